@@ -1,0 +1,269 @@
+//! One frame, end to end: scene → shadow map, depth and surface (host renderer) → technique →
+//! composite. The GPU and CPU backends run the same steps.
+
+use anyhow::{Context, Result, bail};
+use crepuscular::frame::{FrameDesc, surface_transmittance};
+use crepuscular::gpu::GpuContext;
+use crepuscular::stats::{PassTime, TechniqueStats};
+use crepuscular::techniques::brute_force::{self, BruteForce, BruteForceSettings};
+use crepuscular::techniques::reference::{self, ReferenceSettings};
+use crepuscular::tonemap::composite;
+use crepuscular::{CpuFrame, GpuFrame, Image, ShadowProjection};
+use crepuscular_scene::{GpuHost, Scene, builtin, file, host, host_cpu};
+use serde::Serialize;
+use std::path::Path;
+
+/// Where the frame is computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// A GPU adapter if there is one, else the CPU (with a one-line notice).
+    Auto,
+    /// The GPU; fails if there is no adapter.
+    Gpu,
+    /// The CPU implementation of every step.
+    Cpu,
+}
+
+/// Loads a built-in scene by name or a scene file by path.
+pub fn load_scene(name_or_path: &str) -> Result<Scene> {
+    if let Some(s) = builtin::builtin(name_or_path) {
+        return Ok(s);
+    }
+    let p = Path::new(name_or_path);
+    if p.extension().is_some_and(|e| e == "toml") || p.exists() {
+        return Ok(file::load_scene_file(p)?);
+    }
+    let names: Vec<_> = builtin::builtin_names().iter().map(|(n, _)| *n).collect();
+    bail!("{name_or_path}: no such built-in scene or scene file (built-in: {})", names.join(", "))
+}
+
+/// A technique with its parsed settings.
+#[derive(Clone, Debug, Serialize)]
+#[serde(tag = "technique", rename_all = "kebab-case")]
+pub enum TechniqueChoice {
+    /// `brute-force`.
+    BruteForce(BruteForceSettings),
+    /// `reference`.
+    Reference(ReferenceSettings),
+}
+
+impl TechniqueChoice {
+    /// Name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            TechniqueChoice::BruteForce(_) => "brute-force",
+            TechniqueChoice::Reference(_) => "reference",
+        }
+    }
+
+    /// Parses a technique's settings from the scene's `[render.<name>]` table and `key=value`
+    /// overrides (values in TOML syntax). Errors name the source, key and value.
+    pub fn parse(name: &str, scene: &Scene, overrides: &[String]) -> Result<Self> {
+        let mut table = scene.render.techniques.get(name).cloned().unwrap_or_default();
+        for o in overrides {
+            let (k, v) = o.split_once('=').with_context(|| format!("--set {o}: expected key=value"))?;
+            let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {v}"))
+                .ok()
+                .and_then(|mut t| t.remove("v"))
+                .unwrap_or_else(|| toml::Value::String(v.to_string()));
+            table.insert(k.trim().to_string(), value);
+        }
+        let src = format!("{} [render.{name}]", scene.name);
+        let parse = |t: toml::Table| -> Result<TechniqueChoice> {
+            Ok(match name {
+                "brute-force" => {
+                    let s: BruteForceSettings = t.try_into().with_context(|| src.clone())?;
+                    s.validate().with_context(|| src.clone())?;
+                    TechniqueChoice::BruteForce(s)
+                }
+                "reference" => TechniqueChoice::Reference(t.try_into().with_context(|| src.clone())?),
+                other => {
+                    let known: Vec<_> = crepuscular::techniques::TECHNIQUES.iter().map(|t| t.name).collect();
+                    bail!("unknown technique `{other}` (known: {})", known.join(", "))
+                }
+            })
+        };
+        parse(table).map_err(|e| anyhow::anyhow!("{}", format!("{e:#}").replace('\n', " ")))
+    }
+}
+
+/// Everything a render produced.
+pub struct RenderOutput {
+    /// Linear in-scattering L_scatt.
+    pub inscatter: Image,
+    /// Surface radiance from the host renderer.
+    pub surface: Image,
+    /// Final radiance L = T(s)·L_surface + L_scatt.
+    pub final_radiance: Image,
+    /// Camera depth.
+    pub depth: Vec<f32>,
+    /// Stats, ready for `--stats`.
+    pub stats: RenderStats,
+}
+
+/// The adapter a frame ran on.
+#[derive(Clone, Debug, Serialize)]
+pub struct AdapterStats {
+    /// Adapter name ("cpu" on the CPU backend).
+    pub name: String,
+    /// wgpu backend (Vulkan, Metal, …) or "cpu".
+    pub backend: String,
+    /// Device type.
+    pub device_type: String,
+    /// Software rasterizer.
+    pub software: bool,
+    /// Driver and version.
+    pub driver: String,
+}
+
+/// `--stats` JSON.
+#[derive(Clone, Debug, Serialize)]
+pub struct RenderStats {
+    /// Adapter.
+    pub adapter: AdapterStats,
+    /// "gpu" or "cpu".
+    pub backend: String,
+    /// Scene name.
+    pub scene: String,
+    /// Width, height.
+    pub resolution: [u32; 2],
+    /// Shadow-map size and layers.
+    pub shadow_map: [u32; 2],
+    /// Technique and its settings.
+    pub settings: TechniqueChoice,
+    /// Host renderer passes (shadow map, surface).
+    pub host_passes: Vec<PassTime>,
+    /// The technique's own stats (passes, samples, memory).
+    pub technique: TechniqueStats,
+}
+
+/// Options of one render.
+pub struct RenderOptions<'a> {
+    /// Backend.
+    pub backend: Backend,
+    /// Technique.
+    pub technique: TechniqueChoice,
+    /// Progress for long CPU work: (done, total).
+    pub progress: &'a (dyn Fn(u64, u64) + Sync),
+    /// Printed notices (e.g. falling back to the CPU).
+    pub notice: &'a dyn Fn(&str),
+}
+
+/// The frame description of a scene at its render size.
+pub fn frame_desc(scene: &Scene) -> FrameDesc {
+    let r = &scene.render;
+    let aspect = r.width as f32 / r.height as f32;
+    let shadow = ShadowProjection::fit(&scene.light, &scene.camera, aspect, scene.geometry.bounds(), r.shadow.size);
+    FrameDesc {
+        camera: scene.camera.clone(),
+        light: scene.light.clone(),
+        medium: scene.medium.clone(),
+        shadow,
+        shadow_bias: r.shadow.bias,
+        normal_offset_texels: r.shadow.normal_offset_texels,
+        ambient: r.ambient,
+        width: r.width,
+        height: r.height,
+    }
+}
+
+fn cpu_adapter() -> AdapterStats {
+    AdapterStats {
+        name: "cpu".into(),
+        backend: "cpu".into(),
+        device_type: "Cpu".into(),
+        software: true,
+        driver: format!("rayon, {} threads", rayon::current_num_threads()),
+    }
+}
+
+/// Picks the GPU for a backend choice: Some(context) or None for the CPU.
+pub fn open_gpu(backend: Backend, notice: &dyn Fn(&str)) -> Result<Option<GpuContext>> {
+    match backend {
+        Backend::Cpu => Ok(None),
+        Backend::Gpu => Ok(Some(GpuContext::new().context("--backend gpu")?)),
+        Backend::Auto => match GpuContext::new() {
+            Ok(g) => Ok(Some(g)),
+            Err(e) => {
+                notice(&format!("notice: {e}; rendering on the CPU backend"));
+                Ok(None)
+            }
+        },
+    }
+}
+
+/// Renders a scene with a technique.
+pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> Result<RenderOutput> {
+    let desc = frame_desc(scene);
+    let spot = match &scene.light {
+        crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
+        _ => None,
+    };
+    let (inscatter, surface, depth, host_passes, technique, adapter) = match gpu {
+        Some(gpu) => {
+            let host = GpuHost::new(gpu, &scene.geometry)?;
+            let tex = host.render(gpu, &desc, spot)?;
+            let info = &gpu.info;
+            let adapter = AdapterStats {
+                name: info.name.clone(),
+                backend: format!("{:?}", info.backend),
+                device_type: format!("{:?}", info.device_type),
+                software: gpu.software,
+                driver: format!("{} {}", info.driver, info.driver_info),
+            };
+            let depth = gpu.read_texture_f32(&tex.depth, 0)?;
+            let surface = gpu.read_image(&tex.surface)?;
+            let (inscatter, stats) = match &opts.technique {
+                TechniqueChoice::BruteForce(s) => {
+                    let out = gpu.create_output_texture(desc.width, desc.height);
+                    let out_view = out.create_view(&Default::default());
+                    let depth_view = tex.depth_view();
+                    let shadow_view = tex.shadow_view();
+                    let spot_view = tex.spot_texture.create_view(&Default::default());
+                    let frame = GpuFrame {
+                        desc: &desc,
+                        depth: &depth_view,
+                        shadow_map: &shadow_view,
+                        spot_texture: spot.map(|_| &spot_view),
+                    };
+                    let mut bf = BruteForce::new(gpu, s.clone())?;
+                    let stats = bf.render(gpu, &frame, &out_view)?;
+                    (gpu.read_image(&out)?, stats)
+                }
+                TechniqueChoice::Reference(s) => {
+                    // The reference runs on the CPU over the very shadow map the GPU drew.
+                    let shadow_map = host::read_shadow_map(gpu, &tex, &desc)?;
+                    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
+                    reference::render(&frame, s, opts.progress)?
+                }
+            };
+            (inscatter, surface, depth, tex.passes, stats, adapter)
+        }
+        None => {
+            let h = host_cpu::render(&scene.geometry, &desc);
+            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+            let (inscatter, stats) = match &opts.technique {
+                TechniqueChoice::BruteForce(s) => brute_force::cpu::march(&frame, s)?,
+                TechniqueChoice::Reference(s) => reference::render(&frame, s, opts.progress)?,
+            };
+            (inscatter, h.surface, h.depth, h.passes, stats, cpu_adapter())
+        }
+    };
+    if !inscatter.all_finite() {
+        bail!("{}: the technique produced non-finite values (NaN/Inf) — a bug, please report it", opts.technique.name());
+    }
+    let t = surface_transmittance(&desc, &depth);
+    let final_radiance = composite(&surface, &inscatter, &t);
+    let stats = RenderStats {
+        backend: if gpu.is_some() { "gpu".into() } else { "cpu".into() },
+        adapter,
+        scene: scene.name.clone(),
+        resolution: [desc.width, desc.height],
+        shadow_map: [desc.shadow.size, desc.shadow.layers],
+        settings: opts.technique.clone(),
+        host_passes,
+        technique,
+    };
+    Ok(RenderOutput { inscatter, surface, final_radiance, depth, stats })
+}

@@ -1,0 +1,336 @@
+//! The host renderer: what a game engine would already have before the effect runs — shadow
+//! maps, the camera depth buffer and lit surface colour — on the GPU (this file) and on the CPU
+//! (`host_cpu`), with the same conventions (see `raster.rs`).
+
+use crate::scene::{Geometry, Vertex};
+use crepuscular::frame::FrameDesc;
+use crepuscular::gpu::{GpuContext, PassTimer};
+use crepuscular::stats::PassTime;
+use crepuscular::{Error, RgbTexture, ShadowMap};
+use wgpu::util::DeviceExt;
+
+/// Shadow-map depth shader.
+pub const SHADOW_DEPTH_WGSL: &str = include_str!("shaders/shadow_depth.wgsl");
+/// Surface shader (composed with the library's common.wgsl).
+pub const SURFACE_WGSL: &str = include_str!("shaders/surface.wgsl");
+
+/// The host renderer's pipelines and the scene's vertex data on the GPU.
+pub struct GpuHost {
+    shadow_pipeline: wgpu::RenderPipeline,
+    shadow_layout: wgpu::BindGroupLayout,
+    surface_pipeline: wgpu::RenderPipeline,
+    surface_layout: wgpu::BindGroupLayout,
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+}
+
+/// What the host renderer produced for a frame: the textures the effect reads.
+pub struct HostTextures {
+    /// Camera depth, `Depth32Float`, [0, 1].
+    pub depth: wgpu::Texture,
+    /// Surface radiance, `Rgba32Float`, linear.
+    pub surface: wgpu::Texture,
+    /// Shadow map, `Depth32Float` array (1 or 6 layers).
+    pub shadow_map: wgpu::Texture,
+    /// The spot texture (1×1 white when the light has none).
+    pub spot_texture: wgpu::Texture,
+    /// Host pass times.
+    pub passes: Vec<PassTime>,
+}
+
+impl HostTextures {
+    /// `D2Array` view of the shadow map, as the effect binds it.
+    pub fn shadow_view(&self) -> wgpu::TextureView {
+        self.shadow_map.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            aspect: wgpu::TextureAspect::DepthOnly,
+            ..Default::default()
+        })
+    }
+    /// View of the depth buffer.
+    pub fn depth_view(&self) -> wgpu::TextureView {
+        self.depth.create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() })
+    }
+}
+
+const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 3] = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3];
+
+impl GpuHost {
+    /// Uploads the geometry and builds the pipelines.
+    pub fn new(gpu: &GpuContext, geometry: &Geometry) -> Result<Self, Error> {
+        gpu.scoped("creating the host renderer", || {
+            let device = &gpu.device;
+            let vertex_layout = wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<Vertex>() as u64,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &VERTEX_ATTRIBUTES,
+            };
+            let uniform_entry = |binding, visibility| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility,
+                ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
+                count: None,
+            };
+            let shadow_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("shadow layer"),
+                entries: &[uniform_entry(0, wgpu::ShaderStages::VERTEX)],
+            });
+            let shadow_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("host/shadow_depth.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(SHADOW_DEPTH_WGSL.into()),
+            });
+            let depth_state = wgpu::DepthStencilState {
+                format: wgpu::TextureFormat::Depth32Float,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            };
+            let primitive = wgpu::PrimitiveState { cull_mode: None, ..Default::default() };
+            let shadow_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("shadow depth"),
+                layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("shadow depth"),
+                    bind_group_layouts: &[Some(&shadow_layout)],
+                    immediate_size: 0,
+                })),
+                vertex: wgpu::VertexState {
+                    module: &shadow_module,
+                    entry_point: Some("vs"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(wgpu::VertexBufferLayout {
+                        array_stride: std::mem::size_of::<Vertex>() as u64,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &VERTEX_ATTRIBUTES[..1],
+                    })],
+                },
+                primitive,
+                depth_stencil: Some(depth_state.clone()),
+                multisample: Default::default(),
+                fragment: None,
+                multiview_mask: None,
+                cache: None,
+            });
+            let tex_entry = |binding, dim| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: dim,
+                    multisampled: false,
+                },
+                count: None,
+            };
+            let surface_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("surface"),
+                entries: &[
+                    uniform_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
+                    tex_entry(1, wgpu::TextureViewDimension::D2Array),
+                    tex_entry(2, wgpu::TextureViewDimension::D2),
+                ],
+            });
+            let surface_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("host/surface.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(crepuscular::shaders::compose(SURFACE_WGSL).into()),
+            });
+            let surface_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("surface"),
+                layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("surface"),
+                    bind_group_layouts: &[Some(&surface_layout)],
+                    immediate_size: 0,
+                })),
+                vertex: wgpu::VertexState {
+                    module: &surface_module,
+                    entry_point: Some("vs"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(vertex_layout)],
+                },
+                primitive,
+                depth_stencil: Some(depth_state),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &surface_module,
+                    entry_point: Some("fs"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: wgpu::TextureFormat::Rgba32Float,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            });
+            // wgpu refuses zero-sized buffers: keep one degenerate triangle for empty scenes.
+            let (verts, idx): (Vec<Vertex>, Vec<u32>) = if geometry.indices.is_empty() {
+                (vec![Vertex { position: [0.0; 3], normal: [0.0, 1.0, 0.0], albedo: [0.0; 3] }; 3], vec![0, 0, 0])
+            } else {
+                (geometry.vertices.clone(), geometry.indices.clone())
+            };
+            let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("scene vertices"),
+                contents: bytemuck::cast_slice(&verts),
+                usage: wgpu::BufferUsages::VERTEX,
+            });
+            let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("scene indices"),
+                contents: bytemuck::cast_slice(&idx),
+                usage: wgpu::BufferUsages::INDEX,
+            });
+            Self {
+                shadow_pipeline,
+                shadow_layout,
+                surface_pipeline,
+                surface_layout,
+                vertices,
+                indices,
+                index_count: idx.len() as u32,
+            }
+        })
+    }
+
+    /// Renders the shadow map, then depth and surface radiance for `desc`. Passes:
+    /// `shadow map` (one render pass per layer, timed together) and `surface`.
+    pub fn render(&self, gpu: &GpuContext, desc: &FrameDesc, spot: Option<&RgbTexture>) -> Result<HostTextures, Error> {
+        let sp = &desc.shadow;
+        gpu.check_texture_size("shadow_map_size", sp.size, sp.size)?;
+        gpu.check_texture_size("image size", desc.width, desc.height)?;
+        let device = &gpu.device;
+        let tex = |label, w, h, layers, format, extra| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: layers },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC
+                    | extra,
+                view_formats: &[],
+            })
+        };
+        let (shadow_map, depth, surface) = gpu.scoped("allocating host textures", || {
+            (
+                tex("shadow map", sp.size, sp.size, sp.layers, wgpu::TextureFormat::Depth32Float, wgpu::TextureUsages::empty()),
+                tex("camera depth", desc.width, desc.height, 1, wgpu::TextureFormat::Depth32Float, wgpu::TextureUsages::empty()),
+                tex("surface radiance", desc.width, desc.height, 1, wgpu::TextureFormat::Rgba32Float, wgpu::TextureUsages::empty()),
+            )
+        })?;
+        let spot_texture = gpu.upload_rgb_texture(spot);
+        let mut timer = PassTimer::new(gpu, 2);
+        let layer_groups: Vec<(wgpu::TextureView, wgpu::BindGroup)> = (0..sp.layers)
+            .map(|l| {
+                let buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("shadow layer matrix"),
+                    contents: bytemuck::cast_slice(&sp.view_proj[l as usize].to_cols_array()),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
+                let bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("shadow layer"),
+                    layout: &self.shadow_layout,
+                    entries: &[wgpu::BindGroupEntry { binding: 0, resource: buf.as_entire_binding() }],
+                });
+                let view = shadow_map.create_view(&wgpu::TextureViewDescriptor {
+                    dimension: Some(wgpu::TextureViewDimension::D2),
+                    base_array_layer: l,
+                    array_layer_count: Some(1),
+                    ..Default::default()
+                });
+                (view, bg)
+            })
+            .collect();
+        timer.pass(gpu, "shadow map", |enc, ts| {
+            for (l, (view, bg)) in layer_groups.iter().enumerate() {
+                let last = l + 1 == layer_groups.len();
+                let writes = ts.map(|t| {
+                    let mut w = t.render();
+                    if l != 0 {
+                        w.beginning_of_pass_write_index = None;
+                    }
+                    if !last {
+                        w.end_of_pass_write_index = None;
+                    }
+                    w
+                });
+                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("shadow map layer"),
+                    color_attachments: &[],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view,
+                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: writes,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                pass.set_pipeline(&self.shadow_pipeline);
+                pass.set_bind_group(0, bg, &[]);
+                pass.set_vertex_buffer(0, self.vertices.slice(..));
+                pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..self.index_count, 0, 0..1);
+            }
+        })?;
+        let frame_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("frame uniforms"),
+            contents: bytemuck::bytes_of(&desc.uniforms()),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let shadow_view = shadow_map.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            aspect: wgpu::TextureAspect::DepthOnly,
+            ..Default::default()
+        });
+        let spot_view = spot_texture.create_view(&Default::default());
+        let bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("surface"),
+            layout: &self.surface_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: frame_buf.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&shadow_view) },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&spot_view) },
+            ],
+        });
+        let depth_view = depth.create_view(&Default::default());
+        let surface_view = surface.create_view(&Default::default());
+        timer.pass(gpu, "surface", |enc, ts| {
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("surface"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &surface_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::BLACK), store: wgpu::StoreOp::Store },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth_view,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: ts.map(|t| t.render()),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.surface_pipeline);
+            pass.set_bind_group(0, &bg, &[]);
+            pass.set_vertex_buffer(0, self.vertices.slice(..));
+            pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..self.index_count, 0, 0..1);
+        })?;
+        let passes = timer.finish(gpu)?;
+        Ok(HostTextures { depth, surface, shadow_map, spot_texture, passes })
+    }
+}
+
+/// Reads the shadow map back to the CPU.
+pub fn read_shadow_map(gpu: &GpuContext, t: &HostTextures, desc: &FrameDesc) -> Result<ShadowMap, Error> {
+    let mut depth = Vec::new();
+    for l in 0..desc.shadow.layers {
+        depth.extend(gpu.read_texture_f32(&t.shadow_map, l)?);
+    }
+    Ok(ShadowMap { projection: desc.shadow.clone(), depth })
+}

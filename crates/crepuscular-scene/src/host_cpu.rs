@@ -1,0 +1,66 @@
+//! The host renderer on the CPU: the same shadow map, depth buffer and surface radiance as
+//! `host.rs`, through the CPU rasterizer (`raster.rs`) and the library's Rust twins of the
+//! surface shader (`integrand::surface_radiance`).
+
+use crate::raster;
+use crate::scene::Geometry;
+use crepuscular::frame::FrameDesc;
+use crepuscular::integrand::surface_radiance;
+use crepuscular::stats::PassTime;
+use crepuscular::{Image, ShadowMap};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// What the CPU host renderer produced.
+pub struct CpuHost {
+    /// Camera depth, [0, 1], row-major from the top-left.
+    pub depth: Vec<f32>,
+    /// The shadow map.
+    pub shadow_map: ShadowMap,
+    /// Surface radiance.
+    pub surface: Image,
+    /// Pass times (wall clock).
+    pub passes: Vec<PassTime>,
+}
+
+/// Renders the shadow map, depth and surface radiance on the CPU.
+pub fn render(geometry: &Geometry, desc: &FrameDesc) -> CpuHost {
+    let t0 = Instant::now();
+    let shadow_map = raster::render_shadow_map(geometry, &desc.shadow);
+    let t1 = Instant::now();
+    let vp = desc.camera.view_projection(desc.aspect());
+    let db = raster::rasterize(geometry, vp, desc.width, desc.height);
+    let mut surface = Image::new(desc.width, desc.height);
+    let inv = vp.inverse();
+    surface.pixels.par_iter_mut().enumerate().for_each(|(i, px)| {
+        let tri = db.triangle[i];
+        if tri == u32::MAX {
+            *px = [0.0, 0.0, 0.0, 1.0];
+            return;
+        }
+        let b = db.bary[i];
+        let idx = &geometry.indices[tri as usize * 3..tri as usize * 3 + 3];
+        let v = idx.iter().map(|&k| geometry.vertices[k as usize]).collect::<Vec<_>>();
+        let lerp = |f: fn(&crate::Vertex) -> [f32; 3]| {
+            Vec3::from(f(&v[0])) * b[0] + Vec3::from(f(&v[1])) * b[1] + Vec3::from(f(&v[2])) * b[2]
+        };
+        let (x, y) = ((i as u32 % desc.width), (i as u32 / desc.width));
+        // World position from the depth buffer, as the GPU's interpolated position would give.
+        let ndc_x = (x as f32 + 0.5) / desc.width as f32 * 2.0 - 1.0;
+        let ndc_y = 1.0 - (y as f32 + 0.5) / desc.height as f32 * 2.0;
+        let p = inv.project_point3(Vec3::new(ndc_x, ndc_y, db.depth[i]));
+        let l = surface_radiance(desc, &shadow_map, p, lerp(|v| v.normal), lerp(|v| v.albedo));
+        *px = [l.x, l.y, l.z, 1.0];
+    });
+    let t2 = Instant::now();
+    CpuHost {
+        depth: db.depth,
+        shadow_map,
+        surface,
+        passes: vec![
+            PassTime { name: "shadow map".into(), ms: (t1 - t0).as_secs_f64() * 1e3 },
+            PassTime { name: "surface".into(), ms: (t2 - t1).as_secs_f64() * 1e3 },
+        ],
+    }
+}

@@ -1,0 +1,191 @@
+//! The frame boundary: everything the effect reads, in one place. A host renderer (ours in
+//! `crepuscular-scene`, or a user's own) fills a [`GpuFrame`] with its camera, light, medium,
+//! shadow-map projection and its own depth and shadow-map textures; the CPU backend fills a
+//! [`CpuFrame`] with the same data as arrays.
+
+use crate::image::Image;
+use crate::integrand::light_position;
+use crate::model::{Camera, Light, Medium, RgbTexture};
+use crate::shadow::{ShadowMap, ShadowProjection};
+use glam::{Mat4, Vec3};
+
+/// The per-frame uniform block shared by every shader (`struct Frame` in common.wgsl).
+/// Layout is asserted against naga's view of the WGSL struct in a test.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct FrameUniforms {
+    /// Clip → world of the camera.
+    pub inv_view_proj: [[f32; 4]; 4],
+    /// World → clip of the camera.
+    pub view_proj: [[f32; 4]; 4],
+    /// World → clip per shadow-map layer.
+    pub shadow_view_proj: [[[f32; 4]; 4]; 6],
+    /// Camera position (xyz), near plane (w).
+    pub camera_pos: [f32; 4],
+    /// Camera forward unit vector (xyz), far plane (w).
+    pub camera_fwd: [f32; 4],
+    /// Light position (xyz; unused for directional lights), 0 (w).
+    pub light_pos: [f32; 4],
+    /// Light travel direction (directional) or spot axis (xyz); cos of the spot's outer angle (w).
+    pub light_dir: [f32; 4],
+    /// Light colour × intensity (rgb); cos of the spot's inner angle (w).
+    pub light_color: [f32; 4],
+    /// σs (rgb); phase asymmetry g (w).
+    pub sigma_s: [f32; 4],
+    /// σa (rgb); 0 (w).
+    pub sigma_a: [f32; 4],
+    /// Hoffman–Preetham Rayleigh fraction per channel (rgb); 0 (w).
+    pub rayleigh_fraction: [f32; 4],
+    /// Shadow projection near, far, volume bias (world units), world size of a texel.
+    pub shadow_params: [f32; 4],
+    /// Ambient radiance for surfaces (rgb); surface normal offset in texels (w).
+    pub ambient: [f32; 4],
+    /// Image width, image height, light kind (0 directional, 1 spot, 2 point), phase kind
+    /// (0 isotropic, 1 HG, 2 Rayleigh, 3 Hoffman–Preetham).
+    pub ints: [u32; 4],
+    /// Shadow layers, shadow size, orthographic shadow (1/0), spot texture present (1/0).
+    pub shadow_ints: [u32; 4],
+}
+
+const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 704);
+
+/// Describes a frame independently of where its textures live.
+#[derive(Clone, Debug)]
+pub struct FrameDesc {
+    /// Camera.
+    pub camera: Camera,
+    /// Light.
+    pub light: Light,
+    /// Medium.
+    pub medium: Medium,
+    /// Shadow-map projection (matrices and depth range) the shadow map was rendered with.
+    pub shadow: ShadowProjection,
+    /// Volume shadow bias, world units (see [`crate::ShadowSettings::bias`]).
+    pub shadow_bias: f32,
+    /// Surface normal offset in shadow texels (host renderer only).
+    pub normal_offset_texels: f32,
+    /// Ambient radiance for surfaces (host renderer only).
+    pub ambient: Vec3,
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+}
+
+impl FrameDesc {
+    /// Width / height.
+    pub fn aspect(&self) -> f32 {
+        self.width as f32 / self.height as f32
+    }
+
+    /// The uniform block for the GPU.
+    pub fn uniforms(&self) -> FrameUniforms {
+        let vp = self.camera.view_projection(self.aspect());
+        let (light_dir, cos_outer, cos_inner) = match &self.light {
+            Light::Directional { direction, .. } => (direction.normalize(), 0.0, 0.0),
+            Light::Spot { direction, outer_angle_degrees, inner_angle_degrees, .. } => (
+                direction.normalize(),
+                outer_angle_degrees.to_radians().cos(),
+                inner_angle_degrees.to_radians().cos(),
+            ),
+            Light::Point { .. } => (Vec3::ZERO, 0.0, 0.0),
+        };
+        let color = match &self.light {
+            Light::Directional { color, intensity, .. }
+            | Light::Spot { color, intensity, .. }
+            | Light::Point { color, intensity, .. } => *color * *intensity,
+        };
+        let has_tex = matches!(&self.light, Light::Spot { texture: Some(_), .. });
+        let (phase_kind, g, rf) = self.medium.phase.gpu_params();
+        let v4 = |v: Vec3, w: f32| [v.x, v.y, v.z, w];
+        let s = &self.shadow;
+        FrameUniforms {
+            inv_view_proj: vp.inverse().to_cols_array_2d(),
+            view_proj: vp.to_cols_array_2d(),
+            shadow_view_proj: s.view_proj.map(|m| m.to_cols_array_2d()),
+            camera_pos: v4(self.camera.position, self.camera.near),
+            camera_fwd: v4(self.camera.forward(), self.camera.far),
+            light_pos: v4(light_position(&self.light), 0.0),
+            light_dir: v4(light_dir, cos_outer),
+            light_color: v4(color, cos_inner),
+            sigma_s: v4(self.medium.scattering, g),
+            sigma_a: v4(self.medium.absorption, 0.0),
+            rayleigh_fraction: v4(rf, 0.0),
+            shadow_params: [s.near, s.far, self.shadow_bias, s.texel_world],
+            ambient: v4(self.ambient, self.normal_offset_texels),
+            ints: [self.width, self.height, self.light.kind_code(), phase_kind],
+            shadow_ints: [s.layers, s.size, s.orthographic as u32, has_tex as u32],
+        }
+    }
+
+    /// Unit direction of the view ray through the centre of pixel (x, y), computed as the
+    /// shaders do (`pixel_ray` in common.wgsl): unproject the far-plane point.
+    pub fn pixel_ray(&self, inv_view_proj: &Mat4, x: u32, y: u32) -> Vec3 {
+        let ndc_x = (x as f32 + 0.5) / self.width as f32 * 2.0 - 1.0;
+        let ndc_y = 1.0 - (y as f32 + 0.5) / self.height as f32 * 2.0;
+        let p = inv_view_proj.project_point3(Vec3::new(ndc_x, ndc_y, 1.0));
+        (p - self.camera.position).normalize()
+    }
+
+    /// Distance s along the unit view ray `dir` to the visible surface for a depth-buffer
+    /// value `d` (the far plane where d = 1). Mirrors `view_distance` in common.wgsl.
+    pub fn view_distance(&self, d: f32, dir: Vec3) -> f32 {
+        let lin = crate::model::linear_depth(d, self.camera.near, self.camera.far);
+        lin / dir.dot(self.camera.forward()).max(1e-4)
+    }
+}
+
+/// A frame on the CPU: the description plus the host renderer's images.
+#[derive(Clone, Copy, Debug)]
+pub struct CpuFrame<'a> {
+    /// Camera, light, medium, shadow projection, size.
+    pub desc: &'a FrameDesc,
+    /// Camera depth buffer, [0, 1] per pixel, `width * height`, row-major from the top-left.
+    pub depth: &'a [f32],
+    /// The shadow map.
+    pub shadow_map: &'a ShadowMap,
+    /// Surface radiance (for compositing), if any.
+    pub surface: Option<&'a Image>,
+}
+
+impl CpuFrame<'_> {
+    /// The spot light's projected texture, if any.
+    pub fn spot_texture(&self) -> Option<&RgbTexture> {
+        match &self.desc.light {
+            Light::Spot { texture: Some(t), .. } => Some(t),
+            _ => None,
+        }
+    }
+}
+
+/// A frame on the GPU: the description plus views of the host renderer's textures. This is
+/// what a user's own wgpu renderer passes to a technique.
+#[derive(Clone, Copy, Debug)]
+pub struct GpuFrame<'a> {
+    /// Camera, light, medium, shadow projection, size.
+    pub desc: &'a FrameDesc,
+    /// Camera depth: a `D2` view of a `Depth32Float` (or `R32Float`) texture of [0, 1] depths,
+    /// `width × height`. Bound as an unfilterable float texture.
+    pub depth: &'a wgpu::TextureView,
+    /// Shadow map: a `D2Array` view of a `Depth32Float` (or `R32Float`) texture with
+    /// `shadow.layers` layers of `shadow.size²` texels.
+    pub shadow_map: &'a wgpu::TextureView,
+    /// The spot light's projected texture (`Rgba8UnormSrgb`/`Rgba16Float`/`Rgba32Float`, read
+    /// with `textureLoad`), if the light has one.
+    pub spot_texture: Option<&'a wgpu::TextureView>,
+}
+
+/// Transmittance T(s) = exp(−σt·s) to the visible surface per pixel, computed from the depth
+/// buffer exactly as the composite uses it.
+pub fn surface_transmittance(desc: &FrameDesc, depth: &[f32]) -> Vec<[f32; 3]> {
+    let inv = desc.camera.view_projection(desc.aspect()).inverse();
+    let st = desc.medium.extinction();
+    (0..desc.height)
+        .flat_map(|y| (0..desc.width).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let dir = desc.pixel_ray(&inv, x, y);
+            let s = desc.view_distance(depth[(y * desc.width + x) as usize], dir);
+            (-st * s).exp().to_array()
+        })
+        .collect()
+}

@@ -1,0 +1,381 @@
+//! The GPU context, readbacks, and per-pass timing.
+
+use crate::error::Error;
+use crate::stats::PassTime;
+use std::time::Instant;
+
+/// An adapter, device and queue, and what they can do.
+pub struct GpuContext {
+    /// The adapter.
+    pub adapter: wgpu::Adapter,
+    /// The device.
+    pub device: wgpu::Device,
+    /// The queue.
+    pub queue: wgpu::Queue,
+    /// Adapter information (name, backend, driver).
+    pub info: wgpu::AdapterInfo,
+    /// True for a software rasterizer (lavapipe, WARP, SwiftShader): its timestamp queries are
+    /// not meaningful, so passes are timed by synchronised wall clock.
+    pub software: bool,
+    /// True when passes are timed with timestamp queries.
+    pub timestamps: bool,
+}
+
+impl std::fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuContext").field("info", &self.info).finish()
+    }
+}
+
+/// Blocks until the queue is idle.
+pub fn wait_idle(device: &wgpu::Device) -> Result<(), Error> {
+    device
+        .poll(wgpu::PollType::Wait { submission_index: None, timeout: None })
+        .map(|_| ())
+        .map_err(|e| Error::Gpu { context: "waiting for the GPU".into(), message: e.to_string() })
+}
+
+impl GpuContext {
+    /// Finds an adapter (any backend wgpu was built with; software adapters included) and
+    /// creates a device with the adapter's own limits and only the optional features it has.
+    pub fn new() -> Result<Self, Error> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY | wgpu::Backends::GL);
+        let instance = wgpu::Instance::new(desc);
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            apply_limit_buckets: false,
+        }))
+        .map_err(|e| Error::NoAdapter(e.to_string()))?;
+        Self::from_adapter(adapter)
+    }
+
+    /// Creates the device on a given adapter.
+    pub fn from_adapter(adapter: wgpu::Adapter) -> Result<Self, Error> {
+        let info = adapter.get_info();
+        let software = info.device_type == wgpu::DeviceType::Cpu
+            || info.name.to_lowercase().contains("llvmpipe")
+            || info.name.to_lowercase().contains("swiftshader");
+        let wanted = wgpu::Features::TIMESTAMP_QUERY;
+        let features = adapter.features() & wanted;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("crepuscular"),
+            required_features: features,
+            required_limits: adapter.limits(),
+            ..Default::default()
+        }))
+        .map_err(|e| Error::Device(e.to_string()))?;
+        let timestamps = !software && features.contains(wgpu::Features::TIMESTAMP_QUERY);
+        Ok(Self { adapter, device, queue, info, software, timestamps })
+    }
+
+    /// One line naming the adapter, backend and driver.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} ({:?}, {:?}{}, driver {} {})",
+            self.info.name,
+            self.info.backend,
+            self.info.device_type,
+            if self.software { ", software" } else { "" },
+            self.info.driver,
+            self.info.driver_info
+        )
+    }
+
+    /// Checks a 2D texture size against the device limit, before any allocation.
+    pub fn check_texture_size(&self, what: &str, width: u32, height: u32) -> Result<(), Error> {
+        let limit = self.device.limits().max_texture_dimension_2d;
+        let big = width.max(height);
+        if big > limit || width == 0 || height == 0 {
+            return Err(Error::Limit { what: what.into(), value: big as u64, limit: limit as u64 });
+        }
+        Ok(())
+    }
+
+    /// Runs `f` inside validation and out-of-memory error scopes and turns a captured error into
+    /// [`Error::Gpu`] instead of wgpu's default panic.
+    pub fn scoped<T>(&self, context: &str, f: impl FnOnce() -> T) -> Result<T, Error> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let val = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let out = f();
+        let e1 = pollster::block_on(val.pop());
+        let e2 = pollster::block_on(oom.pop());
+        match e1.or(e2) {
+            Some(e) => Err(Error::Gpu { context: context.into(), message: e.to_string() }),
+            None => Ok(out),
+        }
+    }
+
+    /// Reads back a whole single-layer 2D texture of a 4-byte-per-texel (`R32Float`,
+    /// `Depth32Float`) or 16-byte-per-texel (`Rgba32Float`) format as f32s.
+    pub fn read_texture_f32(&self, texture: &wgpu::Texture, layer: u32) -> Result<Vec<f32>, Error> {
+        let (w, h) = (texture.width(), texture.height());
+        let bpp = texture.format().block_copy_size(Some(wgpu::TextureAspect::All)).unwrap_or(4);
+        let aspect = if texture.format().is_depth_stencil_format() {
+            wgpu::TextureAspect::DepthOnly
+        } else {
+            wgpu::TextureAspect::All
+        };
+        let row = w * bpp;
+        let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: (padded * h) as u64,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x: 0, y: 0, z: layer },
+                aspect,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded), rows_per_image: Some(h) },
+            },
+            wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        );
+        self.queue.submit([enc.finish()]);
+        let slice = buffer.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        wait_idle(&self.device)?;
+        let data = slice
+            .get_mapped_range()
+            .map_err(|e| Error::Gpu { context: "reading back a texture".into(), message: e.to_string() })?;
+        let mut out = Vec::with_capacity((w * h * bpp / 4) as usize);
+        for y in 0..h {
+            let start = (y * padded) as usize;
+            out.extend_from_slice(bytemuck::cast_slice(&data[start..start + row as usize]));
+        }
+        drop(data);
+        buffer.unmap();
+        Ok(out)
+    }
+
+    /// Reads back an `Rgba32Float` texture as an [`crate::Image`].
+    pub fn read_image(&self, texture: &wgpu::Texture) -> Result<crate::Image, Error> {
+        let f = self.read_texture_f32(texture, 0)?;
+        Ok(crate::Image {
+            width: texture.width(),
+            height: texture.height(),
+            pixels: f.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect(),
+        })
+    }
+
+    /// Creates a texture and uploads data with a tightly packed layout (`bytes_per_texel` per
+    /// texel, `layers` layers).
+    pub fn upload_texture(
+        &self,
+        label: &str,
+        format: wgpu::TextureFormat,
+        width: u32,
+        height: u32,
+        layers: u32,
+        bytes_per_texel: u32,
+        data: &[u8],
+    ) -> wgpu::Texture {
+        let tex = self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: layers },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        self.queue.write_texture(
+            wgpu::TexelCopyTextureInfo { texture: &tex, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+            data,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(width * bytes_per_texel), rows_per_image: Some(height) },
+            wgpu::Extent3d { width, height, depth_or_array_layers: layers },
+        );
+        tex
+    }
+
+    /// Uploads a spot texture as `Rgba32Float` (or a 1×1 white texture for `None`).
+    pub fn upload_rgb_texture(&self, tex: Option<&crate::RgbTexture>) -> wgpu::Texture {
+        match tex {
+            Some(t) => self.upload_texture(
+                "spot texture",
+                wgpu::TextureFormat::Rgba32Float,
+                t.width,
+                t.height,
+                1,
+                16,
+                bytemuck::cast_slice(&t.texels),
+            ),
+            None => self.upload_texture("white", wgpu::TextureFormat::Rgba32Float, 1, 1, 1, 16, bytemuck::cast_slice(&[1.0f32; 4])),
+        }
+    }
+
+    /// Creates the `Rgba32Float` storage texture a technique writes its in-scattering into.
+    pub fn create_output_texture(&self, width: u32, height: u32) -> wgpu::Texture {
+        self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("in-scattering"),
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba32Float,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        })
+    }
+}
+
+/// Timestamp slots for one pass, handed to the pass descriptor.
+#[derive(Clone, Copy)]
+pub struct TimestampSlot<'a> {
+    set: &'a wgpu::QuerySet,
+    index: u32,
+}
+
+impl<'a> TimestampSlot<'a> {
+    /// For a compute pass descriptor.
+    pub fn compute(self) -> wgpu::ComputePassTimestampWrites<'a> {
+        wgpu::ComputePassTimestampWrites {
+            query_set: self.set,
+            beginning_of_pass_write_index: Some(self.index),
+            end_of_pass_write_index: Some(self.index + 1),
+        }
+    }
+    /// For a render pass descriptor.
+    pub fn render(self) -> wgpu::RenderPassTimestampWrites<'a> {
+        wgpu::RenderPassTimestampWrites {
+            query_set: self.set,
+            beginning_of_pass_write_index: Some(self.index),
+            end_of_pass_write_index: Some(self.index + 1),
+        }
+    }
+}
+
+/// Times passes. On hardware adapters with timestamp queries each pass writes begin/end
+/// timestamps; elsewhere (software adapters) each pass is submitted on its own and waited for,
+/// and its synchronised wall-clock time is recorded.
+pub struct PassTimer {
+    query_set: Option<wgpu::QuerySet>,
+    names: Vec<String>,
+    wall_ms: Vec<f64>,
+    capacity: u32,
+}
+
+impl PassTimer {
+    /// A timer for up to `max_passes` passes.
+    pub fn new(gpu: &GpuContext, max_passes: u32) -> Self {
+        let query_set = gpu.timestamps.then(|| {
+            gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("pass timestamps"),
+                ty: wgpu::QueryType::Timestamp,
+                count: max_passes * 2,
+            })
+        });
+        Self { query_set, names: Vec::new(), wall_ms: Vec::new(), capacity: max_passes }
+    }
+
+    /// "timestamp-queries" or "wall-clock".
+    pub fn mode(&self) -> &'static str {
+        if self.query_set.is_some() { "timestamp-queries" } else { "wall-clock" }
+    }
+
+    /// Records one pass: `record` gets a fresh encoder (inside a debug group named `name`) and
+    /// the timestamp slot to put in its pass descriptor; the encoder is submitted afterwards.
+    pub fn pass(
+        &mut self,
+        gpu: &GpuContext,
+        name: &str,
+        record: impl FnOnce(&mut wgpu::CommandEncoder, Option<TimestampSlot<'_>>),
+    ) -> Result<(), Error> {
+        let index = self.names.len() as u32;
+        let slot = match &self.query_set {
+            Some(set) if index < self.capacity => Some(TimestampSlot { set, index: index * 2 }),
+            _ => None,
+        };
+        let start = Instant::now();
+        gpu.scoped(name, || {
+            let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(name) });
+            enc.push_debug_group(name);
+            record(&mut enc, slot);
+            enc.pop_debug_group();
+            gpu.queue.submit([enc.finish()]);
+        })?;
+        if self.query_set.is_none() {
+            wait_idle(&gpu.device)?;
+        }
+        self.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        self.names.push(name.to_string());
+        Ok(())
+    }
+
+    /// Waits for the passes and returns their times.
+    pub fn finish(self, gpu: &GpuContext) -> Result<Vec<PassTime>, Error> {
+        let Some(set) = &self.query_set else {
+            return Ok(self.names.into_iter().zip(self.wall_ms).map(|(name, ms)| PassTime { name, ms }).collect());
+        };
+        let n = (self.names.len() as u32).min(self.capacity) * 2;
+        let resolve = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("timestamps"),
+            size: (n.max(2) * 8) as u64,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let read = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("timestamps readback"),
+            size: (n.max(2) * 8) as u64,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.resolve_query_set(set, 0..n, &resolve, 0);
+        enc.copy_buffer_to_buffer(&resolve, 0, &read, 0, (n * 8) as u64);
+        gpu.queue.submit([enc.finish()]);
+        let slice = read.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        wait_idle(&gpu.device)?;
+        let period = gpu.queue.get_timestamp_period() as f64;
+        let ticks: Vec<u64> = bytemuck::cast_slice(
+            &slice
+                .get_mapped_range()
+                .map_err(|e| Error::Gpu { context: "reading timestamps".into(), message: e.to_string() })?,
+        )
+        .to_vec();
+        Ok(self
+            .names
+            .into_iter()
+            .enumerate()
+            .map(|(i, name)| {
+                let ms = match (ticks.get(2 * i), ticks.get(2 * i + 1)) {
+                    (Some(a), Some(b)) => b.saturating_sub(*a) as f64 * period * 1e-6,
+                    _ => self.wall_ms[i],
+                };
+                PassTime { name, ms }
+            })
+            .collect())
+    }
+}
+
+/// The GPU adapter for tests: `Some` when one exists; `None` with a printed reason when none
+/// does — unless `CREPUSCULAR_REQUIRE_GPU=1`, in which case a missing adapter fails the test.
+#[doc(hidden)]
+pub fn test_gpu(test: &str) -> Option<GpuContext> {
+    match GpuContext::new() {
+        Ok(g) => {
+            eprintln!("{test}: GPU adapter {}", g.describe());
+            Some(g)
+        }
+        Err(e) => {
+            if std::env::var("CREPUSCULAR_REQUIRE_GPU").is_ok_and(|v| v == "1") {
+                panic!("{test}: CREPUSCULAR_REQUIRE_GPU=1 but {e}");
+            }
+            eprintln!("SKIPPED {test}: {e} (set CREPUSCULAR_REQUIRE_GPU=1 to make this a failure)");
+            None
+        }
+    }
+}

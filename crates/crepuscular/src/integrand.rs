@@ -1,0 +1,92 @@
+//! The single-scattering integrand shared by every technique (DESIGN.md §1):
+//! L_scatt = ∫₀ˢ T(t)·σs·p(cos θ)·L_in(x_t)·V(x_t) dt. Each function here has a WGSL twin of the
+//! same name in `shaders/common.wgsl`.
+
+use crate::model::{Light, Medium};
+use crate::shadow::ShadowMap;
+use glam::{Vec3, Vec4, Vec4Swizzles};
+
+/// Unshadowed incident radiance at `p` and the unit direction ω_l in which that light travels
+/// at `p`. Directional: E, no extinction along the light path. Spot / point:
+/// I·tex·cone·exp(−σt·d)/d². The spot texture is looked up through the shadow projection
+/// `spot_view_proj` (the spot's shadow frustum). Mirrors `light_incident` in WGSL.
+pub fn light_incident(light: &Light, medium: &Medium, spot_view_proj: &glam::Mat4, p: Vec3) -> (Vec3, Vec3) {
+    match light {
+        Light::Directional { direction, color, intensity } => (*color * *intensity, direction.normalize()),
+        Light::Point { position, color, intensity } => {
+            let v = p - *position;
+            let d2 = v.length_squared().max(1e-8);
+            let d = d2.sqrt();
+            let att = (-medium.extinction() * d).exp() / d2;
+            (*color * *intensity * att, v / d)
+        }
+        Light::Spot { position, direction, outer_angle_degrees, inner_angle_degrees, color, intensity, texture } => {
+            let v = p - *position;
+            let d2 = v.length_squared().max(1e-8);
+            let d = d2.sqrt();
+            let wl = v / d;
+            let cos_a = wl.dot(direction.normalize());
+            let cone = Light::spot_cone(
+                outer_angle_degrees.to_radians().cos(),
+                inner_angle_degrees.to_radians().cos(),
+                cos_a,
+            );
+            if cone <= 0.0 {
+                return (Vec3::ZERO, wl);
+            }
+            let mut tex = Vec3::ONE;
+            if let Some(t) = texture {
+                let c = *spot_view_proj * Vec4::new(p.x, p.y, p.z, 1.0);
+                if c.w > 0.0 {
+                    let ndc = c.xy() / c.w;
+                    tex = t.sample(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+                }
+            }
+            let att = (-medium.extinction() * d).exp() / d2;
+            (*color * *intensity * cone * att * tex, wl)
+        }
+    }
+}
+
+/// Position of a local light (unused for directional lights).
+pub fn light_position(light: &Light) -> Vec3 {
+    match light {
+        Light::Directional { .. } => Vec3::ZERO,
+        Light::Spot { position, .. } | Light::Point { position, .. } => *position,
+    }
+}
+
+/// σs·p(cos θ)·L_in(x)·V(x) at a point x on a view ray of unit direction `view_dir`: the
+/// in-scattered radiance per unit length before transmittance to the eye. Mirrors
+/// `inscatter_density` in WGSL.
+pub fn inscatter_density(light: &Light, medium: &Medium, shadow: &ShadowMap, bias: f32, view_dir: Vec3, p: Vec3) -> Vec3 {
+    let (l_in, wl) = light_incident(light, medium, &shadow.projection.view_proj[0], p);
+    if l_in == Vec3::ZERO {
+        return Vec3::ZERO;
+    }
+    let v = shadow.visibility(light_position(light), p, bias);
+    if v == 0.0 {
+        return Vec3::ZERO;
+    }
+    // cos θ = dot(ω_l, −ω): θ = 0 looking straight into the light (DESIGN.md §1).
+    let cos_theta = -wl.dot(view_dir);
+    medium.scattering * medium.phase.eval(cos_theta) * l_in * v
+}
+
+/// Lambert surface radiance with the same light and shadow map, plus ambient·albedo. The
+/// normal is flipped to face the camera (surfaces are double-sided). Mirrors
+/// `surface_radiance` in common.wgsl.
+pub fn surface_radiance(desc: &crate::frame::FrameDesc, shadow: &ShadowMap, p: Vec3, normal: Vec3, albedo: Vec3) -> Vec3 {
+    let mut n = normal.normalize_or_zero();
+    if n.dot(desc.camera.position - p) < 0.0 {
+        n = -n;
+    }
+    let (l_in, wl) = light_incident(&desc.light, &desc.medium, &shadow.projection.view_proj[0], p);
+    let cosine = n.dot(-wl).max(0.0);
+    let mut direct = Vec3::ZERO;
+    if cosine > 0.0 && l_in.max_element() > 0.0 {
+        let v = shadow.visibility_pcf(light_position(&desc.light), p, n, desc.shadow_bias, desc.normal_offset_texels);
+        direct = albedo / std::f32::consts::PI * l_in * cosine * v;
+    }
+    direct + desc.ambient * albedo
+}

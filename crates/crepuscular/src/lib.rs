@@ -1,0 +1,27 @@
+//! # crepuscular
+//!
+//! Real-time single scattering in homogeneous participating media — crepuscular rays, light
+//! shafts, volumetric shadows — on the GPU through wgpu, with a CPU mirror of every step.
+//!
+//! The effect takes what a renderer already has (camera, light, medium, a depth texture and a
+//! shadow map) through one boundary, [`frame`], and writes an in-scattering texture.
+#![deny(missing_docs)]
+
+pub mod error;
+pub mod frame;
+pub mod gpu;
+pub mod image;
+pub mod integrand;
+pub mod model;
+pub mod shaders;
+pub mod shadow;
+pub mod stats;
+pub mod techniques;
+pub mod tonemap;
+
+pub use error::Error;
+pub use frame::{CpuFrame, FrameUniforms, GpuFrame};
+pub use gpu::GpuContext;
+pub use image::Image;
+pub use model::{Camera, Light, Medium, Phase, RgbTexture};
+pub use shadow::{Bounds, ShadowMap, ShadowProjection, ShadowSettings};

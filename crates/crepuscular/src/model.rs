@@ -1,0 +1,324 @@
+//! The physical model shared by every technique (DESIGN.md §1): camera, medium, phase
+//! functions and lights. Everything here is plain data plus the closed-form pieces of the
+//! single-scattering integral; the GPU mirrors these functions in `shaders/common.wgsl`
+//! under the same names.
+
+use glam::{Mat4, Vec3};
+use serde::{Deserialize, Serialize};
+use std::f32::consts::PI;
+
+/// A pinhole camera. World space is right-handed with +Y up; clip-space depth is in [0, 1]
+/// (wgpu / WebGPU convention), 0 at `near`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    /// Eye position, world units (metres).
+    pub position: Vec3,
+    /// Point the camera looks at, world units.
+    pub look_at: Vec3,
+    /// Up vector; need not be orthogonal to the view direction. Default +Y.
+    pub up: Vec3,
+    /// Vertical field of view, degrees. Default 60.
+    pub fov_y_degrees: f32,
+    /// Near plane distance along the view axis, world units. Default 0.1.
+    pub near: f32,
+    /// Far plane distance along the view axis, world units; rays that hit nothing end here
+    /// (the in-scattering integral runs to the far plane). Default 200.
+    pub far: f32,
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Self {
+            position: Vec3::new(0.0, 1.0, 5.0),
+            look_at: Vec3::ZERO,
+            up: Vec3::Y,
+            fov_y_degrees: 60.0,
+            near: 0.1,
+            far: 200.0,
+        }
+    }
+}
+
+impl Camera {
+    /// Unit view direction.
+    pub fn forward(&self) -> Vec3 {
+        (self.look_at - self.position).normalize()
+    }
+    /// World → view matrix.
+    pub fn view(&self) -> Mat4 {
+        Mat4::look_at_rh(self.position, self.look_at, self.up)
+    }
+    /// View → clip matrix for an image of the given aspect (width / height); depth in [0, 1].
+    pub fn projection(&self, aspect: f32) -> Mat4 {
+        Mat4::perspective_rh(self.fov_y_degrees.to_radians(), aspect, self.near, self.far)
+    }
+    /// World → clip.
+    pub fn view_projection(&self, aspect: f32) -> Mat4 {
+        self.projection(aspect) * self.view()
+    }
+    /// The eight world-space corners of the frustum slice between view depths `d0` and `d1`.
+    pub fn frustum_corners(&self, aspect: f32, d0: f32, d1: f32) -> [Vec3; 8] {
+        let f = self.forward();
+        let r = f.cross(self.up).normalize();
+        let u = r.cross(f);
+        let ty = (self.fov_y_degrees.to_radians() * 0.5).tan();
+        let tx = ty * aspect;
+        let mut out = [Vec3::ZERO; 8];
+        for (k, d) in [d0, d1].into_iter().enumerate() {
+            for (j, (sx, sy)) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].into_iter().enumerate() {
+                out[k * 4 + j] = self.position + f * d + r * (sx * tx * d) + u * (sy * ty * d);
+            }
+        }
+        out
+    }
+}
+
+/// Linear view depth (distance along the view axis) from a [0, 1] perspective depth-buffer
+/// value, for `Mat4::perspective_rh`. Mirrors `linear_depth` in common.wgsl.
+pub fn linear_depth(d: f32, near: f32, far: f32) -> f32 {
+    near * far / (far - d * (far - near))
+}
+
+/// A phase function p(cos θ), normalised to integrate to 1 over the sphere.
+/// θ is the scattering angle: 0 when looking straight into the light (DESIGN.md §1).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Phase {
+    /// p = 1 / (4π).
+    Isotropic,
+    /// Henyey–Greenstein: p = (1 − g²) / (4π (1 + g² − 2g cos θ)^{3/2}).
+    HenyeyGreenstein {
+        /// Asymmetry in (−1, 1); > 0 scatters forward (bright halo around the sun). Default 0.7.
+        #[serde(default = "default_g")]
+        g: f32,
+    },
+    /// Rayleigh: p = 3 / (16π) (1 + cos² θ).
+    Rayleigh,
+    /// Hoffman & Preetham 2002: a per-channel mix of Rayleigh and Mie (Mie through
+    /// Henyey–Greenstein with asymmetry `g`): p_c = f_c·p_R + (1 − f_c)·p_HG.
+    HoffmanPreetham {
+        /// Mie asymmetry in (−1, 1). Default 0.76.
+        #[serde(default = "default_mie_g")]
+        g: f32,
+        /// Fraction f of the scattering coefficient that is Rayleigh, per RGB channel, in [0, 1].
+        /// Default (0.216, 0.391, 0.612): β_R = (5.8, 13.5, 33.1)·10⁻⁶ m⁻¹ against β_M = 21·10⁻⁶ m⁻¹.
+        #[serde(default = "default_rayleigh_fraction")]
+        rayleigh_fraction: Vec3,
+    },
+}
+
+fn default_g() -> f32 {
+    0.7
+}
+fn default_mie_g() -> f32 {
+    0.76
+}
+fn default_rayleigh_fraction() -> Vec3 {
+    Vec3::new(5.8 / 26.8, 13.5 / 34.5, 33.1 / 54.1)
+}
+
+impl Default for Phase {
+    fn default() -> Self {
+        Phase::HenyeyGreenstein { g: 0.7 }
+    }
+}
+
+/// Henyey–Greenstein phase function.
+pub fn phase_hg(cos_theta: f32, g: f32) -> f32 {
+    let denom = (1.0 + g * g - 2.0 * g * cos_theta).max(1e-6);
+    (1.0 - g * g) / (4.0 * PI * denom * denom.sqrt())
+}
+
+/// Rayleigh phase function.
+pub fn phase_rayleigh(cos_theta: f32) -> f32 {
+    3.0 / (16.0 * PI) * (1.0 + cos_theta * cos_theta)
+}
+
+impl Phase {
+    /// p(cos θ) per RGB channel (only Hoffman–Preetham differs between channels).
+    /// Mirrors `phase` in common.wgsl.
+    pub fn eval(&self, cos_theta: f32) -> Vec3 {
+        match *self {
+            Phase::Isotropic => Vec3::splat(1.0 / (4.0 * PI)),
+            Phase::HenyeyGreenstein { g } => Vec3::splat(phase_hg(cos_theta, g)),
+            Phase::Rayleigh => Vec3::splat(phase_rayleigh(cos_theta)),
+            Phase::HoffmanPreetham { g, rayleigh_fraction: f } => {
+                f * phase_rayleigh(cos_theta) + (Vec3::ONE - f) * phase_hg(cos_theta, g)
+            }
+        }
+    }
+    /// f64 evaluation for the reference.
+    pub fn eval_f64(&self, c: f64) -> [f64; 3] {
+        use std::f64::consts::PI;
+        let hg = |g: f64| {
+            let d = (1.0 + g * g - 2.0 * g * c).max(1e-12);
+            (1.0 - g * g) / (4.0 * PI * d * d.sqrt())
+        };
+        let ray = 3.0 / (16.0 * PI) * (1.0 + c * c);
+        match *self {
+            Phase::Isotropic => [1.0 / (4.0 * PI); 3],
+            Phase::HenyeyGreenstein { g } => [hg(g as f64); 3],
+            Phase::Rayleigh => [ray; 3],
+            Phase::HoffmanPreetham { g, rayleigh_fraction: f } => {
+                let m = hg(g as f64);
+                let f = [f.x as f64, f.y as f64, f.z as f64];
+                [0, 1, 2].map(|i| f[i] * ray + (1.0 - f[i]) * m)
+            }
+        }
+    }
+    /// Code and parameters as the GPU sees them: (kind, g, rayleigh fraction).
+    pub fn gpu_params(&self) -> (u32, f32, Vec3) {
+        match *self {
+            Phase::Isotropic => (0, 0.0, Vec3::ZERO),
+            Phase::HenyeyGreenstein { g } => (1, g, Vec3::ZERO),
+            Phase::Rayleigh => (2, 0.0, Vec3::ONE),
+            Phase::HoffmanPreetham { g, rayleigh_fraction } => (3, g, rayleigh_fraction),
+        }
+    }
+}
+
+/// A homogeneous participating medium (DESIGN.md §1). Coefficients are per world unit
+/// (metre) and per RGB channel; σt = σs + σa.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Medium {
+    /// Scattering coefficient σs, m⁻¹, RGB, ≥ 0. Default 0.02 (light fog).
+    pub scattering: Vec3,
+    /// Absorption coefficient σa, m⁻¹, RGB, ≥ 0. Default 0.005.
+    pub absorption: Vec3,
+    /// Phase function. Default Henyey–Greenstein, g = 0.7.
+    pub phase: Phase,
+}
+
+impl Default for Medium {
+    fn default() -> Self {
+        Self { scattering: Vec3::splat(0.02), absorption: Vec3::splat(0.005), phase: Phase::default() }
+    }
+}
+
+impl Medium {
+    /// Extinction σt = σs + σa.
+    pub fn extinction(&self) -> Vec3 {
+        self.scattering + self.absorption
+    }
+    /// Transmittance T(t) = exp(−σt·t).
+    pub fn transmittance(&self, t: f32) -> Vec3 {
+        (-self.extinction() * t).exp()
+    }
+}
+
+/// ∫₀^Δ exp(−σt·t) dt = (1 − exp(−σt·Δ)) / σt, per channel, stable as σt → 0.
+/// Mirrors `segment_transmittance` in common.wgsl.
+pub fn segment_transmittance(sigma_t: Vec3, delta: f32) -> Vec3 {
+    let f = |s: f32| {
+        let x = s * delta;
+        if x < 1e-4 { delta * (1.0 - 0.5 * x) } else { (1.0 - (-x).exp()) / s }
+    };
+    Vec3::new(f(sigma_t.x), f(sigma_t.y), f(sigma_t.z))
+}
+
+/// An RGB texture in linear colour, row-major from the top-left texel, used as a spot light's
+/// projected "gobo" (stained glass).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RgbTexture {
+    /// Width in texels.
+    pub width: u32,
+    /// Height in texels.
+    pub height: u32,
+    /// Linear RGBA texels (alpha ignored), `width * height` of them.
+    pub texels: Vec<[f32; 4]>,
+}
+
+impl RgbTexture {
+    /// Bilinear lookup with clamp-to-edge at uv in [0, 1]² (v down), texel centres at
+    /// (i + 0.5) / width. Mirrors `sample_spot_texture` in common.wgsl, which uses four
+    /// `textureLoad`s so that both sides filter bit-for-bit alike.
+    pub fn sample(&self, u: f32, v: f32) -> Vec3 {
+        let x = u * self.width as f32 - 0.5;
+        let y = v * self.height as f32 - 0.5;
+        let x0 = x.floor();
+        let y0 = y.floor();
+        let fx = x - x0;
+        let fy = y - y0;
+        let w = self.width as i32;
+        let h = self.height as i32;
+        let at = |i: i32, j: i32| {
+            let t = self.texels[(j.clamp(0, h - 1) * w + i.clamp(0, w - 1)) as usize];
+            Vec3::new(t[0], t[1], t[2])
+        };
+        let (i, j) = (x0 as i32, y0 as i32);
+        let a = at(i, j).lerp(at(i + 1, j), fx);
+        let b = at(i, j + 1).lerp(at(i + 1, j + 1), fx);
+        a.lerp(b, fy)
+    }
+}
+
+/// The light source. One light per frame; run the effect once per light and add the results
+/// for several (Tóth & Umenhoffer 2009 §4).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Light {
+    /// A distant light (sun). Radiance scale E = colour·intensity arrives unattenuated: no
+    /// extinction along the light path (the convention of Klehm et al. 2014).
+    Directional {
+        /// Direction in which the light travels (from the sun towards the scene), unit length.
+        direction: Vec3,
+        /// Linear RGB colour.
+        color: Vec3,
+        /// Scale E applied to `color`.
+        intensity: f32,
+    },
+    /// A spot light: L_in = I·tex(ω)·cone(ω)·exp(−σt·d)/d².
+    Spot {
+        /// Position, world units.
+        position: Vec3,
+        /// Axis direction (where the spot points), unit length.
+        direction: Vec3,
+        /// Half-angle where the cone falls to zero, degrees, in (0, 89].
+        outer_angle_degrees: f32,
+        /// Half-angle inside which the cone is at full strength, degrees, ≤ outer.
+        inner_angle_degrees: f32,
+        /// Linear RGB colour.
+        color: Vec3,
+        /// Intensity I (per steradian), scales `color`.
+        intensity: f32,
+        /// Optional projected RGB texture, mapped over the spot's square shadow frustum.
+        texture: Option<std::sync::Arc<RgbTexture>>,
+    },
+    /// A point light: L_in = I·exp(−σt·d)/d² (Tóth & Umenhoffer's Φ/(4πd²) with I = Φ/4π),
+    /// shadowed by a cube shadow map (six layers).
+    Point {
+        /// Position, world units.
+        position: Vec3,
+        /// Linear RGB colour.
+        color: Vec3,
+        /// Intensity I (per steradian), scales `color`.
+        intensity: f32,
+    },
+}
+
+impl Light {
+    /// Short name of the light kind.
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            Light::Directional { .. } => "directional",
+            Light::Spot { .. } => "spot",
+            Light::Point { .. } => "point",
+        }
+    }
+    /// Kind code shared with WGSL.
+    pub fn kind_code(&self) -> u32 {
+        match self {
+            Light::Directional { .. } => 0,
+            Light::Spot { .. } => 1,
+            Light::Point { .. } => 2,
+        }
+    }
+    /// Number of shadow-map layers this light uses (six cube faces for a point light).
+    pub fn shadow_layers(&self) -> u32 {
+        if matches!(self, Light::Point { .. }) { 6 } else { 1 }
+    }
+    /// Spot cone factor: smoothstep between the outer and inner half-angles.
+    pub fn spot_cone(cos_outer: f32, cos_inner: f32, cos_a: f32) -> f32 {
+        let t = ((cos_a - cos_outer) / (cos_inner - cos_outer).max(1e-6)).clamp(0.0, 1.0);
+        t * t * (3.0 - 2.0 * t)
+    }
+}

@@ -1,0 +1,292 @@
+// Shared WGSL for every pass: the frame uniforms, phase functions, lights, shadow lookups and
+// the single-scattering integrand (DESIGN.md §1). Every function has a Rust twin of the same
+// name (model.rs, shadow.rs, integrand.rs, frame.rs) that the CPU mirror calls.
+// Composition: this file is prepended to each pass shader (see shaders.rs).
+
+const PI: f32 = 3.14159265358979;
+
+struct Frame {
+    inv_view_proj: mat4x4<f32>,
+    view_proj: mat4x4<f32>,
+    shadow_view_proj: array<mat4x4<f32>, 6>,
+    camera_pos: vec4<f32>,
+    camera_fwd: vec4<f32>,
+    light_pos: vec4<f32>,
+    light_dir: vec4<f32>,
+    light_color: vec4<f32>,
+    sigma_s: vec4<f32>,
+    sigma_a: vec4<f32>,
+    rayleigh_fraction: vec4<f32>,
+    shadow_params: vec4<f32>,
+    ambient: vec4<f32>,
+    ints: vec4<u32>,
+    shadow_ints: vec4<u32>,
+}
+
+fn extinction(f: Frame) -> vec3<f32> {
+    return f.sigma_s.xyz + f.sigma_a.xyz;
+}
+
+// model.rs linear_depth: [0,1] perspective depth → view-axis distance.
+fn linear_depth(d: f32, near: f32, far: f32) -> f32 {
+    return near * far / (far - d * (far - near));
+}
+
+fn phase_hg(c: f32, g: f32) -> f32 {
+    let denom = max(1.0 + g * g - 2.0 * g * c, 1e-6);
+    return (1.0 - g * g) / (4.0 * PI * denom * sqrt(denom));
+}
+
+fn phase_rayleigh(c: f32) -> f32 {
+    return 3.0 / (16.0 * PI) * (1.0 + c * c);
+}
+
+// model.rs Phase::eval.
+fn phase(f: Frame, c: f32) -> vec3<f32> {
+    let kind = f.ints.w;
+    let g = f.sigma_s.w;
+    if kind == 0u {
+        return vec3<f32>(1.0 / (4.0 * PI));
+    } else if kind == 1u {
+        return vec3<f32>(phase_hg(c, g));
+    } else if kind == 2u {
+        return vec3<f32>(phase_rayleigh(c));
+    }
+    let fr = f.rayleigh_fraction.xyz;
+    return fr * phase_rayleigh(c) + (vec3<f32>(1.0) - fr) * phase_hg(c, g);
+}
+
+// model.rs segment_transmittance: ∫₀^Δ exp(−σt t) dt per channel, stable as σt → 0.
+fn segment_transmittance1(s: f32, delta: f32) -> f32 {
+    let x = s * delta;
+    if x < 1e-4 {
+        return delta * (1.0 - 0.5 * x);
+    }
+    return (1.0 - exp(-x)) / s;
+}
+
+fn segment_transmittance(st: vec3<f32>, delta: f32) -> vec3<f32> {
+    return vec3<f32>(
+        segment_transmittance1(st.x, delta),
+        segment_transmittance1(st.y, delta),
+        segment_transmittance1(st.z, delta),
+    );
+}
+
+// frame.rs FrameDesc::pixel_ray.
+fn pixel_ray(f: Frame, px: vec2<u32>) -> vec3<f32> {
+    let size = vec2<f32>(f32(f.ints.x), f32(f.ints.y));
+    let ndc = vec2<f32>((f32(px.x) + 0.5) / size.x * 2.0 - 1.0, 1.0 - (f32(px.y) + 0.5) / size.y * 2.0);
+    let h = f.inv_view_proj * vec4<f32>(ndc, 1.0, 1.0);
+    let p = h.xyz / h.w;
+    return normalize(p - f.camera_pos.xyz);
+}
+
+// frame.rs FrameDesc::view_distance.
+fn view_distance(f: Frame, d: f32, dir: vec3<f32>) -> f32 {
+    let lin = linear_depth(d, f.camera_pos.w, f.camera_fwd.w);
+    return lin / max(dot(dir, f.camera_fwd.xyz), 1e-4);
+}
+
+// shadow.rs cube_face.
+fn cube_face(v: vec3<f32>) -> u32 {
+    let a = abs(v);
+    if a.x >= a.y && a.x >= a.z {
+        return select(1u, 0u, v.x >= 0.0);
+    } else if a.y >= a.z {
+        return select(3u, 2u, v.y >= 0.0);
+    }
+    return select(5u, 4u, v.z >= 0.0);
+}
+
+// shadow.rs ShadowProjection::linear.
+fn shadow_linear_depth(f: Frame, d: f32) -> f32 {
+    if f.shadow_ints.z == 1u {
+        return f.shadow_params.x + d * (f.shadow_params.y - f.shadow_params.x);
+    }
+    return linear_depth(d, f.shadow_params.x, f.shadow_params.y);
+}
+
+struct ShadowCoord {
+    valid: bool,
+    layer: u32,
+    texel: vec2<u32>,
+    depth: f32, // linear light-space depth of the point
+    uv: vec2<f32>,
+}
+
+// shadow.rs ShadowMap::coord.
+fn shadow_coord(f: Frame, p: vec3<f32>) -> ShadowCoord {
+    var sc: ShadowCoord;
+    sc.valid = false;
+    var layer = 0u;
+    if f.shadow_ints.x == 6u {
+        layer = cube_face(p - f.light_pos.xyz);
+    }
+    sc.layer = layer;
+    let c = f.shadow_view_proj[layer] * vec4<f32>(p, 1.0);
+    if c.w <= 0.0 {
+        return sc;
+    }
+    let ndc = c.xyz / c.w;
+    if ndc.z < 0.0 || ndc.z > 1.0 || abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 {
+        return sc;
+    }
+    let n = f32(f.shadow_ints.y);
+    sc.uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    sc.texel = vec2<u32>(min(floor(sc.uv * n), vec2<f32>(n - 1.0)));
+    sc.depth = shadow_linear_depth(f, ndc.z);
+    sc.valid = true;
+    return sc;
+}
+
+// shadow.rs ShadowMap::visibility: 1 lit, 0 shadowed; outside the map is lit.
+fn shadow_visibility(f: Frame, shadow_map: texture_2d_array<f32>, p: vec3<f32>, bias: f32) -> f32 {
+    let sc = shadow_coord(f, p);
+    if !sc.valid {
+        return 1.0;
+    }
+    let stored = shadow_linear_depth(f, textureLoad(shadow_map, vec2<i32>(sc.texel), i32(sc.layer), 0).r);
+    return select(0.0, 1.0, sc.depth <= stored + bias);
+}
+
+// model.rs RgbTexture::sample: bilinear, clamp to edge, four loads.
+fn sample_spot_texture(tex: texture_2d<f32>, uv: vec2<f32>) -> vec3<f32> {
+    let dim = vec2<i32>(textureDimensions(tex));
+    let x = uv * vec2<f32>(dim) - 0.5;
+    let x0 = floor(x);
+    let fr = x - x0;
+    let i = vec2<i32>(x0);
+    let hi = dim - vec2<i32>(1);
+    let t00 = textureLoad(tex, clamp(i, vec2<i32>(0), hi), 0).rgb;
+    let t10 = textureLoad(tex, clamp(i + vec2<i32>(1, 0), vec2<i32>(0), hi), 0).rgb;
+    let t01 = textureLoad(tex, clamp(i + vec2<i32>(0, 1), vec2<i32>(0), hi), 0).rgb;
+    let t11 = textureLoad(tex, clamp(i + vec2<i32>(1, 1), vec2<i32>(0), hi), 0).rgb;
+    let a = mix(t00, t10, fr.x);
+    let b = mix(t01, t11, fr.x);
+    return mix(a, b, fr.y);
+}
+
+struct Incident {
+    radiance: vec3<f32>,
+    dir: vec3<f32>, // direction in which the light travels at the point
+}
+
+fn smooth_cone(cos_outer: f32, cos_inner: f32, c: f32) -> f32 {
+    let t = clamp((c - cos_outer) / max(cos_inner - cos_outer, 1e-6), 0.0, 1.0);
+    return t * t * (3.0 - 2.0 * t);
+}
+
+// integrand.rs light_incident.
+fn light_incident(f: Frame, spot_tex: texture_2d<f32>, p: vec3<f32>) -> Incident {
+    var r: Incident;
+    let kind = f.ints.z;
+    if kind == 0u {
+        r.radiance = f.light_color.xyz;
+        r.dir = f.light_dir.xyz;
+        return r;
+    }
+    let v = p - f.light_pos.xyz;
+    let d2 = max(dot(v, v), 1e-8);
+    let d = sqrt(d2);
+    r.dir = v / d;
+    let att = exp(-extinction(f) * d) / d2;
+    if kind == 2u {
+        r.radiance = f.light_color.xyz * att;
+        return r;
+    }
+    let cone = smooth_cone(f.light_dir.w, f.light_color.w, dot(r.dir, f.light_dir.xyz));
+    if cone <= 0.0 {
+        r.radiance = vec3<f32>(0.0);
+        return r;
+    }
+    var tex = vec3<f32>(1.0);
+    if f.shadow_ints.w == 1u {
+        let c = f.shadow_view_proj[0] * vec4<f32>(p, 1.0);
+        if c.w > 0.0 {
+            let ndc = c.xy / c.w;
+            tex = sample_spot_texture(spot_tex, vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5));
+        }
+    }
+    r.radiance = f.light_color.xyz * cone * att * tex;
+    return r;
+}
+
+// integrand.rs inscatter_density: σs·p(cos θ)·L_in(x)·V(x).
+fn inscatter_density(
+    f: Frame,
+    shadow_map: texture_2d_array<f32>,
+    spot_tex: texture_2d<f32>,
+    view_dir: vec3<f32>,
+    p: vec3<f32>,
+) -> vec3<f32> {
+    let li = light_incident(f, spot_tex, p);
+    if all(li.radiance == vec3<f32>(0.0)) {
+        return vec3<f32>(0.0);
+    }
+    let v = shadow_visibility(f, shadow_map, p, f.shadow_params.z);
+    if v == 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let cos_theta = -dot(li.dir, view_dir);
+    return f.sigma_s.xyz * phase(f, cos_theta) * li.radiance * v;
+}
+
+// A 32-bit integer hash (PCG, Jarzynski & Olano 2020), mirrored by `pcg_hash` in Rust.
+fn pcg_hash(v: u32) -> u32 {
+    let state = v * 747796405u + 2891336453u;
+    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+// Uniform in [0, 1) from a pixel and a frame index, mirrored by `pixel_jitter` in Rust.
+fn pixel_jitter(px: vec2<u32>, frame: u32) -> f32 {
+    let h = pcg_hash(px.x ^ pcg_hash(px.y ^ pcg_hash(frame)));
+    return f32(h >> 8u) * (1.0 / 16777216.0);
+}
+
+// shadow.rs ShadowMap::visibility_pcf: 3×3 percentage-closer filter for surfaces, with the
+// point pushed along the surface normal by `normal_offset_texels` shadow texels.
+fn shadow_pcf(f: Frame, shadow_map: texture_2d_array<f32>, p: vec3<f32>, n: vec3<f32>) -> f32 {
+    var texel = f.shadow_params.w;
+    if f.shadow_ints.z == 0u {
+        texel *= length(p - f.light_pos.xyz);
+    }
+    let q = p + n * (f.ambient.w * texel);
+    let sc = shadow_coord(f, q);
+    if !sc.valid {
+        return 1.0;
+    }
+    let size = i32(f.shadow_ints.y);
+    var sum = 0.0;
+    for (var dy = -1; dy <= 1; dy++) {
+        for (var dx = -1; dx <= 1; dx++) {
+            let t = clamp(vec2<i32>(sc.texel) + vec2<i32>(dx, dy), vec2<i32>(0), vec2<i32>(size - 1));
+            let stored = shadow_linear_depth(f, textureLoad(shadow_map, t, i32(sc.layer), 0).r);
+            sum += select(0.0, 1.0, sc.depth <= stored + f.shadow_params.z);
+        }
+    }
+    return sum / 9.0;
+}
+
+// integrand.rs surface_radiance: Lambert with the same light and shadow map, plus ambient.
+fn surface_radiance(
+    f: Frame,
+    shadow_map: texture_2d_array<f32>,
+    spot_tex: texture_2d<f32>,
+    p: vec3<f32>,
+    normal: vec3<f32>,
+    albedo: vec3<f32>,
+) -> vec3<f32> {
+    var n = normalize(normal);
+    if dot(n, f.camera_pos.xyz - p) < 0.0 {
+        n = -n;
+    }
+    let li = light_incident(f, spot_tex, p);
+    let cosine = max(dot(n, -li.dir), 0.0);
+    var direct = vec3<f32>(0.0);
+    if cosine > 0.0 && any(li.radiance > vec3<f32>(0.0)) {
+        direct = albedo / PI * li.radiance * cosine * shadow_pcf(f, shadow_map, p, n);
+    }
+    return direct + f.ambient.xyz * albedo;
+}

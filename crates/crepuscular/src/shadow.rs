@@ -1,0 +1,249 @@
+//! Shadow-map setup and lookups. One convention for every light kind: a depth texture array
+//! (one layer for directional and spot lights, six cube faces for a point light), each layer
+//! with its own world → clip matrix and [0, 1] depth. Lookups compare *linear* light-space
+//! depths so a bias means the same distance everywhere. Mirrored by `shadow_visibility` in
+//! common.wgsl.
+
+use crate::model::{Camera, Light};
+use glam::{Mat4, Vec3, Vec4, Vec4Swizzles};
+use serde::{Deserialize, Serialize};
+
+/// World-space axis-aligned bounds of a scene's geometry.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bounds {
+    /// Minimum corner.
+    pub min: Vec3,
+    /// Maximum corner.
+    pub max: Vec3,
+}
+
+impl Bounds {
+    /// The eight corners.
+    pub fn corners(&self) -> [Vec3; 8] {
+        let (a, b) = (self.min, self.max);
+        [
+            Vec3::new(a.x, a.y, a.z), Vec3::new(b.x, a.y, a.z), Vec3::new(a.x, b.y, a.z), Vec3::new(b.x, b.y, a.z),
+            Vec3::new(a.x, a.y, b.z), Vec3::new(b.x, a.y, b.z), Vec3::new(a.x, b.y, b.z), Vec3::new(b.x, b.y, b.z),
+        ]
+    }
+    /// Centre.
+    pub fn center(&self) -> Vec3 {
+        0.5 * (self.min + self.max)
+    }
+    /// Half the diagonal.
+    pub fn radius(&self) -> f32 {
+        0.5 * (self.max - self.min).length()
+    }
+}
+
+/// Settings of the host shadow map.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ShadowSettings {
+    /// Texels per side of each shadow-map layer. Default 2048. Memory: 4 bytes per texel per
+    /// layer (six layers for a point light); the cost of the shadow pass grows with it.
+    pub size: u32,
+    /// Constant depth bias for the volume lookups, in world units along the light's depth
+    /// axis. Default 0.02. Too small → acne-like noise in the shafts; too large → light leaks
+    /// at contact points.
+    pub bias: f32,
+    /// Normal offset for surface lookups, in shadow-map texels. Default 1.5.
+    pub normal_offset_texels: f32,
+}
+
+impl Default for ShadowSettings {
+    fn default() -> Self {
+        Self { size: 2048, bias: 0.02, normal_offset_texels: 1.5 }
+    }
+}
+
+/// The matrices and depth ranges of a light's shadow map: everything needed to rasterize it and
+/// to look it up. This is the part of the frame boundary a user's renderer fills in with its
+/// own matrices if it already has a shadow map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShadowProjection {
+    /// World → clip per layer (only the first `layers` are used).
+    pub view_proj: [Mat4; 6],
+    /// Number of layers: 1, or 6 for a point light's cube faces (+X, −X, +Y, −Y, +Z, −Z).
+    pub layers: u32,
+    /// Near plane of the light projection, world units.
+    pub near: f32,
+    /// Far plane of the light projection, world units.
+    pub far: f32,
+    /// True for an orthographic projection (directional light): depth is linear.
+    pub orthographic: bool,
+    /// Texels per side.
+    pub size: u32,
+    /// World-space size of one texel at unit distance (perspective) or everywhere (orthographic).
+    pub texel_world: f32,
+}
+
+/// Look-at targets and up vectors of the six cube faces, in layer order.
+pub const CUBE_FACES: [(Vec3, Vec3); 6] = [
+    (Vec3::X, Vec3::NEG_Y),
+    (Vec3::NEG_X, Vec3::NEG_Y),
+    (Vec3::Y, Vec3::Z),
+    (Vec3::NEG_Y, Vec3::NEG_Z),
+    (Vec3::Z, Vec3::NEG_Y),
+    (Vec3::NEG_Z, Vec3::NEG_Y),
+];
+
+/// Cube face (layer) for a direction from the light: the major axis. Mirrors `cube_face` in WGSL.
+pub fn cube_face(v: Vec3) -> u32 {
+    let a = v.abs();
+    if a.x >= a.y && a.x >= a.z {
+        if v.x >= 0.0 { 0 } else { 1 }
+    } else if a.y >= a.z {
+        if v.y >= 0.0 { 2 } else { 3 }
+    } else if v.z >= 0.0 {
+        4
+    } else {
+        5
+    }
+}
+
+impl ShadowProjection {
+    /// Fits the shadow projection for `light`. Directional: orthographic, fitted to the part of
+    /// the view frustum that holds geometry, with the depth range covering every caster in
+    /// `bounds`. Spot: perspective over the cone (square, full angle 2·outer). Point: six 90°
+    /// faces. `aspect` is the camera image's width / height.
+    pub fn fit(light: &Light, camera: &Camera, aspect: f32, bounds: Bounds, size: u32) -> Self {
+        let reach = (bounds.center() - camera.position).length() + bounds.radius();
+        match light {
+            Light::Directional { direction, .. } => {
+                let dir = direction.normalize();
+                let up = if dir.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
+                let c = bounds.center();
+                let r = bounds.radius().max(1e-3);
+                let view = Mat4::look_at_rh(c - dir * (2.0 * r), c, up);
+                let far_fit = camera.far.min(reach).max(camera.near * 2.0);
+                let frustum = camera.frustum_corners(aspect, camera.near, far_fit);
+                let (mut fmin, mut fmax) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+                for p in frustum {
+                    let q = view.transform_point3(p);
+                    fmin = fmin.min(q);
+                    fmax = fmax.max(q);
+                }
+                let (mut bmin, mut bmax) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+                for p in bounds.corners() {
+                    let q = view.transform_point3(p);
+                    bmin = bmin.min(q);
+                    bmax = bmax.max(q);
+                }
+                // xy: the frustum ∩ the geometry; z: every caster (view looks down −z).
+                let lo = fmin.max(bmin);
+                let hi = fmax.min(bmax);
+                let (lo, hi) = if lo.x < hi.x && lo.y < hi.y { (lo, hi) } else { (bmin, bmax) };
+                let pad = 0.01 * r;
+                let near = (-bmax.z - pad).max(1e-3);
+                let far = -bmin.z + pad;
+                let proj = Mat4::orthographic_rh(lo.x - pad, hi.x + pad, lo.y - pad, hi.y + pad, near, far);
+                let texel = ((hi.x - lo.x).max(hi.y - lo.y) + 2.0 * pad) / size as f32;
+                let m = proj * view;
+                Self { view_proj: [m; 6], layers: 1, near, far, orthographic: true, size, texel_world: texel }
+            }
+            Light::Spot { position, direction, outer_angle_degrees, .. } => {
+                let dir = direction.normalize();
+                let up = if dir.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
+                let fov = (2.0 * outer_angle_degrees.to_radians()).min(179f32.to_radians());
+                let far = ((bounds.center() - *position).length() + bounds.radius()).max(1.0);
+                let near = (far * 1e-3).max(0.02);
+                let m = Mat4::perspective_rh(fov, 1.0, near, far) * Mat4::look_at_rh(*position, *position + dir, up);
+                let texel = 2.0 * (fov * 0.5).tan() / size as f32;
+                Self { view_proj: [m; 6], layers: 1, near, far, orthographic: false, size, texel_world: texel }
+            }
+            Light::Point { position, .. } => {
+                let far = ((bounds.center() - *position).length() + bounds.radius()).max(1.0);
+                let near = (far * 1e-3).max(0.02);
+                let proj = Mat4::perspective_rh(std::f32::consts::FRAC_PI_2, 1.0, near, far);
+                let view_proj = CUBE_FACES.map(|(f, u)| proj * Mat4::look_at_rh(*position, *position + f, u));
+                Self { view_proj, layers: 6, near, far, orthographic: false, size, texel_world: 2.0 / size as f32 }
+            }
+        }
+    }
+
+    /// Linear light-space depth from a [0, 1] depth value. Mirrors `shadow_linear_depth`.
+    pub fn linear(&self, d: f32) -> f32 {
+        if self.orthographic {
+            self.near + d * (self.far - self.near)
+        } else {
+            crate::model::linear_depth(d, self.near, self.far)
+        }
+    }
+}
+
+/// A shadow map on the CPU: `layers` images of `size × size` [0, 1] depths, row-major from the
+/// top-left texel (texture v = 0 at the top, as wgpu stores it).
+#[derive(Clone, Debug)]
+pub struct ShadowMap {
+    /// The projection that produced it.
+    pub projection: ShadowProjection,
+    /// Depths, `layers * size * size`, cleared to 1.0 where nothing was drawn.
+    pub depth: Vec<f32>,
+}
+
+impl ShadowMap {
+    /// Which layer, texel and linear depth a world point falls on; None outside the map
+    /// (outside the light frustum). Mirrors `shadow_coord` in common.wgsl.
+    pub fn coord(&self, light_pos: Vec3, p: Vec3) -> Option<(u32, u32, u32, f32)> {
+        let pr = &self.projection;
+        let layer = if pr.layers == 6 { cube_face(p - light_pos) } else { 0 };
+        let c = pr.view_proj[layer as usize] * Vec4::new(p.x, p.y, p.z, 1.0);
+        if c.w <= 0.0 {
+            return None;
+        }
+        let ndc = c.xyz() / c.w;
+        if ndc.z < 0.0 || ndc.z > 1.0 || ndc.x.abs() > 1.0 || ndc.y.abs() > 1.0 {
+            return None;
+        }
+        let n = pr.size as f32;
+        let tx = ((ndc.x * 0.5 + 0.5) * n).floor().min(n - 1.0) as u32;
+        let ty = ((0.5 - ndc.y * 0.5) * n).floor().min(n - 1.0) as u32;
+        Some((layer, tx, ty, pr.linear(ndc.z)))
+    }
+
+    /// Stored depth at a texel.
+    pub fn texel(&self, layer: u32, x: u32, y: u32) -> f32 {
+        let n = self.projection.size;
+        self.depth[((layer * n + y) * n + x) as usize]
+    }
+
+    /// Binary visibility of a point from the light (1 lit, 0 shadowed); points outside the map
+    /// are lit. Mirrors `shadow_visibility` in common.wgsl.
+    pub fn visibility(&self, light_pos: Vec3, p: Vec3, bias: f32) -> f32 {
+        match self.coord(light_pos, p) {
+            None => 1.0,
+            Some((l, x, y, z)) => {
+                let stored = self.projection.linear(self.texel(l, x, y));
+                if z <= stored + bias { 1.0 } else { 0.0 }
+            }
+        }
+    }
+}
+
+impl ShadowMap {
+    /// 3×3 percentage-closer filtered visibility for a surface point with normal `n`, pushed
+    /// along the normal by `normal_offset_texels` texels. Mirrors `shadow_pcf` in common.wgsl.
+    pub fn visibility_pcf(&self, light_pos: Vec3, p: Vec3, n: Vec3, bias: f32, normal_offset_texels: f32) -> f32 {
+        let pr = &self.projection;
+        let mut texel = pr.texel_world;
+        if !pr.orthographic {
+            texel *= (p - light_pos).length();
+        }
+        let q = p + n * (normal_offset_texels * texel);
+        let Some((layer, tx, ty, z)) = self.coord(light_pos, q) else {
+            return 1.0;
+        };
+        let size = pr.size as i32;
+        let mut sum = 0.0;
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let x = (tx as i32 + dx).clamp(0, size - 1) as u32;
+                let y = (ty as i32 + dy).clamp(0, size - 1) as u32;
+                let stored = pr.linear(self.texel(layer, x, y));
+                sum += if z <= stored + bias { 1.0 } else { 0.0 };
+            }
+        }
+        sum / 9.0
+    }
+}

@@ -1,0 +1,61 @@
+//! CPU mirror of `brute-force`: the same sample placement and arithmetic (f32) as march.wgsl,
+//! function for function.
+
+use super::BruteForceSettings;
+use crate::error::Error;
+use crate::frame::CpuFrame;
+use crate::image::Image;
+use crate::integrand::inscatter_density;
+use crate::model::segment_transmittance;
+use crate::shaders::pixel_jitter;
+use crate::stats::{PassTime, TechniqueStats};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// Mirrors `march_ray` in march.wgsl.
+pub fn march_ray(frame: &CpuFrame, settings: &BruteForceSettings, x: u32, y: u32, dir: Vec3, s: f32) -> Vec3 {
+    let desc = frame.desc;
+    let n = settings.steps;
+    let delta = s / n as f32;
+    let j = if settings.jitter { pixel_jitter(x, y, settings.frame_index) } else { 0.5 };
+    let st = desc.medium.extinction();
+    let seg = segment_transmittance(st, delta);
+    let mut sum = Vec3::ZERO;
+    for i in 0..n {
+        let t0 = i as f32 * delta;
+        let t = (i as f32 + j) * delta;
+        let p = desc.camera.position + dir * t;
+        sum += inscatter_density(&desc.light, &desc.medium, frame.shadow_map, desc.shadow_bias, dir, p)
+            * (-st * t0).exp()
+            * seg;
+    }
+    sum
+}
+
+/// Mirrors the `march` entry point over the whole image.
+pub fn march(frame: &CpuFrame, settings: &BruteForceSettings) -> Result<(Image, TechniqueStats), Error> {
+    settings.validate()?;
+    let desc = frame.desc;
+    let start = std::time::Instant::now();
+    let inv = desc.camera.view_projection(desc.aspect()).inverse();
+    let mut img = Image::new(desc.width, desc.height);
+    img.pixels.par_chunks_mut(desc.width as usize).enumerate().for_each(|(y, row)| {
+        for (x, px) in row.iter_mut().enumerate() {
+            let (x, y) = (x as u32, y as u32);
+            let dir = desc.pixel_ray(&inv, x, y);
+            let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
+            let l = march_ray(frame, settings, x, y, dir, s);
+            *px = [l.x, l.y, l.z, 1.0];
+        }
+    });
+    let stats = TechniqueStats {
+        technique: "brute-force".into(),
+        backend: "cpu".into(),
+        timing: "wall-clock".into(),
+        passes: vec![PassTime { name: "march".into(), ms: start.elapsed().as_secs_f64() * 1e3 }],
+        raymarched_samples: desc.width as u64 * desc.height as u64 * settings.steps as u64,
+        gpu_memory_bytes: 0,
+        extra: Default::default(),
+    };
+    Ok((img, stats))
+}

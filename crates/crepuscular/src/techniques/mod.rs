@@ -1,0 +1,43 @@
+//! The techniques, one folder each: settings, GPU passes with their WGSL beside them, and
+//! `cpu.rs`, the CPU mirror with the same sample placement and function names.
+
+pub mod brute_force;
+pub mod reference;
+
+/// What the tool and the docs list about a technique.
+#[derive(Clone, Copy, Debug)]
+pub struct TechniqueInfo {
+    /// Name used on the command line and in scene files (`[render.<name>]`).
+    pub name: &'static str,
+    /// One line.
+    pub summary: &'static str,
+    /// The paper it implements.
+    pub paper: &'static str,
+    /// Runs on the GPU.
+    pub gpu: bool,
+    /// Runs on the CPU.
+    pub cpu: bool,
+}
+
+/// Every technique, in the order the tool lists them.
+pub const TECHNIQUES: &[TechniqueInfo] = &[
+    TechniqueInfo {
+        name: "brute-force",
+        summary: "per-pixel ray marching through the shadow map, N steps per pixel (GPU + CPU mirror)",
+        paper: "Tóth & Umenhoffer 2009, §3–4, eq. 1",
+        gpu: true,
+        cpu: true,
+    },
+    TechniqueInfo {
+        name: "reference",
+        summary: "ground truth: f64, many stratified steps per pixel over the same shadow map, with a convergence estimate (CPU only)",
+        paper: "DESIGN.md §1 (the integral itself)",
+        gpu: false,
+        cpu: true,
+    },
+];
+
+/// Looks a technique up by name.
+pub fn find(name: &str) -> Option<&'static TechniqueInfo> {
+    TECHNIQUES.iter().find(|t| t.name == name)
+}

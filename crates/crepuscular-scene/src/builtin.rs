@@ -187,29 +187,31 @@ fn ground(g: &mut Geometry, size: f32, albedo: Vec3) {
 // ---------------------------------------------------------------------------------------------
 // Scenes.
 
-/// A row of nine columns on a stylobate under an architrave and cornice, a row of broken
-/// columns behind, a few fallen blocks in front. The sun is low behind the colonnade, hidden
-/// behind the architrave as seen from the camera, so shafts pass between the columns towards
-/// the camera and the columns' shadows stripe the fog and the ground.
+/// A stoa: a hall whose front is a row of nine columns under an architrave, closed by a roof,
+/// side walls and a back wall. The camera stands inside looking out through the colonnade at a
+/// low sun partly hidden by a column; shafts stream between the columns into the shadowed hall
+/// towards the camera, and the columns' shadows stripe the floor and the fog. Outside, a row
+/// of broken columns and a few fallen blocks.
 fn colonnade() -> Scene {
     let mut g = Geometry::default();
     let stone = Vec3::new(0.66, 0.6, 0.52);
     let dark_stone = Vec3::new(0.5, 0.46, 0.4);
-    ground(&mut g, 160.0, Vec3::new(0.5, 0.45, 0.38));
-    // Stylobate: two steps.
+    ground(&mut g, 200.0, Vec3::new(0.5, 0.45, 0.38));
+    // Hall: x in [-hx, hx], z in [0, depth]; floor at `top`.
+    let (hx, depth) = (14.5f32, 13.0f32);
+    let top = 0.7;
     boxed(
         &mut g,
-        Vec3::new(0.0, 0.2, 0.0),
-        Vec3::new(30.0, 0.4, 5.0),
+        Vec3::new(0.0, 0.2, depth * 0.5 - 0.6),
+        Vec3::new(2.0 * hx + 2.0, 0.4, depth + 3.2),
         dark_stone,
     );
     boxed(
         &mut g,
-        Vec3::new(0.0, 0.55, 0.0),
-        Vec3::new(29.0, 0.3, 4.0),
+        Vec3::new(0.0, 0.55, depth * 0.5 - 0.3),
+        Vec3::new(2.0 * hx + 1.0, 0.3, depth + 2.0),
         stone,
     );
-    let top = 0.7;
     let column_h = 7.5;
     for i in 0..9 {
         let x = -12.0 + 3.0 * i as f32;
@@ -233,46 +235,68 @@ fn colonnade() -> Scene {
             stone,
         );
     }
-    let beam_y = top + 0.3 + column_h + 0.4; // 8.9
+    let beam_y = top + 0.3 + column_h + 0.4; // 8.9: underside of the architrave
     boxed(
         &mut g,
         Vec3::new(0.0, beam_y + 0.5, 0.0),
-        Vec3::new(26.0, 1.0, 1.6),
+        Vec3::new(2.0 * hx + 1.0, 1.0, 1.6),
         stone,
     );
     boxed(
         &mut g,
         Vec3::new(0.0, beam_y + 1.2, 0.0),
-        Vec3::new(27.0, 0.4, 2.2),
+        Vec3::new(2.0 * hx + 2.0, 0.4, 2.2),
         dark_stone,
     );
-    // Broken columns behind.
+    // Roof over the hall, side walls and back wall.
+    let roof_y = beam_y + 1.0;
+    boxed(
+        &mut g,
+        Vec3::new(0.0, roof_y + 0.3, depth * 0.5),
+        Vec3::new(2.0 * hx + 2.0, 0.6, depth + 1.0),
+        dark_stone,
+    );
+    for s in [-1.0f32, 1.0] {
+        boxed(
+            &mut g,
+            Vec3::new(s * hx, (top + roof_y) * 0.5, depth * 0.5),
+            Vec3::new(0.8, roof_y - top, depth),
+            stone,
+        );
+    }
+    boxed(
+        &mut g,
+        Vec3::new(0.0, (top + roof_y) * 0.5, depth),
+        Vec3::new(2.0 * hx, roof_y - top, 0.8),
+        stone,
+    );
+    // Broken columns outside.
     let mut rng = Rng::new(0xC010_77AD);
     for i in 0..8 {
         let x = -13.5 + 3.8 * i as f32 + rng.range(-0.4, 0.4);
         let h = rng.range(1.5, 6.5);
         g.append(&mesh::cylinder(
-            &Transform::at_scaled(Vec3::new(x, h * 0.5, -9.0), Vec3::new(0.9, h, 0.9)),
+            &Transform::at_scaled(Vec3::new(x, h * 0.5, -12.0), Vec3::new(0.9, h, 0.9)),
             dark_stone,
         ));
     }
-    // Fallen drums and blocks in front.
+    // Fallen drums and blocks inside and outside.
     g.append(&mesh::cylinder(
-        &Transform::at_scaled(Vec3::new(6.0, 0.5, 6.5), Vec3::new(1.0, 1.8, 1.0))
+        &Transform::at_scaled(Vec3::new(-5.0, top + 0.5, 6.0), Vec3::new(1.0, 1.8, 1.0))
             .rotated(Vec3::new(0.0, 35.0, 90.0)),
         stone,
     ));
     boxed_rot(
         &mut g,
-        Vec3::new(-6.5, 0.45, 5.0),
+        Vec3::new(5.5, top + 0.45, 4.0),
         Vec3::new(1.6, 0.9, 1.1),
         Vec3::new(0.0, 22.0, 0.0),
         dark_stone,
     );
     boxed_rot(
         &mut g,
-        Vec3::new(-4.8, 0.3, 8.0),
-        Vec3::new(0.9, 0.6, 0.9),
+        Vec3::new(-7.0, 0.45, -6.0),
+        Vec3::new(1.4, 0.9, 1.0),
         Vec3::new(0.0, -15.0, 0.0),
         stone,
     );
@@ -281,22 +305,22 @@ fn colonnade() -> Scene {
         name: String::new(),
         description: String::new(),
         camera: Camera {
-            position: Vec3::new(3.5, 1.7, 17.0),
-            look_at: Vec3::new(-0.5, 5.2, 0.0),
+            position: Vec3::new(7.0, 2.2, 9.5),
+            look_at: Vec3::new(-3.0, 4.6, 0.0),
             up: Vec3::Y,
             fov_y_degrees: 60.0,
             near: 0.1,
             far: 200.0,
         },
         medium: Medium {
-            scattering: Vec3::splat(0.035),
-            absorption: Vec3::splat(0.008),
-            phase: Phase::HenyeyGreenstein { g: 0.55 },
+            scattering: Vec3::splat(0.04),
+            absorption: Vec3::splat(0.01),
+            phase: Phase::HenyeyGreenstein { g: 0.6 },
         },
-        // Sun behind the colonnade, about 25° high, slightly to the left: travelling towards
-        // +z (the camera), down and to the right.
+        // Sun outside the colonnade, about 16° high and a little to the left, behind a column
+        // as seen from the camera: travelling towards +z (the camera), down and to the right.
         light: Light::Directional {
-            direction: Vec3::new(0.22, -0.47, 1.0).normalize(),
+            direction: Vec3::new(0.557, -0.242, 0.795).normalize(),
             color: Vec3::new(1.0, 0.86, 0.66),
             intensity: 4.0,
         },

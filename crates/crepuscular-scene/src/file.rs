@@ -30,7 +30,8 @@
 //! kind = "spot"                          # "directional" | "spot" | "point"; default "directional"
 //! position = [-10.0, 9.0, 0.0]           # spot, point: metres (required)
 //! direction = [1.0, -0.95, 0.0]          # directional, spot: where the light travels, from the
-//!                                        # light into the scene (required; normalised on load)
+//!                                        # light into the scene; normalised on load; required
+//!                                        # for spot, default [0.2, -0.45, 1.0] for directional
 //! outer_angle_degrees = 24.0             # spot: half-angle where the cone reaches 0, (0, 89];
 //!                                        # default 30
 //! inner_angle_degrees = 19.0             # spot: full-strength half-angle, in [0, outer];
@@ -88,6 +89,11 @@ use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Component, Path, PathBuf};
 use std::sync::Arc;
+
+/// Direction of travel of the default directional light (before normalisation): a low sun
+/// ahead of the default camera, which looks down −z, so that shafts come towards it. Used when
+/// a file has no `[light]` table or a directional light without `direction`.
+pub const DEFAULT_SUN_DIRECTION: [f32; 3] = [0.2, -0.45, 1.0];
 
 /// Largest accepted image width or height (output and shadow map), pixels.
 pub const MAX_IMAGE_SIZE: u32 = 16384;
@@ -371,6 +377,32 @@ const RENDER_KEYS: &[&str] = &[
     "exposure",
 ];
 
+/// A technique table under `[render]`; any other value there is an unknown key. Reading it
+/// through a seed (rather than failing after the value) keeps the key in the error's path.
+struct TechniqueTable<'k> {
+    key: &'k str,
+}
+
+impl<'de> de::DeserializeSeed<'de> for TechniqueTable<'_> {
+    type Value = toml::Table;
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<toml::Table, D::Error> {
+        match toml::Value::deserialize(d)? {
+            toml::Value::Table(t) => Ok(t),
+            _ => {
+                let known = RENDER_KEYS
+                    .iter()
+                    .map(|k| format!("`{k}`"))
+                    .collect::<Vec<_>>();
+                Err(de::Error::custom(format!(
+                    "unknown field `{}`, expected one of {} or a technique table such as [render.brute-force]",
+                    self.key,
+                    known.join(", ")
+                )))
+            }
+        }
+    }
+}
+
 impl<'de> Deserialize<'de> for RawRender {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         struct V;
@@ -392,21 +424,10 @@ impl<'de> Deserialize<'de> for RawRender {
                         }
                         "ambient" => r.ambient = Some(map.next_value()?),
                         "exposure" => r.exposure = Some(map.next_value()?),
-                        _ => match map.next_value::<toml::Value>()? {
-                            toml::Value::Table(t) => {
-                                r.techniques.insert(key, t);
-                            }
-                            _ => {
-                                let known = RENDER_KEYS
-                                    .iter()
-                                    .map(|k| format!("`{k}`"))
-                                    .collect::<Vec<_>>();
-                                return Err(de::Error::custom(format!(
-                                    "unknown field `{key}`, expected one of {} or a technique table such as [render.brute-force]",
-                                    known.join(", ")
-                                )));
-                            }
-                        },
+                        _ => {
+                            let t = map.next_value_seed(TechniqueTable { key: &key })?;
+                            r.techniques.insert(key, t);
+                        }
                     }
                 }
                 Ok(r)
@@ -459,9 +480,22 @@ fn parse_raw(text: &str, file: &str) -> Result<RawScene, SceneError> {
             line,
             column,
             key,
-            message: one_line(inner.message()),
+            message: friendly(&one_line(inner.message())),
         }
     })
+}
+
+/// Rewrites serde's Rust-flavoured type names into the words a scene-file author uses.
+fn friendly(message: &str) -> String {
+    let mut m = message
+        .replace("expected f32", "expected a number")
+        .replace("expected u32", "expected a whole number ≥ 0")
+        .replace("expected a string", "expected a quoted string");
+    if let Some(i) = m.find("expected struct Raw") {
+        m.truncate(i);
+        m.push_str("expected a table");
+    }
+    m
 }
 
 /// 1-based line and column (in characters) of a byte offset.
@@ -899,7 +933,8 @@ fn build_light(ctx: &Ctx, l: RawLight) -> Result<Light, SceneError> {
             if let Some(p) = position {
                 return not_used("position", fmt_vec(p.to_array()));
             }
-            let direction = direction.ok_or_else(|| required("direction"))?;
+            let direction =
+                direction.unwrap_or_else(|| Vec3::from(DEFAULT_SUN_DIRECTION).normalize());
             Ok(Light::Directional {
                 direction,
                 color,

@@ -170,7 +170,7 @@ fn setup_triangle(
 ) {
     let base = 3 * t as usize;
     let mut verts = [ClipVert::default(); 3];
-    for k in 0..3 {
+    for (k, vert) in verts.iter_mut().enumerate() {
         let Some(v) = geometry.vertices.get(geometry.indices[base + k] as usize) else {
             return;
         };
@@ -179,8 +179,8 @@ fn setup_triangle(
         if !c.is_finite() {
             return;
         }
-        verts[k].c = [c.x as f64, c.y as f64, c.z as f64, c.w as f64];
-        verts[k].b[k] = 1.0;
+        vert.c = [c.x as f64, c.y as f64, c.z as f64, c.w as f64];
+        vert.b[k] = 1.0;
     }
 
     // Outcodes: trivially reject, and clip only against the planes that cut the triangle.
@@ -215,7 +215,7 @@ fn setup_triangle(
     let mut iw = [0.0; MAX_POLY];
     for i in 0..n {
         let c = &poly[i].c;
-        if !(c[3] > 0.0) {
+        if c[3] <= 0.0 || c[3].is_nan() {
             return;
         }
         let inv = 1.0 / c[3];
@@ -396,10 +396,10 @@ fn raster_band(
             // Conservative span of the row from the three edges, then exact tests.
             let (mut lo, mut hi) = (bx0, bx1);
             let mut row = [0.0; 3];
-            for k in 0..3 {
-                // e_k(px) = row[k] − dy·px, with row[k] = dx·(py − ay) + dy·ax.
+            for (k, r) in row.iter_mut().enumerate() {
+                // e_k(px) = c + a·(px − ax), with c = dx·(py − ay) and a = −dy.
                 let c = e.dx[k] * (py - e.ay[k]);
-                row[k] = c;
+                *r = c;
                 let a = -e.dy[k];
                 if a == 0.0 {
                     if c < e.min[k] {
@@ -499,7 +499,7 @@ pub fn rasterize(geometry: &Geometry, view_proj: Mat4, width: u32, height: u32) 
                 let px = (i % w) as f64 + 0.5;
                 let py = (y0 + i / w) as f64 + 0.5;
                 let l = [0, 1, 2].map(|k| e.eval(k, px, py) * t.inv_area);
-                let denom = 1.0; let p = Persp { inv_w: [1.0; 3], b_over_w: p.b_over_w.map(|r| r.map(|_| 0.0)).into_iter().zip(p.b_over_w).zip(p.inv_w).map(|((_, r), iw)| r.map(|b| b / iw)).collect::<Vec<_>>().try_into().unwrap() };
+                let denom = l[0] * p.inv_w[0] + l[1] * p.inv_w[1] + l[2] * p.inv_w[2];
                 let mut bc = [0.0f64; 3];
                 for (j, b) in bc.iter_mut().enumerate() {
                     *b = (l[0] * p.b_over_w[0][j]

@@ -39,17 +39,28 @@ impl GpuContext {
     /// Finds an adapter (any backend wgpu was built with; software adapters included) and
     /// creates a device with the adapter's own limits and only the optional features it has.
     pub fn new() -> Result<Self, Error> {
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY | wgpu::Backends::GL);
-        let instance = wgpu::Instance::new(desc);
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            force_fallback_adapter: false,
-            compatible_surface: None,
-            apply_limit_buckets: false,
-        }))
-        .map_err(|e| Error::NoAdapter(e.to_string()))?;
-        Self::from_adapter(adapter)
+        // Vulkan / Metal / DX12 first; the GL backend only when none of those has an adapter
+        // (or when WGPU_BACKEND asks for it), since probing EGL is noisy on headless machines.
+        let tries = match wgpu::Backends::from_env() {
+            Some(b) => vec![b],
+            None => vec![wgpu::Backends::PRIMARY, wgpu::Backends::GL],
+        };
+        let mut last = String::from("no backend tried");
+        for backends in tries {
+            let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+            desc.backends = backends;
+            let instance = wgpu::Instance::new(desc);
+            match pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: false,
+                compatible_surface: None,
+                apply_limit_buckets: false,
+            })) {
+                Ok(adapter) => return Self::from_adapter(adapter),
+                Err(e) => last = e.to_string(),
+            }
+        }
+        Err(Error::NoAdapter(last))
     }
 
     /// Creates the device on a given adapter.

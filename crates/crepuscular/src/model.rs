@@ -322,3 +322,69 @@ impl Light {
         t * t * (3.0 - 2.0 * t)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// ∫ p dω over the sphere by a fine midpoint rule in cos θ (p depends on θ only).
+    fn integrate(p: &Phase) -> Vec3 {
+        let n = 200_000;
+        let mut sum = glam::DVec3::ZERO;
+        for i in 0..n {
+            let c = -1.0 + (i as f64 + 0.5) * 2.0 / n as f64;
+            sum += glam::DVec3::from(p.eval_f64(c)) * (2.0 / n as f64) * 2.0 * std::f64::consts::PI;
+        }
+        sum.as_vec3()
+    }
+
+    #[test]
+    fn every_phase_function_integrates_to_one() {
+        let phases = [
+            Phase::Isotropic,
+            Phase::HenyeyGreenstein { g: 0.0 },
+            Phase::HenyeyGreenstein { g: 0.7 },
+            Phase::HenyeyGreenstein { g: -0.5 },
+            Phase::HenyeyGreenstein { g: 0.95 },
+            Phase::Rayleigh,
+            Phase::HoffmanPreetham { g: 0.76, rayleigh_fraction: default_rayleigh_fraction() },
+        ];
+        for p in phases {
+            let s = integrate(&p);
+            assert!((s - Vec3::ONE).abs().max_element() < 1e-3, "{p:?} integrates to {s}");
+        }
+    }
+
+    #[test]
+    fn f32_and_f64_phase_agree() {
+        for p in [Phase::HenyeyGreenstein { g: 0.7 }, Phase::Rayleigh, Phase::HoffmanPreetham { g: 0.8, rayleigh_fraction: Vec3::new(0.2, 0.4, 0.6) }] {
+            for i in 0..=20 {
+                let c = -1.0 + i as f32 * 0.1;
+                let a = p.eval(c);
+                let b = Vec3::from(p.eval_f64(c as f64).map(|x| x as f32));
+                assert!(((a - b) / b).abs().max_element() < 1e-4, "{p:?} at {c}: {a} vs {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn segment_transmittance_matches_the_integral_and_its_limit() {
+        for s in [0.0f32, 1e-7, 1e-3, 0.1, 1.0, 50.0] {
+            let d = 2.0;
+            let got = segment_transmittance(Vec3::splat(s), d).x as f64;
+            let exact = if s == 0.0 { d as f64 } else { (1.0 - (-(s as f64) * d as f64).exp()) / s as f64 };
+            assert!((got - exact).abs() / exact < 1e-5, "σt {s}: {got} vs {exact}");
+        }
+    }
+
+    #[test]
+    fn linear_depth_inverts_the_projection() {
+        let cam = Camera::default();
+        let proj = cam.projection(1.5);
+        for z in [0.1f32, 0.5, 3.0, 50.0, 199.0] {
+            let c = proj * glam::Vec4::new(0.0, 0.0, -z, 1.0);
+            let d = c.z / c.w;
+            assert!((linear_depth(d, cam.near, cam.far) - z).abs() / z < 1e-4);
+        }
+    }
+}

@@ -1,0 +1,204 @@
+//! Closed forms (DESIGN.md §4, rung 2): on occluder-free frames every technique must match the
+//! known answer — the directional closed form σs·p·E·(1 − e^(−σt·s))/σt per pixel, and an
+//! independent high-order quadrature for a point light.
+
+mod common;
+
+use crepuscular::frame::FrameDesc;
+use crepuscular::gpu::test_gpu;
+use crepuscular::techniques::brute_force::{self, BruteForceSettings};
+use crepuscular::techniques::reference::{self, ReferenceSettings};
+use crepuscular::{Bounds, Camera, CpuFrame, Image, Light, Medium, Phase, ShadowMap, ShadowProjection};
+use glam::{DVec3, Vec3};
+
+const W: u32 = 64;
+const H: u32 = 36;
+
+/// A frame looking down −Z at a wall 30 m away (depth constant), with an empty shadow map
+/// (nothing casts shadows, V = 1).
+fn frame(light: Light, medium: Medium) -> (FrameDesc, Vec<f32>, ShadowMap) {
+    let camera = Camera {
+        position: Vec3::ZERO,
+        look_at: Vec3::new(0.0, 0.0, -1.0),
+        up: Vec3::Y,
+        fov_y_degrees: 60.0,
+        near: 0.1,
+        far: 100.0,
+    };
+    let bounds = Bounds { min: Vec3::new(-40.0, -40.0, -40.0), max: Vec3::new(40.0, 40.0, 1.0) };
+    let shadow = ShadowProjection::fit(&light, &camera, W as f32 / H as f32, bounds, 64);
+    let layers = shadow.layers as usize;
+    let sm = ShadowMap { projection: shadow.clone(), depth: vec![1.0; layers * 64 * 64] };
+    // The wall's depth-buffer value at view depth 30.
+    let proj = camera.projection(W as f32 / H as f32);
+    let c = proj * glam::Vec4::new(0.0, 0.0, -30.0, 1.0);
+    let depth = vec![c.z / c.w; (W * H) as usize];
+    let desc = FrameDesc {
+        camera,
+        light,
+        medium,
+        shadow,
+        shadow_bias: 0.02,
+        normal_offset_texels: 1.5,
+        ambient: Vec3::ZERO,
+        width: W,
+        height: H,
+    };
+    (desc, depth, sm)
+}
+
+fn ray(desc: &FrameDesc, x: u32, y: u32) -> (DVec3, f64) {
+    let inv = desc.camera.view_projection(desc.aspect()).as_dmat4().inverse();
+    let ndc_x = (x as f64 + 0.5) / W as f64 * 2.0 - 1.0;
+    let ndc_y = 1.0 - (y as f64 + 0.5) / H as f64 * 2.0;
+    let dir = inv.project_point3(DVec3::new(ndc_x, ndc_y, 1.0)).normalize();
+    let s = 30.0 / dir.dot(DVec3::NEG_Z);
+    (dir, s)
+}
+
+fn directional_closed_form(desc: &FrameDesc) -> Image {
+    let Light::Directional { direction, color, intensity } = &desc.light else { unreachable!() };
+    let st = desc.medium.extinction().as_dvec3();
+    let ss = desc.medium.scattering.as_dvec3();
+    let mut img = Image::new(W, H);
+    for y in 0..H {
+        for x in 0..W {
+            let (dir, s) = ray(desc, x, y);
+            let p = DVec3::from(desc.medium.phase.eval_f64(-direction.as_dvec3().normalize().dot(dir)));
+            let l = ss * p * color.as_dvec3() * *intensity as f64 * (DVec3::ONE - (-st * s).exp()) / st;
+            img.pixels[(y * W + x) as usize] = [l.x as f32, l.y as f32, l.z as f32, 1.0];
+        }
+    }
+    img
+}
+
+/// Composite Gauss–Legendre (5 points × 4096 panels) of the point-light integral, f64.
+fn point_quadrature(desc: &FrameDesc) -> Image {
+    let Light::Point { position, color, intensity } = &desc.light else { unreachable!() };
+    let st = desc.medium.extinction().as_dvec3();
+    let ss = desc.medium.scattering.as_dvec3();
+    let lp = position.as_dvec3();
+    let gl = [
+        (0.0, 0.568888888888889),
+        (-0.538469310105683, 0.478628670499366),
+        (0.538469310105683, 0.478628670499366),
+        (-0.906179845938664, 0.236926885056189),
+        (0.906179845938664, 0.236926885056189),
+    ];
+    let mut img = Image::new(W, H);
+    for y in 0..H {
+        for x in 0..W {
+            let (dir, s) = ray(desc, x, y);
+            let panels = 4096;
+            let h = s / panels as f64;
+            let mut sum = DVec3::ZERO;
+            for k in 0..panels {
+                for (xi, wi) in gl {
+                    let t = (k as f64 + 0.5 + 0.5 * xi) * h;
+                    let v = dir * t - lp;
+                    let d = v.length();
+                    let wl = v / d;
+                    let p = DVec3::from(desc.medium.phase.eval_f64(-wl.dot(dir)));
+                    let f = (-st * t).exp() * ss * p * color.as_dvec3() * *intensity as f64 * (-st * d).exp() / (d * d);
+                    sum += f * wi * 0.5 * h;
+                }
+            }
+            img.pixels[(y * W + x) as usize] = [sum.x as f32, sum.y as f32, sum.z as f32, 1.0];
+        }
+    }
+    img
+}
+
+fn media() -> Vec<Medium> {
+    vec![
+        Medium { scattering: Vec3::new(0.02, 0.03, 0.05), absorption: Vec3::splat(0.01), phase: Phase::HenyeyGreenstein { g: 0.7 } },
+        Medium { scattering: Vec3::splat(0.1), absorption: Vec3::ZERO, phase: Phase::Isotropic },
+        Medium { scattering: Vec3::new(0.05, 0.08, 0.12), absorption: Vec3::splat(0.02), phase: Phase::Rayleigh },
+        Medium { scattering: Vec3::splat(0.04), absorption: Vec3::splat(0.0), phase: Phase::HoffmanPreetham { g: 0.76, rayleigh_fraction: Vec3::new(0.2, 0.4, 0.6) } },
+        // σt = 0 in one channel: the closed form's limit σs·p·E·s.
+        Medium { scattering: Vec3::new(0.0, 0.05, 0.05), absorption: Vec3::ZERO, phase: Phase::HenyeyGreenstein { g: -0.3 } },
+    ]
+}
+
+fn sun() -> Light {
+    Light::Directional { direction: Vec3::new(0.3, -0.2, 1.0).normalize(), color: Vec3::new(1.0, 0.9, 0.8), intensity: 4.0 }
+}
+
+fn cpu_frame<'a>(d: &'a FrameDesc, depth: &'a [f32], sm: &'a ShadowMap) -> CpuFrame<'a> {
+    CpuFrame { desc: d, depth, shadow_map: sm, surface: None }
+}
+
+#[test]
+fn directional_reference_matches_the_closed_form_tightly() {
+    for m in media() {
+        let (d, depth, sm) = frame(sun(), m.clone());
+        let exact = directional_closed_form(&d);
+        let (img, _) = reference::render(&cpu_frame(&d, &depth, &sm), &ReferenceSettings { steps: 1024, seed: 3 }, &|_, _| {}).unwrap();
+        let e = common::max_rel(&img, &exact, 1e-9);
+        assert!(e < 1e-3, "{m:?}: reference off the closed form by {e}");
+    }
+}
+
+#[test]
+fn directional_brute_force_matches_the_closed_form() {
+    // With exact per-step transmittance, an unshadowed sun is integrated exactly at any step
+    // count; what remains is f32 rounding.
+    for m in media() {
+        let (d, depth, sm) = frame(sun(), m.clone());
+        let exact = directional_closed_form(&d);
+        for steps in [1, 8, 64] {
+            let s = BruteForceSettings { steps, ..Default::default() };
+            let (img, _) = brute_force::cpu::march(&cpu_frame(&d, &depth, &sm), &s).unwrap();
+            let e = common::max_rel(&img, &exact, 1e-9);
+            assert!(e < 1e-4, "{m:?}, {steps} steps: brute-force off the closed form by {e}");
+        }
+    }
+}
+
+#[test]
+fn directional_brute_force_on_the_gpu_matches_the_closed_form() {
+    let Some(gpu) = test_gpu("directional_brute_force_on_the_gpu_matches_the_closed_form") else { return };
+    for m in media() {
+        let (d, depth, sm) = frame(sun(), m.clone());
+        let exact = directional_closed_form(&d);
+        let img = common::gpu_brute_force(&gpu, &cpu_frame(&d, &depth, &sm), &BruteForceSettings::default());
+        let e = common::max_rel(&img, &exact, 1e-9);
+        assert!(e < 1e-3, "{m:?}: GPU brute-force off the closed form by {e}");
+    }
+}
+
+fn lamp() -> Light {
+    Light::Point { position: Vec3::new(0.0, 12.0, -14.0), color: Vec3::new(1.0, 0.8, 0.6), intensity: 50.0 }
+}
+
+#[test]
+fn point_light_reference_matches_an_independent_quadrature() {
+    for m in media() {
+        let (d, depth, sm) = frame(lamp(), m.clone());
+        let exact = point_quadrature(&d);
+        let (img, _) = reference::render(&cpu_frame(&d, &depth, &sm), &ReferenceSettings { steps: 2048, seed: 5 }, &|_, _| {}).unwrap();
+        let e = common::max_rel(&img, &exact, 1e-9);
+        assert!(e < 5e-3, "{m:?}: reference off the quadrature by {e}");
+    }
+}
+
+#[test]
+fn point_light_brute_force_is_within_its_step_error() {
+    // Midpoint sampling of the 1/d² peak, with the light off screen (rays pass ≥ ~3 m from it):
+    // the step error at the default 64 steps is bounded in the README, and falls with more steps
+    // down to f32 rounding.
+    for m in media() {
+        let (d, depth, sm) = frame(lamp(), m.clone());
+        let exact = point_quadrature(&d);
+        let mut last = f32::MAX;
+        for (steps, bound) in [(16, 0.05), (64, 0.005), (256, 5e-4)] {
+            let s = BruteForceSettings { steps, ..Default::default() };
+            let (img, _) = brute_force::cpu::march(&cpu_frame(&d, &depth, &sm), &s).unwrap();
+            let e = common::max_rel(&img, &exact, 1e-9);
+            eprintln!("{steps}: {e}");
+            assert!(e < bound, "{m:?}, {steps} steps: off by {e} (bound {bound})");
+            assert!(e < last, "error must fall with more steps");
+            last = e;
+        }
+    }
+}

@@ -313,14 +313,14 @@ fn colonnade() -> Scene {
             far: 200.0,
         },
         medium: Medium {
-            scattering: Vec3::splat(0.04),
-            absorption: Vec3::splat(0.01),
-            phase: Phase::HenyeyGreenstein { g: 0.6 },
+            scattering: Vec3::splat(0.03),
+            absorption: Vec3::splat(0.015),
+            phase: Phase::HenyeyGreenstein { g: 0.5 },
         },
         // Sun outside the colonnade, about 16° high and a little to the left, behind a column
         // as seen from the camera: travelling towards +z (the camera), down and to the right.
         light: Light::Directional {
-            direction: Vec3::new(0.557, -0.242, 0.795).normalize(),
+            direction: Vec3::new(0.505, -0.244, 0.827).normalize(),
             color: Vec3::new(1.0, 0.86, 0.66),
             intensity: 4.0,
         },

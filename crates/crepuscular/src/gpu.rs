@@ -390,3 +390,50 @@ pub fn test_gpu(test: &str) -> Option<GpuContext> {
         }
     }
 }
+
+/// A CPU frame's depth, shadow map and spot texture uploaded as GPU textures (`R32Float`
+/// depth and shadow layers, `Rgba32Float` spot texture), so a GPU technique can run on exactly
+/// the inputs the CPU mirror sees.
+pub struct UploadedFrame {
+    /// Camera depth (`R32Float`).
+    pub depth: wgpu::TextureView,
+    /// Shadow map (`R32Float` array).
+    pub shadow_map: wgpu::TextureView,
+    /// Spot texture, if the light has one.
+    pub spot_texture: Option<wgpu::TextureView>,
+}
+
+impl UploadedFrame {
+    /// Uploads the inputs of `frame`.
+    pub fn new(gpu: &GpuContext, frame: &crate::CpuFrame) -> Result<Self, Error> {
+        let d = frame.desc;
+        let sp = &frame.shadow_map.projection;
+        gpu.check_texture_size("image size", d.width, d.height)?;
+        gpu.check_texture_size("shadow_map_size", sp.size, sp.size)?;
+        gpu.scoped("uploading a CPU frame", || {
+            let depth = gpu.upload_texture("depth", wgpu::TextureFormat::R32Float, d.width, d.height, 1, 4, bytemuck::cast_slice(frame.depth));
+            let shadow = gpu.upload_texture(
+                "shadow map",
+                wgpu::TextureFormat::R32Float,
+                sp.size,
+                sp.size,
+                sp.layers,
+                4,
+                bytemuck::cast_slice(&frame.shadow_map.depth),
+            );
+            Self {
+                depth: depth.create_view(&Default::default()),
+                shadow_map: shadow.create_view(&wgpu::TextureViewDescriptor {
+                    dimension: Some(wgpu::TextureViewDimension::D2Array),
+                    ..Default::default()
+                }),
+                spot_texture: frame.spot_texture().map(|t| gpu.upload_rgb_texture(Some(t)).create_view(&Default::default())),
+            }
+        })
+    }
+
+    /// The frame boundary over these textures.
+    pub fn frame<'a>(&'a self, desc: &'a crate::frame::FrameDesc) -> crate::GpuFrame<'a> {
+        crate::GpuFrame { desc, depth: &self.depth, shadow_map: &self.shadow_map, spot_texture: self.spot_texture.as_ref() }
+    }
+}

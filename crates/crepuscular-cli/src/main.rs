@@ -27,6 +27,8 @@ enum Command {
     Techniques,
     /// Compare two images (EXR or PNG): RMSE, PSNR on linear values, FLIP mean on tone-mapped.
     Diff(DiffArgs),
+    /// Print the GPU adapter that `--backend auto|gpu` would use (fails if there is none).
+    Adapter,
 }
 
 #[derive(clap::Args)]
@@ -211,6 +213,11 @@ fn run() -> Result<()> {
             Ok(())
         }
         Command::Diff(a) => cmd_diff(a),
+        Command::Adapter => {
+            let gpu = crepuscular::GpuContext::new()?;
+            println!("{}", gpu.describe());
+            Ok(())
+        }
     }
 }
 

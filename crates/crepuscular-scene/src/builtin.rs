@@ -617,8 +617,8 @@ fn stained_glass() -> Scene {
         wall * 0.6,
     );
     // Pews on the right half, facing -z.
-    for i in 0..5 {
-        let z = -4.5 + 2.2 * i as f32;
+    for i in 0..3 {
+        let z = -6.5 + 2.0 * i as f32;
         boxed(
             &mut g,
             Vec3::new(3.0, 0.45, z),
@@ -652,35 +652,36 @@ fn stained_glass() -> Scene {
         Vec3::new(0.7, 0.7, 0.68),
     ));
 
-    let position = Vec3::new(-10.0, 9.0, 0.0);
-    let target = Vec3::new(-0.5, 0.0, 0.0);
+    // High outside the window: a steep, flat slab of light lands on the floor at x ≈ -5..-1.
+    let position = Vec3::new(-9.0, 12.0, 0.0);
+    let target = Vec3::new(0.0, 0.0, 0.0);
     Scene {
         name: String::new(),
         description: String::new(),
         camera: Camera {
-            position: Vec3::new(5.0, 1.3, 3.5),
-            look_at: Vec3::new(-5.0, 3.8, -0.5),
+            position: Vec3::new(4.0, 1.5, 5.0),
+            look_at: Vec3::new(-4.0, 4.2, -0.5),
             up: Vec3::Y,
             fov_y_degrees: 65.0,
             near: 0.05,
             far: 60.0,
         },
         medium: Medium {
-            scattering: Vec3::splat(0.08),
-            absorption: Vec3::splat(0.01),
+            scattering: Vec3::splat(0.06),
+            absorption: Vec3::splat(0.005),
             phase: Phase::HenyeyGreenstein { g: 0.5 },
         },
         light: Light::Spot {
             position,
             direction: (target - position).normalize(),
-            outer_angle_degrees: 22.0,
-            inner_angle_degrees: 18.0,
+            outer_angle_degrees: 16.0,
+            inner_angle_degrees: 13.0,
             color: Vec3::new(1.0, 0.95, 0.88),
-            intensity: 3000.0,
+            intensity: 8000.0,
             texture: Some(Arc::new(stained_glass_texture(STAINED_GLASS_TEXTURE_SIZE))),
         },
         geometry: g,
-        render: render(0.02, Vec3::new(0.03, 0.03, 0.035)),
+        render: render(0.02, Vec3::new(0.12, 0.12, 0.13)),
     }
 }
 
@@ -800,7 +801,7 @@ fn cage() -> Scene {
             phase: Phase::HenyeyGreenstein { g: 0.3 },
         },
         light: Light::Point {
-            position: Vec3::new(0.0, yc, 0.0),
+            position: Vec3::new(0.12, yc + 0.2, -0.1),
             color: Vec3::new(1.0, 0.78, 0.5),
             intensity: 80.0,
         },
@@ -866,25 +867,25 @@ fn terrain() -> Scene {
             g.indices.extend_from_slice(&[a, c, b, b, c, d]);
         }
     }
-    let eye = Vec3::new(0.0, terrain_height(0.0, 45.0).max(0.0) + 3.5, 45.0);
+    let eye = Vec3::new(0.0, terrain_height(0.0, 45.0).max(0.0) + 10.0, 45.0);
     Scene {
         name: String::new(),
         description: String::new(),
         camera: Camera {
             position: eye,
-            look_at: Vec3::new(0.0, 12.0, -40.0),
+            look_at: Vec3::new(-10.0, 8.0, -40.0),
             up: Vec3::Y,
             fov_y_degrees: 55.0,
             near: 0.2,
             far: 400.0,
         },
         medium: Medium {
-            scattering: Vec3::new(0.011, 0.013, 0.016),
-            absorption: Vec3::splat(0.003),
-            phase: Phase::HenyeyGreenstein { g: 0.6 },
+            scattering: Vec3::new(0.008, 0.009, 0.011),
+            absorption: Vec3::splat(0.004),
+            phase: Phase::HenyeyGreenstein { g: 0.45 },
         },
         light: Light::Directional {
-            direction: Vec3::new(0.15, -0.2, 1.0).normalize(),
+            direction: Vec3::new(0.55, -0.12, 1.0).normalize(),
             color: Vec3::new(1.0, 0.76, 0.52),
             intensity: 4.5,
         },

@@ -1,0 +1,165 @@
+//! The binary as a user meets it: renders end to end on the CPU backend, writes every output,
+//! diffs, and fails on bad scene files with one line that names the file and the key.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_crepuscular"))
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("crepuscular-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn render_writes_png_exr_and_stats_and_diff_reads_them() {
+    let d = tmp("render");
+    let run = |technique: &str, stem: &str| {
+        let out = bin()
+            .args(["render", "colonnade", "--technique", technique, "--backend", "cpu", "--size", "96x54", "--shadow-map-size", "512"])
+            .args(["--set", if technique == "reference" { "steps=64" } else { "steps=32" }])
+            .arg("--output")
+            .arg(d.join(format!("{stem}.png")))
+            .arg("--exr")
+            .arg(d.join(format!("{stem}.exr")))
+            .arg("--stats")
+            .arg(d.join(format!("{stem}.json")))
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    };
+    run("brute-force", "bf");
+    run("reference", "ref");
+    for f in ["bf.png", "bf.exr", "bf.final.exr", "bf.json", "ref.exr"] {
+        assert!(d.join(f).metadata().unwrap().len() > 0, "{f} missing");
+    }
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("bf.json")).unwrap()).unwrap();
+    assert_eq!(stats["technique"]["raymarched_samples"], 96 * 54 * 32);
+    assert_eq!(stats["settings"]["steps"], 32);
+    assert_eq!(stats["adapter"]["name"], "cpu");
+    let rstats: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("ref.json")).unwrap()).unwrap();
+    assert!(rstats["technique"]["extra"]["convergence_mean_rel_change_half_vs_full"].as_f64().is_some());
+    let out = bin()
+        .arg("diff")
+        .arg(d.join("ref.exr"))
+        .arg(d.join("bf.exr"))
+        .arg("--heatmap")
+        .arg(d.join("heat.png"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("RMSE") && text.contains("PSNR") && text.contains("FLIP"), "{text}");
+    assert!(d.join("heat.png").exists());
+    // Identical images: zero error.
+    let out = bin().arg("diff").arg(d.join("bf.exr")).arg(d.join("bf.exr")).output().unwrap();
+    assert!(String::from_utf8_lossy(&out.stdout).contains("RMSE       0.000000e0"), "{}", String::from_utf8_lossy(&out.stdout));
+}
+
+#[test]
+fn scenes_and_techniques_list_one_line_each() {
+    let out = bin().arg("scenes").output().unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    for name in ["colonnade", "forest", "stained-glass", "cage", "terrain"] {
+        assert_eq!(text.lines().filter(|l| l.starts_with(name)).count(), 1, "{text}");
+    }
+    let out = bin().arg("techniques").output().unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.lines().any(|l| l.starts_with("brute-force")) && text.lines().any(|l| l.starts_with("reference")));
+}
+
+const GOOD: &str = r#"
+[camera]
+position = [0, 2, 10]
+look_at = [0, 1, 0]
+[medium]
+scattering = [0.05, 0.05, 0.05]
+absorption = [0.01, 0.01, 0.01]
+phase = { kind = "henyey-greenstein", g = 0.6 }
+[light]
+kind = "directional"
+direction = [0.2, -0.4, -1]
+intensity = 4
+[[objects]]
+kind = "box"
+translate = [0, 1, 0]
+[render]
+width = 64
+height = 36
+shadow_map_size = 256
+"#;
+
+fn bad_scene(dir: &Path, name: &str, text: &str) -> (bool, String) {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    let out = bin().args(["render"]).arg(&p).args(["--backend", "cpu", "--output"]).arg(dir.join("x.png")).output().unwrap();
+    (out.status.success(), String::from_utf8_lossy(&out.stderr).trim().to_string())
+}
+
+#[test]
+fn bad_scene_files_fail_with_one_line_naming_file_and_key() {
+    let d = tmp("bad");
+    let (ok, err) = bad_scene(&d, "good.toml", GOOD);
+    assert!(ok, "the good scene must render: {err}");
+    let cases: &[(&str, String, &str)] = &[
+        ("syntax.toml", GOOD.replace("width = 64", "width = = 64"), "width"),
+        ("unknown.toml", GOOD.replace("width = 64", "widht = 64"), "widht"),
+        ("type.toml", GOOD.replace("width = 64", "width = \"wide\""), "width"),
+        ("negative.toml", GOOD.replace("scattering = [0.05, 0.05, 0.05]", "scattering = [-0.05, 0.05, 0.05]"), "scattering"),
+        ("nan.toml", GOOD.replace("absorption = [0.01, 0.01, 0.01]", "absorption = [nan, 0.01, 0.01]"), "absorption"),
+        ("zero.toml", GOOD.replace("height = 36", "height = 0"), "height"),
+        ("mesh.toml", format!("{GOOD}\n[[objects]]\nkind = \"mesh\"\npath = \"missing.obj\"\n"), "path"),
+        ("escape.toml", format!("{GOOD}\n[[objects]]\nkind = \"mesh\"\npath = \"../../etc/passwd.obj\"\n"), "path"),
+    ];
+    for (file, text, key) in cases {
+        let (ok, err) = bad_scene(&d, file, text);
+        assert!(!ok, "{file} must fail");
+        let lines: Vec<_> = err.lines().filter(|l| !l.contains("XDG_RUNTIME_DIR")).collect();
+        assert_eq!(lines.len(), 1, "{file}: expected one line, got {err:?}");
+        assert!(lines[0].contains(file), "{file}: message does not name the file: {}", lines[0]);
+        assert!(lines[0].contains(key), "{file}: message does not name `{key}`: {}", lines[0]);
+        assert!(!err.contains("panicked"), "{file}: panicked: {err}");
+    }
+}
+
+#[test]
+fn bad_command_line_values_fail_cleanly() {
+    for args in [
+        vec!["render", "no-such-scene", "--backend", "cpu"],
+        vec!["render", "colonnade", "--size", "0x10", "--backend", "cpu"],
+        vec!["render", "colonnade", "--technique", "nope", "--backend", "cpu"],
+        vec!["render", "colonnade", "--set", "steps=0", "--backend", "cpu"],
+        vec!["render", "colonnade", "--set", "stepz=3", "--backend", "cpu"],
+    ] {
+        let out = bin().args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} must fail");
+        assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+    }
+}
+
+#[test]
+fn example_scene_files_render() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/scenes");
+    let d = tmp("examples");
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "toml") {
+            let out = bin()
+                .arg("render")
+                .arg(&p)
+                .args(["--backend", "cpu", "--size", "64x36", "--shadow-map-size", "256", "--output"])
+                .arg(d.join("e.png"))
+                .output()
+                .unwrap();
+            assert!(out.status.success(), "{}: {}", p.display(), String::from_utf8_lossy(&out.stderr));
+            n += 1;
+        }
+    }
+    assert!(n > 0);
+}

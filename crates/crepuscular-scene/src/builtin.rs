@@ -816,7 +816,7 @@ const TERRAIN_N: usize = 128;
 /// Height of the `terrain` heightfield at (x, z), metres.
 fn terrain_height(x: f32, z: f32) -> f32 {
     // Rolling hills.
-    let hills = 7.0 * fbm(0x7E44, x / 38.0, z / 38.0, 5) - 2.0;
+    let hills = 10.0 * fbm(0x7E44, x / 34.0, z / 34.0, 5) - 4.0;
     // A ridge across the view, with peaks and notches.
     let zr = -45.0 + 7.0 * (x / 23.0).sin() + 4.0 * (x / 9.0).cos();
     let across = (z - zr) / 11.0;
@@ -827,11 +827,11 @@ fn terrain_height(x: f32, z: f32) -> f32 {
     hills + ridge - valley
 }
 
-/// A 128 × 128 heightfield, 170 × 170 m, with smooth normals: rolling hills and a notched
+/// A 128 × 128 heightfield, 180 × 180 m, with smooth normals: rolling hills and a notched
 /// ridge against a very low sun.
 fn terrain() -> Scene {
     let n = TERRAIN_N;
-    let (x0, x1, z0, z1) = (-85.0f32, 85.0f32, -110.0f32, 60.0f32);
+    let (x0, x1, z0, z1) = (-90.0f32, 90.0f32, -125.0f32, 55.0f32);
     let step = Vec3::new((x1 - x0) / (n - 1) as f32, 0.0, (z1 - z0) / (n - 1) as f32);
     let mut g = Geometry {
         vertices: Vec::with_capacity(n * n),
@@ -867,13 +867,13 @@ fn terrain() -> Scene {
             g.indices.extend_from_slice(&[a, c, b, b, c, d]);
         }
     }
-    let eye = Vec3::new(0.0, terrain_height(0.0, 45.0).max(0.0) + 10.0, 45.0);
+    let eye = Vec3::new(0.0, terrain_height(0.0, 45.0).max(0.0) + 8.0, 45.0);
     Scene {
         name: String::new(),
         description: String::new(),
         camera: Camera {
             position: eye,
-            look_at: Vec3::new(-10.0, 8.0, -40.0),
+            look_at: Vec3::new(-10.0, 6.0, -40.0),
             up: Vec3::Y,
             fov_y_degrees: 55.0,
             near: 0.2,
@@ -882,15 +882,15 @@ fn terrain() -> Scene {
         medium: Medium {
             scattering: Vec3::new(0.008, 0.009, 0.011),
             absorption: Vec3::splat(0.004),
-            phase: Phase::HenyeyGreenstein { g: 0.45 },
+            phase: Phase::HenyeyGreenstein { g: 0.5 },
         },
         light: Light::Directional {
-            direction: Vec3::new(0.55, -0.12, 1.0).normalize(),
+            direction: Vec3::new(0.5, -0.2, 1.0).normalize(),
             color: Vec3::new(1.0, 0.76, 0.52),
             intensity: 4.5,
         },
         geometry: g,
-        render: render(0.15, Vec3::new(0.03, 0.035, 0.045)),
+        render: render(0.15, Vec3::new(0.05, 0.055, 0.07)),
     }
 }
 

@@ -3,6 +3,10 @@
 //! camera depth buffer, then hands those textures and the matrices it used to the brute-force
 //! technique, which writes the in-scattered light (god rays) into an `Rgba32Float` texture.
 //!
+//! What the engine supplies, per frame: a camera depth buffer (`Depth32Float`, standard [0, 1]
+//! depth, not reversed-Z), a shadow map (`Depth32Float`, sampled as a 2D array), the camera and
+//! light matrices those were rendered with, and the light and fog parameters.
+//!
 //! Run: `cargo run --release -p crepuscular --example own_renderer` (writes `own_renderer.ppm`).
 
 use crepuscular::frame::{FrameDesc, GpuFrame};
@@ -37,14 +41,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let gpu = match GpuContext::new() {
         Ok(gpu) => gpu,
         Err(e) => {
-            eprintln!("own_renderer: no usable GPU adapter ({e}); install a Vulkan/Metal/DX12 driver or lavapipe");
+            eprintln!("own_renderer needs a GPU adapter (Vulkan, Metal, DX12 or lavapipe): {e}");
             std::process::exit(1);
         }
     };
     println!("adapter: {}", gpu.describe());
     let device = &gpu.device;
 
-    // 2. The engine's scene: a 40 m ground quad and a grate of four bars floating 5 m up.
+    // 2. The engine's scene: a 40 m ground slab and a grate of four bars floating 5 m up.
     let mut verts = cuboid(Vec3::new(-20.0, -0.1, -20.0), Vec3::new(20.0, 0.0, 20.0));
     for i in 0..4 {
         let x = -3.5 + 2.0 * i as f32;
@@ -56,8 +60,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         usage: wgpu::BufferUsages::VERTEX,
     });
 
-    // The engine's camera and sun. The camera's matrices are crepuscular's `Camera` ones, so
-    // the depth buffer below and the technique's view rays agree by construction.
+    // The engine's camera and sun. crepuscular rebuilds the camera's view rays from `Camera`
+    // (look_at_rh × perspective_rh), so the depth pass below uses exactly that matrix.
     let camera = Camera {
         position: Vec3::new(0.0, 1.7, 14.0),
         look_at: Vec3::new(0.0, 3.5, 0.0),

@@ -11,7 +11,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "crepuscular", version, about = "Crepuscular rays and light shafts: single scattering in participating media, GPU (wgpu) and CPU")]
+#[command(
+    name = "crepuscular",
+    version,
+    about = "Crepuscular rays and light shafts: single scattering in participating media, GPU (wgpu) and CPU"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -143,7 +147,11 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
         }
         bar.set_position(done);
     };
-    let out = render::render(&scene, gpu.as_ref(), &RenderOptions { backend: a.backend, technique, progress: &progress, notice: &notice })?;
+    let out = render::render(
+        &scene,
+        gpu.as_ref(),
+        &RenderOptions { backend: a.backend, technique, progress: &progress, notice: &notice },
+    )?;
     bar.finish_and_clear();
     let tone = ToneMap::new(scene.render.exposure);
     let rgb = tone.to_rgb8(&out.final_radiance);
@@ -174,7 +182,8 @@ fn cmd_diff(a: DiffArgs) -> Result<()> {
     let r = output::read_exr(&a.reference)?;
     let t = output::read_exr(&a.test)?;
     let tone = ToneMap::new(a.exposure);
-    let m = metrics::compare(&r, &t, &tone).with_context(|| format!("{} vs {}", a.reference.display(), a.test.display()))?;
+    let m = metrics::compare(&r, &t, &tone)
+        .with_context(|| format!("{} vs {}", a.reference.display(), a.test.display()))?;
     println!("RMSE       {:.6e}", m.rmse);
     println!("PSNR       {:.2} dB (linear, peak = max of the reference)", m.psnr_db);
     println!("FLIP mean  {:.5} (tone-mapped, exposure {})", m.flip_mean, a.exposure);

@@ -30,11 +30,7 @@ mod psnr_serde {
     use serde::{Deserialize, Deserializer, Serializer};
 
     pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
-        if v.is_finite() {
-            s.serialize_f64(*v)
-        } else {
-            s.serialize_none()
-        }
+        if v.is_finite() { s.serialize_f64(*v) } else { s.serialize_none() }
     }
 
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
@@ -56,20 +52,11 @@ fn check_sizes(reference: &Image, test: &Image) -> Result<()> {
     for (what, img) in [("reference", reference), ("test", test)] {
         let n = img.width as usize * img.height as usize;
         if img.pixels.len() != n {
-            bail!(
-                "{what} image claims {}x{} but holds {} pixels",
-                img.width,
-                img.height,
-                img.pixels.len()
-            );
+            bail!("{what} image claims {}x{} but holds {} pixels", img.width, img.height, img.pixels.len());
         }
     }
     if reference.pixels.is_empty() {
-        bail!(
-            "cannot compare empty ({}x{}) images",
-            reference.width,
-            reference.height
-        );
+        bail!("cannot compare empty ({}x{}) images", reference.width, reference.height);
     }
     Ok(())
 }
@@ -77,12 +64,8 @@ fn check_sizes(reference: &Image, test: &Image) -> Result<()> {
 /// Peak signal value of the reference: its largest finite R, G or B value, or 1 when none is
 /// above 0 (an all-black reference).
 fn reference_peak(reference: &Image) -> f64 {
-    let peak = reference
-        .pixels
-        .iter()
-        .flat_map(|p| &p[..3])
-        .filter(|c| c.is_finite())
-        .fold(0.0f32, |m, &c| m.max(c)) as f64;
+    let peak =
+        reference.pixels.iter().flat_map(|p| &p[..3]).filter(|c| c.is_finite()).fold(0.0f32, |m, &c| m.max(c)) as f64;
     if peak > 0.0 { peak } else { 1.0 }
 }
 
@@ -123,43 +106,24 @@ pub fn compare(reference: &Image, test: &Image, tone: &ToneMap) -> Result<Metric
             (sum, max)
         })
         .collect();
-    let (sum, max_abs) = partials.iter().fold((0.0f64, 0.0f64), |(s, m), &(ps, pm)| {
-        (s + ps, nan_max(m, pm))
-    });
+    let (sum, max_abs) = partials.iter().fold((0.0f64, 0.0f64), |(s, m), &(ps, pm)| (s + ps, nan_max(m, pm)));
     let rmse = (sum / (reference.pixels.len() * 3) as f64).sqrt();
-    let psnr_db = if rmse == 0.0 {
-        f64::INFINITY
-    } else {
-        20.0 * (reference_peak(reference) / rmse).log10()
-    };
+    let psnr_db = if rmse == 0.0 { f64::INFINITY } else { 20.0 * (reference_peak(reference) / rmse).log10() };
     let error_map = flip_error_map(reference, test, tone);
     let flip_mean = nv_flip::FlipPool::from_image(&error_map).mean() as f64;
-    Ok(Metrics {
-        rmse,
-        psnr_db,
-        flip_mean,
-        max_abs,
-    })
+    Ok(Metrics { rmse, psnr_db, flip_mean, max_abs })
 }
 
 /// `max` that returns NaN when either operand is NaN.
 fn nan_max(a: f64, b: f64) -> f64 {
-    if a.is_nan() || b.is_nan() {
-        f64::NAN
-    } else {
-        a.max(b)
-    }
+    if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) }
 }
 
 /// The FLIP error map between the tone-mapped images, coloured with FLIP's magma LUT: returns
 /// `(width, height, rgb)` with `rgb` tightly packed 8-bit RGB, row-major from the top left.
 ///
 /// Errors when the sizes differ (naming both) or the images are empty.
-pub fn flip_heatmap(
-    reference: &Image,
-    test: &Image,
-    tone: &ToneMap,
-) -> Result<(u32, u32, Vec<u8>)> {
+pub fn flip_heatmap(reference: &Image, test: &Image, tone: &ToneMap) -> Result<(u32, u32, Vec<u8>)> {
     check_sizes(reference, test)?;
     let error_map = flip_error_map(reference, test, tone);
     let coloured = error_map.apply_color_lut(&nv_flip::magma_lut());
@@ -176,18 +140,12 @@ pub fn abs_error_heatmap(reference: &Image, test: &Image) -> Result<Vec<u8>> {
     check_sizes(reference, test)?;
     let peak = reference_peak(reference);
     let mut out = vec![0u8; reference.pixels.len() * 3];
-    out.par_chunks_mut(3)
-        .zip(reference.pixels.par_iter().zip(test.pixels.par_iter()))
-        .for_each(|(dst, (r, t))| {
-            let d = |c: usize| (r[c] as f64 - t[c] as f64).abs();
-            let y = 0.2126 * d(0) + 0.7152 * d(1) + 0.0722 * d(2);
-            let v = if y.is_finite() {
-                (y / peak).clamp(0.0, 1.0)
-            } else {
-                1.0
-            };
-            dst.copy_from_slice(&magma_ramp(v as f32));
-        });
+    out.par_chunks_mut(3).zip(reference.pixels.par_iter().zip(test.pixels.par_iter())).for_each(|(dst, (r, t))| {
+        let d = |c: usize| (r[c] as f64 - t[c] as f64).abs();
+        let y = 0.2126 * d(0) + 0.7152 * d(1) + 0.0722 * d(2);
+        let v = if y.is_finite() { (y / peak).clamp(0.0, 1.0) } else { 1.0 };
+        dst.copy_from_slice(&magma_ramp(v as f32));
+    });
     Ok(out)
 }
 
@@ -230,11 +188,7 @@ mod tests {
     }
 
     fn filled(w: u32, h: u32, v: f32) -> Image {
-        Image {
-            width: w,
-            height: h,
-            pixels: vec![[v, v, v, 1.0]; (w * h) as usize],
-        }
+        Image { width: w, height: h, pixels: vec![[v, v, v, 1.0]; (w * h) as usize] }
     }
 
     #[test]
@@ -255,11 +209,7 @@ mod tests {
         assert!((m.rmse - 0.1).abs() < 1e-6, "{}", m.rmse);
         assert!((m.max_abs - 0.1).abs() < 1e-6, "{}", m.max_abs);
         // peak 0.5, RMSE 0.1 → 20·log10(5)
-        assert!(
-            (m.psnr_db - 20.0 * 5f64.log10()).abs() < 1e-4,
-            "{}",
-            m.psnr_db
-        );
+        assert!((m.psnr_db - 20.0 * 5f64.log10()).abs() < 1e-4, "{}", m.psnr_db);
         assert!(m.flip_mean > 0.0 && m.flip_mean < 1.0, "{}", m.flip_mean);
     }
 
@@ -287,9 +237,7 @@ mod tests {
     fn size_mismatch_is_an_error_naming_both_sizes() {
         let a = filled(8, 4, 0.5);
         let b = filled(4, 8, 0.5);
-        let msg = compare(&a, &b, &ToneMap::default())
-            .unwrap_err()
-            .to_string();
+        let msg = compare(&a, &b, &ToneMap::default()).unwrap_err().to_string();
         assert!(msg.contains("8x4") && msg.contains("4x8"), "{msg}");
         assert!(flip_heatmap(&a, &b, &ToneMap::default()).is_err());
         assert!(abs_error_heatmap(&a, &b).is_err());
@@ -307,12 +255,7 @@ mod tests {
 
     #[test]
     fn psnr_infinity_serialises_as_null_and_back() {
-        let m = Metrics {
-            rmse: 0.0,
-            psnr_db: f64::INFINITY,
-            flip_mean: 0.0,
-            max_abs: 0.0,
-        };
+        let m = Metrics { rmse: 0.0, psnr_db: f64::INFINITY, flip_mean: 0.0, max_abs: 0.0 };
         let json = serde_json::to_string(&m).unwrap();
         assert!(json.contains("\"psnr_db\":null"), "{json}");
         let back: Metrics = serde_json::from_str(&json).unwrap();

@@ -16,9 +16,7 @@ use image::{DynamicImage, ImageEncoder, ImageFormat, ImageReader, Rgba32FImage};
 
 /// The temporary sibling of `path`: `<dir>/.<name>.tmp-<pid>`.
 fn temp_path(path: &Path) -> Result<PathBuf> {
-    let name = path
-        .file_name()
-        .ok_or_else(|| anyhow!("{}: not a file path", path.display()))?;
+    let name = path.file_name().ok_or_else(|| anyhow!("{}: not a file path", path.display()))?;
     let mut tmp_name = std::ffi::OsString::from(".");
     tmp_name.push(name);
     tmp_name.push(format!(".tmp-{}", std::process::id()));
@@ -52,11 +50,9 @@ pub fn write_atomic_with(path: &Path, f: impl FnOnce(&mut File) -> Result<()>) -
             .with_context(|| format!("cannot create temporary file {}", tmp.display()))?;
         f(&mut file)?;
         file.flush()?;
-        file.sync_all()
-            .with_context(|| format!("cannot sync {}", tmp.display()))?;
+        file.sync_all().with_context(|| format!("cannot sync {}", tmp.display()))?;
         drop(file);
-        fs::rename(&tmp, path)
-            .with_context(|| format!("cannot rename {} to {}", tmp.display(), path.display()))?;
+        fs::rename(&tmp, path).with_context(|| format!("cannot rename {} to {}", tmp.display(), path.display()))?;
         Ok(())
     })();
     match result {
@@ -93,13 +89,7 @@ fn sync_parent_dir(path: &Path) {
 pub fn write_png_rgb8(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
     let expected = width as usize * height as usize * 3;
     if rgb.len() != expected {
-        bail!(
-            "cannot write {}: {}x{} RGB needs {expected} bytes, got {}",
-            path.display(),
-            width,
-            height,
-            rgb.len()
-        );
+        bail!("cannot write {}: {}x{} RGB needs {expected} bytes, got {}", path.display(), width, height, rgb.len());
     }
     let mut png = Vec::new();
     image::codecs::png::PngEncoder::new(&mut png)
@@ -113,13 +103,7 @@ pub fn write_png_rgb8(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Resul
 pub fn write_exr(path: &Path, img: &Image) -> Result<()> {
     let flat: Vec<f32> = img.pixels.iter().flatten().copied().collect();
     let buffer = Rgba32FImage::from_raw(img.width, img.height, flat).ok_or_else(|| {
-        anyhow!(
-            "cannot write {}: {}x{} image has {} pixels",
-            path.display(),
-            img.width,
-            img.height,
-            img.pixels.len()
-        )
+        anyhow!("cannot write {}: {}x{} image has {} pixels", path.display(), img.width, img.height, img.pixels.len())
     })?;
     let mut cursor = Cursor::new(Vec::new());
     DynamicImage::ImageRgba32F(buffer)
@@ -140,38 +124,25 @@ pub fn read_exr(path: &Path) -> Result<Image> {
         .with_guessed_format()
         .with_context(|| format!("cannot read {}", path.display()))?;
     let format = reader.format();
-    let decoded = reader
-        .decode()
-        .with_context(|| format!("cannot decode image {}", path.display()))?;
+    let decoded = reader.decode().with_context(|| format!("cannot decode image {}", path.display()))?;
     let linear_source = format == Some(ImageFormat::OpenExr)
-        || matches!(
-            decoded,
-            DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_)
-        );
+        || matches!(decoded, DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_));
     let rgba = decoded.into_rgba32f();
     let (width, height) = rgba.dimensions();
     let pixels = rgba
         .pixels()
         .map(|p| {
             let [r, g, b, a] = p.0;
-            if linear_source {
-                [r, g, b, a]
-            } else {
-                [srgb_eotf(r), srgb_eotf(g), srgb_eotf(b), a]
-            }
+            if linear_source { [r, g, b, a] } else { [srgb_eotf(r), srgb_eotf(g), srgb_eotf(b), a] }
         })
         .collect();
-    Ok(Image {
-        width,
-        height,
-        pixels,
-    })
+    Ok(Image { width, height, pixels })
 }
 
 /// Writes `value` as pretty-printed JSON (with a trailing newline), atomically.
 pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
-    let mut bytes = serde_json::to_vec_pretty(value)
-        .with_context(|| format!("cannot serialise JSON for {}", path.display()))?;
+    let mut bytes =
+        serde_json::to_vec_pretty(value).with_context(|| format!("cannot serialise JSON for {}", path.display()))?;
     bytes.push(b'\n');
     write_atomic(path, &bytes)
 }
@@ -193,10 +164,8 @@ mod tests {
     }
 
     fn entries(dir: &Path) -> Vec<String> {
-        let mut v: Vec<String> = fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
+        let mut v: Vec<String> =
+            fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
         v.sort();
         v
     }

@@ -234,7 +234,8 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
                 TechniqueChoice::Reference(s) => {
                     // The reference runs on the CPU over the very shadow map the GPU drew.
                     let shadow_map = host::read_shadow_map(gpu, &tex, &desc)?;
-                    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
+                    let frame =
+                        CpuFrame { desc: &desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
                     reference::render(&frame, s, opts.progress)?
                 }
             };
@@ -251,7 +252,10 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
         }
     };
     if !inscatter.all_finite() {
-        bail!("{}: the technique produced non-finite values (NaN/Inf) — a bug, please report it", opts.technique.name());
+        bail!(
+            "{}: the technique produced non-finite values (NaN/Inf) — a bug, please report it",
+            opts.technique.name()
+        );
     }
     let t = surface_transmittance(&desc, &depth);
     let final_radiance = composite(&surface, &inscatter, &t);

@@ -20,7 +20,18 @@ fn render_writes_png_exr_and_stats_and_diff_reads_them() {
     let d = tmp("render");
     let run = |technique: &str, stem: &str| {
         let out = bin()
-            .args(["render", "colonnade", "--technique", technique, "--backend", "cpu", "--size", "96x54", "--shadow-map-size", "512"])
+            .args([
+                "render",
+                "colonnade",
+                "--technique",
+                technique,
+                "--backend",
+                "cpu",
+                "--size",
+                "96x54",
+                "--shadow-map-size",
+                "512",
+            ])
             .args(["--set", if technique == "reference" { "steps=64" } else { "steps=32" }])
             .arg("--output")
             .arg(d.join(format!("{stem}.png")))
@@ -57,7 +68,11 @@ fn render_writes_png_exr_and_stats_and_diff_reads_them() {
     assert!(d.join("heat.png").exists());
     // Identical images: zero error.
     let out = bin().arg("diff").arg(d.join("bf.exr")).arg(d.join("bf.exr")).output().unwrap();
-    assert!(String::from_utf8_lossy(&out.stdout).contains("RMSE       0.000000e0"), "{}", String::from_utf8_lossy(&out.stdout));
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("RMSE       0.000000e0"),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
 }
 
 #[test]
@@ -96,7 +111,8 @@ shadow_map_size = 256
 fn bad_scene(dir: &Path, name: &str, text: &str) -> (bool, String) {
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap();
-    let out = bin().args(["render"]).arg(&p).args(["--backend", "cpu", "--output"]).arg(dir.join("x.png")).output().unwrap();
+    let out =
+        bin().args(["render"]).arg(&p).args(["--backend", "cpu", "--output"]).arg(dir.join("x.png")).output().unwrap();
     (out.status.success(), String::from_utf8_lossy(&out.stderr).trim().to_string())
 }
 
@@ -109,7 +125,11 @@ fn bad_scene_files_fail_with_one_line_naming_file_and_key() {
         ("syntax.toml", GOOD.replace("width = 64", "width = = 64"), "width"),
         ("unknown.toml", GOOD.replace("width = 64", "widht = 64"), "widht"),
         ("type.toml", GOOD.replace("width = 64", "width = \"wide\""), "width"),
-        ("negative.toml", GOOD.replace("scattering = [0.05, 0.05, 0.05]", "scattering = [-0.05, 0.05, 0.05]"), "scattering"),
+        (
+            "negative.toml",
+            GOOD.replace("scattering = [0.05, 0.05, 0.05]", "scattering = [-0.05, 0.05, 0.05]"),
+            "scattering",
+        ),
         ("nan.toml", GOOD.replace("absorption = [0.01, 0.01, 0.01]", "absorption = [nan, 0.01, 0.01]"), "absorption"),
         ("zero.toml", GOOD.replace("height = 36", "height = 0"), "height"),
         ("mesh.toml", format!("{GOOD}\n[[objects]]\nkind = \"mesh\"\npath = \"missing.obj\"\n"), "path"),

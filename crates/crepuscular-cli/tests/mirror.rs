@@ -2,9 +2,9 @@
 //! pass, on small images — the host renderer's depth and shadow maps, and `brute-force` run on
 //! identical inputs, for every light kind.
 
+use crepuscular::CpuFrame;
 use crepuscular::gpu::{UploadedFrame, test_gpu};
 use crepuscular::techniques::brute_force::{self, BruteForce, BruteForceSettings};
-use crepuscular::CpuFrame;
 use crepuscular_cli::render::frame_desc;
 use crepuscular_scene::{GpuHost, builtin, host, host_cpu};
 
@@ -65,7 +65,8 @@ fn brute_force_gpu_matches_its_cpu_mirror() {
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
-        for settings in [BruteForceSettings::default(), BruteForceSettings { steps: 17, jitter: true, frame_index: 7 }] {
+        for settings in [BruteForceSettings::default(), BruteForceSettings { steps: 17, jitter: true, frame_index: 7 }]
+        {
             let (cpu, _) = brute_force::cpu::march(&frame, &settings).unwrap();
             let up = UploadedFrame::new(&gpu, &frame).unwrap();
             let out = gpu.create_output_texture(desc.width, desc.height);

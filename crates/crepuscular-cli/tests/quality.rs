@@ -70,7 +70,12 @@ fn brute_force_vs_reference_on_every_builtin_scene_gpu() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name);
         let run = |technique| {
-            render(&scene, Some(&gpu), &RenderOptions { backend: Backend::Gpu, technique, progress: &|_, _| {}, notice: &|_| {} }).unwrap()
+            render(
+                &scene,
+                Some(&gpu),
+                &RenderOptions { backend: Backend::Gpu, technique, progress: &|_, _| {}, notice: &|_| {} },
+            )
+            .unwrap()
         };
         let bf = run(TechniqueChoice::BruteForce(BruteForceSettings::default()));
         let rf = run(TechniqueChoice::Reference(REFERENCE));

@@ -1,15 +1,17 @@
 //! Built-in procedural scenes. Each is deterministic (a seeded hash generator, no external
 //! randomness), renders at 960 × 540 with a 2048² shadow map by default, and is lit and fogged
-//! so that a tone-mapped image at exposure 1 is well exposed: surfaces around 0.1–1 in
-//! radiance, shafts clearly visible without washing the image out.
+//! so that a tone-mapped image at exposure 1 is well exposed: surfaces around 0.05–1 in
+//! radiance, shafts clearly visible without washing the image out. The cameras look towards
+//! the light, which is partly hidden, because that is where single scattering shows best
+//! (forward-scattering Henyey–Greenstein phase functions, g = 0.3–0.55).
 //!
-//! | name | light | what it shows |
-//! | --- | --- | --- |
-//! | `colonnade` | directional (low sun) | shafts between columns towards the camera |
-//! | `forest` | directional | thousands of leaves: a complex shadow map, shafts through a canopy |
-//! | `stained-glass` | spot with a projected texture | coloured shafts through a window into a dusty room |
-//! | `cage` | point (cube shadow map) | beams radiating out of a lattice lantern |
-//! | `terrain` | directional (very low sun) | a 128 × 128 heightfield; shafts through notches in a ridge |
+//! | name | light | scale | what it shows |
+//! | --- | --- | --- | --- |
+//! | `colonnade` | directional, sun 14° high | 30 m hall | shafts between nine columns into a roofed hall, towards the camera |
+//! | `forest` | directional, sun 23° high | 45 × 40 m | 56 trees, 13 440 leaves (26 880 triangles): a complex shadow map, shafts through a canopy |
+//! | `stained-glass` | spot with a projected 256² texture | 12 × 8 × 16 m room | a coloured slab of light through a window into a dusty room |
+//! | `cage` | point (cube shadow map) | 3.2 m lantern | beams radiating out of a lattice lantern onto the ground and a wall |
+//! | `terrain` | directional, sun 10° high | 180 × 180 m, 128² grid | shafts fanning from behind a peak of a notched ridge |
 
 use crate::mesh::{self, Transform};
 use crate::scene::{Geometry, RenderSettings, Scene, Vertex};
@@ -23,24 +25,12 @@ pub const DEFAULT_SCENE: &str = "colonnade";
 const SCENES: &[(&str, &str)] = &[
     (
         "colonnade",
-        "a row of columns under an architrave in low sun; shafts stream through the gaps towards the camera",
+        "a roofed hall behind a row of columns in low sun; shafts stream between the columns towards the camera",
     ),
-    (
-        "forest",
-        "trunks under a canopy of thousands of leaves, low sun through the gaps; a complex shadow map",
-    ),
-    (
-        "stained-glass",
-        "a dusty room lit by a spot light through a window with a projected stained-glass texture",
-    ),
-    (
-        "cage",
-        "a point light inside a lattice lantern, beams radiating outward (cube shadow map)",
-    ),
-    (
-        "terrain",
-        "a procedural 128×128 heightfield with a notched ridge against a very low sun",
-    ),
+    ("forest", "trunks under a canopy of thousands of leaves, low sun through the gaps; a complex shadow map"),
+    ("stained-glass", "a dusty room lit by a spot light through a window with a projected stained-glass texture"),
+    ("cage", "a point light inside a lattice lantern, beams radiating outward (cube shadow map)"),
+    ("terrain", "a procedural 128×128 heightfield; low sun behind a notched ridge, shafts fanning from a peak"),
 ];
 
 /// Names and one-line descriptions of the built-in scenes, in a stable order.
@@ -89,11 +79,7 @@ impl Rng {
     /// Uniform in the unit ball.
     fn in_ball(&mut self) -> Vec3 {
         loop {
-            let p = Vec3::new(
-                self.range(-1.0, 1.0),
-                self.range(-1.0, 1.0),
-                self.range(-1.0, 1.0),
-            );
+            let p = Vec3::new(self.range(-1.0, 1.0), self.range(-1.0, 1.0), self.range(-1.0, 1.0));
             if p.length_squared() <= 1.0 {
                 return p;
             }
@@ -155,11 +141,7 @@ fn render(shadow_bias: f32, ambient: Vec3) -> RenderSettings {
     RenderSettings {
         width: 960,
         height: 540,
-        shadow: ShadowSettings {
-            size: 2048,
-            bias: shadow_bias,
-            ..ShadowSettings::default()
-        },
+        shadow: ShadowSettings { size: 2048, bias: shadow_bias, ..ShadowSettings::default() },
         ambient,
         exposure: 1.0,
         ..RenderSettings::default()
@@ -171,17 +153,11 @@ fn boxed(g: &mut Geometry, center: Vec3, size: Vec3, albedo: Vec3) {
 }
 
 fn boxed_rot(g: &mut Geometry, center: Vec3, size: Vec3, rot: Vec3, albedo: Vec3) {
-    g.append(&mesh::cuboid(
-        &Transform::at_scaled(center, size).rotated(rot),
-        albedo,
-    ));
+    g.append(&mesh::cuboid(&Transform::at_scaled(center, size).rotated(rot), albedo));
 }
 
 fn ground(g: &mut Geometry, size: f32, albedo: Vec3) {
-    g.append(&mesh::plane(
-        &Transform::at_scaled(Vec3::ZERO, Vec3::new(size, 1.0, size)),
-        albedo,
-    ));
+    g.append(&mesh::plane(&Transform::at_scaled(Vec3::ZERO, Vec3::new(size, 1.0, size)), albedo));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -189,7 +165,7 @@ fn ground(g: &mut Geometry, size: f32, albedo: Vec3) {
 
 /// A stoa: a hall whose front is a row of nine columns under an architrave, closed by a roof,
 /// side walls and a back wall. The camera stands inside looking out through the colonnade at a
-/// low sun partly hidden by a column; shafts stream between the columns into the shadowed hall
+/// low sun just beside a column; shafts stream between the columns into the shadowed hall
 /// towards the camera, and the columns' shadows stripe the floor and the fog. Outside, a row
 /// of broken columns and a few fallen blocks.
 fn colonnade() -> Scene {
@@ -200,76 +176,28 @@ fn colonnade() -> Scene {
     // Hall: x in [-hx, hx], z in [0, depth]; floor at `top`.
     let (hx, depth) = (14.5f32, 13.0f32);
     let top = 0.7;
-    boxed(
-        &mut g,
-        Vec3::new(0.0, 0.2, depth * 0.5 - 0.6),
-        Vec3::new(2.0 * hx + 2.0, 0.4, depth + 3.2),
-        dark_stone,
-    );
-    boxed(
-        &mut g,
-        Vec3::new(0.0, 0.55, depth * 0.5 - 0.3),
-        Vec3::new(2.0 * hx + 1.0, 0.3, depth + 2.0),
-        stone,
-    );
+    boxed(&mut g, Vec3::new(0.0, 0.2, depth * 0.5 - 0.6), Vec3::new(2.0 * hx + 2.0, 0.4, depth + 3.2), dark_stone);
+    boxed(&mut g, Vec3::new(0.0, 0.55, depth * 0.5 - 0.3), Vec3::new(2.0 * hx + 1.0, 0.3, depth + 2.0), stone);
     let column_h = 7.5;
     for i in 0..9 {
         let x = -12.0 + 3.0 * i as f32;
-        boxed(
-            &mut g,
-            Vec3::new(x, top + 0.15, 0.0),
-            Vec3::new(1.3, 0.3, 1.3),
-            stone,
-        );
+        boxed(&mut g, Vec3::new(x, top + 0.15, 0.0), Vec3::new(1.3, 0.3, 1.3), stone);
         g.append(&mesh::cylinder(
-            &Transform::at_scaled(
-                Vec3::new(x, top + 0.3 + column_h * 0.5, 0.0),
-                Vec3::new(1.0, column_h, 1.0),
-            ),
+            &Transform::at_scaled(Vec3::new(x, top + 0.3 + column_h * 0.5, 0.0), Vec3::new(1.0, column_h, 1.0)),
             stone,
         ));
-        boxed(
-            &mut g,
-            Vec3::new(x, top + 0.3 + column_h + 0.2, 0.0),
-            Vec3::new(1.35, 0.4, 1.35),
-            stone,
-        );
+        boxed(&mut g, Vec3::new(x, top + 0.3 + column_h + 0.2, 0.0), Vec3::new(1.35, 0.4, 1.35), stone);
     }
     let beam_y = top + 0.3 + column_h + 0.4; // 8.9: underside of the architrave
-    boxed(
-        &mut g,
-        Vec3::new(0.0, beam_y + 0.5, 0.0),
-        Vec3::new(2.0 * hx + 1.0, 1.0, 1.6),
-        stone,
-    );
-    boxed(
-        &mut g,
-        Vec3::new(0.0, beam_y + 1.2, 0.0),
-        Vec3::new(2.0 * hx + 2.0, 0.4, 2.2),
-        dark_stone,
-    );
+    boxed(&mut g, Vec3::new(0.0, beam_y + 0.5, 0.0), Vec3::new(2.0 * hx + 1.0, 1.0, 1.6), stone);
+    boxed(&mut g, Vec3::new(0.0, beam_y + 1.2, 0.0), Vec3::new(2.0 * hx + 2.0, 0.4, 2.2), dark_stone);
     // Roof over the hall, side walls and back wall.
     let roof_y = beam_y + 1.0;
-    boxed(
-        &mut g,
-        Vec3::new(0.0, roof_y + 0.3, depth * 0.5),
-        Vec3::new(2.0 * hx + 2.0, 0.6, depth + 1.0),
-        dark_stone,
-    );
+    boxed(&mut g, Vec3::new(0.0, roof_y + 0.3, depth * 0.5), Vec3::new(2.0 * hx + 2.0, 0.6, depth + 1.0), dark_stone);
     for s in [-1.0f32, 1.0] {
-        boxed(
-            &mut g,
-            Vec3::new(s * hx, (top + roof_y) * 0.5, depth * 0.5),
-            Vec3::new(0.8, roof_y - top, depth),
-            stone,
-        );
+        boxed(&mut g, Vec3::new(s * hx, (top + roof_y) * 0.5, depth * 0.5), Vec3::new(0.8, roof_y - top, depth), stone);
     }
-    boxed(
-        &mut g,
-        Vec3::new(0.0, (top + roof_y) * 0.5, depth),
-        Vec3::new(2.0 * hx, roof_y - top, 0.8),
-        stone,
-    );
+    boxed(&mut g, Vec3::new(0.0, (top + roof_y) * 0.5, depth), Vec3::new(2.0 * hx, roof_y - top, 0.8), stone);
     // Broken columns outside.
     let mut rng = Rng::new(0xC010_77AD);
     for i in 0..8 {
@@ -286,20 +214,8 @@ fn colonnade() -> Scene {
             .rotated(Vec3::new(0.0, 35.0, 90.0)),
         stone,
     ));
-    boxed_rot(
-        &mut g,
-        Vec3::new(5.5, top + 0.45, 4.0),
-        Vec3::new(1.6, 0.9, 1.1),
-        Vec3::new(0.0, 22.0, 0.0),
-        dark_stone,
-    );
-    boxed_rot(
-        &mut g,
-        Vec3::new(-7.0, 0.45, -6.0),
-        Vec3::new(1.4, 0.9, 1.0),
-        Vec3::new(0.0, -15.0, 0.0),
-        stone,
-    );
+    boxed_rot(&mut g, Vec3::new(5.5, top + 0.45, 4.0), Vec3::new(1.6, 0.9, 1.1), Vec3::new(0.0, 22.0, 0.0), dark_stone);
+    boxed_rot(&mut g, Vec3::new(-7.0, 0.45, -6.0), Vec3::new(1.4, 0.9, 1.0), Vec3::new(0.0, -15.0, 0.0), stone);
 
     Scene {
         name: String::new(),
@@ -332,7 +248,7 @@ fn colonnade() -> Scene {
 /// Number of trees in `forest`.
 const FOREST_TREES_X: usize = 8;
 const FOREST_TREES_Z: usize = 7;
-const LEAVES_PER_TREE: usize = 110;
+const LEAVES_PER_TREE: usize = 240;
 
 /// Trunks on a jittered grid, each under an ellipsoidal canopy of randomly oriented leaf quads.
 fn forest() -> Scene {
@@ -351,34 +267,20 @@ fn forest() -> Scene {
             let too_close = (p - Vec3::new(camera.x, 0.0, camera.z)).length() < 4.0;
             let h = rng.range(7.0, 11.0);
             let r = rng.range(0.18, 0.34);
-            let lean = Vec3::new(
-                rng.range(-3.0, 3.0),
-                rng.range(0.0, 360.0),
-                rng.range(-3.0, 3.0),
-            );
+            let lean = Vec3::new(rng.range(-3.0, 3.0), rng.range(0.0, 360.0), rng.range(-3.0, 3.0));
             let crown = Vec3::new(x, h - rng.range(0.5, 1.5), z);
-            let radii = Vec3::new(
-                rng.range(2.3, 3.3),
-                rng.range(1.6, 2.4),
-                rng.range(2.3, 3.3),
-            );
+            let radii = Vec3::new(rng.range(2.3, 3.3), rng.range(1.6, 2.4), rng.range(2.3, 3.3));
             if too_close {
                 continue;
             }
             g.append(&mesh::cylinder_segments(
-                &Transform::at_scaled(Vec3::new(x, h * 0.5, z), Vec3::new(2.0 * r, h, 2.0 * r))
-                    .rotated(lean),
+                &Transform::at_scaled(Vec3::new(x, h * 0.5, z), Vec3::new(2.0 * r, h, 2.0 * r)).rotated(lean),
                 bark,
                 10,
             ));
             // A few branches towards the crown.
             for _ in 0..3 {
-                let dir = Vec3::new(
-                    rng.range(-1.0, 1.0),
-                    rng.range(0.6, 1.2),
-                    rng.range(-1.0, 1.0),
-                )
-                .normalize();
+                let dir = Vec3::new(rng.range(-1.0, 1.0), rng.range(0.6, 1.2), rng.range(-1.0, 1.0)).normalize();
                 let start = Vec3::new(x, h * rng.range(0.45, 0.65), z);
                 let len = rng.range(1.8, 2.8);
                 let mid = start + dir * (len * 0.5);
@@ -386,8 +288,7 @@ fn forest() -> Scene {
                 let yaw = dir.x.atan2(dir.z).to_degrees();
                 let pitch = dir.y.acos().to_degrees();
                 g.append(&mesh::cylinder_segments(
-                    &Transform::at_scaled(mid, Vec3::new(0.14, len, 0.14))
-                        .rotated(Vec3::new(pitch, yaw, 0.0)),
+                    &Transform::at_scaled(mid, Vec3::new(0.14, len, 0.14)).rotated(Vec3::new(pitch, yaw, 0.0)),
                     bark,
                     6,
                 ));
@@ -398,20 +299,12 @@ fn forest() -> Scene {
                 let n = rng.on_sphere();
                 let t = n.any_orthonormal_vector();
                 let b = n.cross(t);
-                let s = rng.range(0.25, 0.42);
+                let s = rng.range(0.16, 0.28);
                 let spin = rng.range(0.0, std::f32::consts::TAU);
-                let (u, v) = (
-                    t * spin.cos() + b * spin.sin(),
-                    b * spin.cos() - t * spin.sin(),
-                );
+                let (u, v) = (t * spin.cos() + b * spin.sin(), b * spin.cos() - t * spin.sin());
                 let albedo = Vec3::new(0.16, 0.3, 0.07) * tint * rng.range(0.8, 1.2);
                 g.append(&mesh::quad(
-                    [
-                        c - u * s - v * s,
-                        c + u * s - v * s,
-                        c + u * s + v * s,
-                        c - u * s + v * s,
-                    ],
+                    [c - u * s - v * s, c + u * s - v * s, c + u * s + v * s, c - u * s + v * s],
                     albedo,
                 ));
             }
@@ -425,8 +318,11 @@ fn forest() -> Scene {
         }
         let s = rng.range(0.5, 1.2);
         g.append(&mesh::sphere_segments(
-            &Transform::at_scaled(p + Vec3::Y * 0.15 * s, Vec3::new(1.4 * s, 0.8 * s, 1.1 * s))
-                .rotated(Vec3::new(0.0, rng.range(0.0, 180.0), 0.0)),
+            &Transform::at_scaled(p + Vec3::Y * 0.15 * s, Vec3::new(1.4 * s, 0.8 * s, 1.1 * s)).rotated(Vec3::new(
+                0.0,
+                rng.range(0.0, 180.0),
+                0.0,
+            )),
             Vec3::new(0.35, 0.34, 0.3),
             12,
             8,
@@ -447,12 +343,12 @@ fn forest() -> Scene {
         medium: Medium {
             scattering: Vec3::new(0.045, 0.05, 0.055),
             absorption: Vec3::splat(0.01),
-            phase: Phase::HenyeyGreenstein { g: 0.6 },
+            phase: Phase::HenyeyGreenstein { g: 0.55 },
         },
         light: Light::Directional {
             direction: Vec3::new(0.3, -0.45, 1.0).normalize(),
             color: Vec3::new(1.0, 0.9, 0.72),
-            intensity: 4.5,
+            intensity: 4.0,
         },
         geometry: g,
         render: render(0.04, Vec3::new(0.025, 0.03, 0.025)),
@@ -487,10 +383,7 @@ pub fn stained_glass_texture(size: u32) -> RgbTexture {
             let (dx, dy) = (u - 0.5, v - 0.5);
             let r = (dx * dx + dy * dy).sqrt();
             let (cell, edge): (u64, f32) = if r < rings[4] {
-                let k = rings
-                    .windows(2)
-                    .position(|w| r >= w[0] && r < w[1])
-                    .unwrap_or(0);
+                let k = rings.windows(2).position(|w| r >= w[0] && r < w[1]).unwrap_or(0);
                 let n = sectors[k];
                 let a = dy.atan2(dx) + std::f32::consts::PI; // [0, 2π]
                 let sector_w = std::f32::consts::TAU / n as f32;
@@ -498,11 +391,7 @@ pub fn stained_glass_texture(size: u32) -> RgbTexture {
                 let a = a + if k % 2 == 1 { 0.5 * sector_w } else { 0.0 };
                 let s = ((a / sector_w).floor() as i64).rem_euclid(n as i64) as u64;
                 let frac = (a / sector_w).fract();
-                let ang_edge = if n > 1 {
-                    frac.min(1.0 - frac) * sector_w * r
-                } else {
-                    f32::MAX
-                };
+                let ang_edge = if n > 1 { frac.min(1.0 - frac) * sector_w * r } else { f32::MAX };
                 let ring_edge = (r - rings[k]).abs().min((rings[k + 1] - r).abs());
                 // Symmetric colours: sector s and its mirror share a colour.
                 let sym = s.min((n as u64 - s) % n as u64);
@@ -530,11 +419,7 @@ pub fn stained_glass_texture(size: u32) -> RgbTexture {
             texels.push([c.x, c.y, c.z, 1.0]);
         }
     }
-    RgbTexture {
-        width: size,
-        height: size,
-        texels,
-    }
+    RgbTexture { width: size, height: size, texels }
 }
 
 /// A closed room 12 × 8 × 16 m with a window (with a mullion and a transom) in its left wall.
@@ -547,106 +432,36 @@ fn stained_glass() -> Scene {
     let wood = Vec3::new(0.32, 0.2, 0.12);
     let (hx, hy, hz, t) = (6.0f32, 8.0f32, 8.0f32, 0.4f32);
     // Floor and ceiling.
-    boxed(
-        &mut g,
-        Vec3::new(0.0, -t * 0.5, 0.0),
-        Vec3::new(2.0 * hx + 2.0 * t, t, 2.0 * hz + 2.0 * t),
-        floor,
-    );
-    boxed(
-        &mut g,
-        Vec3::new(0.0, hy + t * 0.5, 0.0),
-        Vec3::new(2.0 * hx + 2.0 * t, t, 2.0 * hz + 2.0 * t),
-        wall,
-    );
+    boxed(&mut g, Vec3::new(0.0, -t * 0.5, 0.0), Vec3::new(2.0 * hx + 2.0 * t, t, 2.0 * hz + 2.0 * t), floor);
+    boxed(&mut g, Vec3::new(0.0, hy + t * 0.5, 0.0), Vec3::new(2.0 * hx + 2.0 * t, t, 2.0 * hz + 2.0 * t), wall);
     // Right, back, front walls.
-    boxed(
-        &mut g,
-        Vec3::new(hx + t * 0.5, hy * 0.5, 0.0),
-        Vec3::new(t, hy, 2.0 * hz + 2.0 * t),
-        wall,
-    );
-    boxed(
-        &mut g,
-        Vec3::new(0.0, hy * 0.5, -hz - t * 0.5),
-        Vec3::new(2.0 * hx, hy, t),
-        wall,
-    );
-    boxed(
-        &mut g,
-        Vec3::new(0.0, hy * 0.5, hz + t * 0.5),
-        Vec3::new(2.0 * hx, hy, t),
-        wall,
-    );
+    boxed(&mut g, Vec3::new(hx + t * 0.5, hy * 0.5, 0.0), Vec3::new(t, hy, 2.0 * hz + 2.0 * t), wall);
+    boxed(&mut g, Vec3::new(0.0, hy * 0.5, -hz - t * 0.5), Vec3::new(2.0 * hx, hy, t), wall);
+    boxed(&mut g, Vec3::new(0.0, hy * 0.5, hz + t * 0.5), Vec3::new(2.0 * hx, hy, t), wall);
     // Left wall with a window: y in [w0, w1], z in [-wz, wz].
     let (w0, w1, wz) = (3.0f32, 7.5f32, 1.75f32);
     let x = -hx - t * 0.5;
     let full_z = 2.0 * hz + 2.0 * t;
-    boxed(
-        &mut g,
-        Vec3::new(x, w0 * 0.5, 0.0),
-        Vec3::new(t, w0, full_z),
-        wall,
-    );
-    boxed(
-        &mut g,
-        Vec3::new(x, (w1 + hy) * 0.5, 0.0),
-        Vec3::new(t, hy - w1, full_z),
-        wall,
-    );
+    boxed(&mut g, Vec3::new(x, w0 * 0.5, 0.0), Vec3::new(t, w0, full_z), wall);
+    boxed(&mut g, Vec3::new(x, (w1 + hy) * 0.5, 0.0), Vec3::new(t, hy - w1, full_z), wall);
     let side = hz + t - wz;
     for s in [-1.0f32, 1.0] {
-        boxed(
-            &mut g,
-            Vec3::new(x, (w0 + w1) * 0.5, s * (wz + side * 0.5)),
-            Vec3::new(t, w1 - w0, side),
-            wall,
-        );
+        boxed(&mut g, Vec3::new(x, (w0 + w1) * 0.5, s * (wz + side * 0.5)), Vec3::new(t, w1 - w0, side), wall);
     }
     // Mullion and transom.
-    boxed(
-        &mut g,
-        Vec3::new(x, (w0 + w1) * 0.5, 0.0),
-        Vec3::new(t * 0.6, w1 - w0, 0.1),
-        wall * 0.6,
-    );
-    boxed(
-        &mut g,
-        Vec3::new(x, w0 + 0.62 * (w1 - w0), 0.0),
-        Vec3::new(t * 0.6, 0.1, 2.0 * wz),
-        wall * 0.6,
-    );
+    boxed(&mut g, Vec3::new(x, (w0 + w1) * 0.5, 0.0), Vec3::new(t * 0.6, w1 - w0, 0.1), wall * 0.6);
+    boxed(&mut g, Vec3::new(x, w0 + 0.62 * (w1 - w0), 0.0), Vec3::new(t * 0.6, 0.1, 2.0 * wz), wall * 0.6);
     // Pews on the right half, facing -z.
     for i in 0..3 {
         let z = -6.5 + 2.0 * i as f32;
-        boxed(
-            &mut g,
-            Vec3::new(3.0, 0.45, z),
-            Vec3::new(4.0, 0.1, 0.6),
-            wood,
-        );
-        boxed(
-            &mut g,
-            Vec3::new(3.0, 0.8, z + 0.3),
-            Vec3::new(4.0, 0.8, 0.08),
-            wood,
-        );
+        boxed(&mut g, Vec3::new(3.0, 0.45, z), Vec3::new(4.0, 0.1, 0.6), wood);
+        boxed(&mut g, Vec3::new(3.0, 0.8, z + 0.3), Vec3::new(4.0, 0.8, 0.08), wood);
         for sx in [1.1f32, 4.9] {
-            boxed(
-                &mut g,
-                Vec3::new(sx, 0.45, z),
-                Vec3::new(0.08, 0.9, 0.6),
-                wood,
-            );
+            boxed(&mut g, Vec3::new(sx, 0.45, z), Vec3::new(0.08, 0.9, 0.6), wood);
         }
     }
     // Plinth with a sphere near the back.
-    boxed(
-        &mut g,
-        Vec3::new(-2.0, 0.6, -4.5),
-        Vec3::new(1.0, 1.2, 1.0),
-        wall,
-    );
+    boxed(&mut g, Vec3::new(-2.0, 0.6, -4.5), Vec3::new(1.0, 1.2, 1.0), wall);
     g.append(&mesh::sphere(
         &Transform::at_scaled(Vec3::new(-2.0, 1.7, -4.5), Vec3::splat(1.0)),
         Vec3::new(0.7, 0.7, 0.68),
@@ -693,12 +508,7 @@ fn cage() -> Scene {
     let iron = Vec3::new(0.2, 0.19, 0.18);
     let stone = Vec3::new(0.55, 0.52, 0.48);
     // Pedestal.
-    boxed(
-        &mut g,
-        Vec3::new(0.0, 0.5, 0.0),
-        Vec3::new(3.8, 1.0, 3.8),
-        stone,
-    );
+    boxed(&mut g, Vec3::new(0.0, 0.5, 0.0), Vec3::new(3.8, 1.0, 3.8), stone);
     // Cage: x, z in [-h, h], y in [y0, y0 + 2h].
     let h = 1.6f32;
     let y0 = 1.0f32;
@@ -711,54 +521,21 @@ fn cage() -> Scene {
         let s = pos(k);
         for side in [-1.0f32, 1.0] {
             // Faces x = ±h: vertical bars (along y) at z = s, horizontal bars (along z) at y = yc + s.
-            boxed(
-                &mut g,
-                Vec3::new(side * h, yc, s),
-                Vec3::new(depth, 2.0 * h, bar),
-                iron,
-            );
-            boxed(
-                &mut g,
-                Vec3::new(side * h, yc + s, 0.0),
-                Vec3::new(depth, bar, 2.0 * h),
-                iron,
-            );
+            boxed(&mut g, Vec3::new(side * h, yc, s), Vec3::new(depth, 2.0 * h, bar), iron);
+            boxed(&mut g, Vec3::new(side * h, yc + s, 0.0), Vec3::new(depth, bar, 2.0 * h), iron);
             // Faces z = ±h.
-            boxed(
-                &mut g,
-                Vec3::new(s, yc, side * h),
-                Vec3::new(bar, 2.0 * h, depth),
-                iron,
-            );
-            boxed(
-                &mut g,
-                Vec3::new(0.0, yc + s, side * h),
-                Vec3::new(2.0 * h, bar, depth),
-                iron,
-            );
+            boxed(&mut g, Vec3::new(s, yc, side * h), Vec3::new(bar, 2.0 * h, depth), iron);
+            boxed(&mut g, Vec3::new(0.0, yc + s, side * h), Vec3::new(2.0 * h, bar, depth), iron);
         }
         // Top face y = y0 + 2h.
-        boxed(
-            &mut g,
-            Vec3::new(s, y0 + 2.0 * h, 0.0),
-            Vec3::new(bar, depth, 2.0 * h),
-            iron,
-        );
-        boxed(
-            &mut g,
-            Vec3::new(0.0, y0 + 2.0 * h, s),
-            Vec3::new(2.0 * h, depth, bar),
-            iron,
-        );
+        boxed(&mut g, Vec3::new(s, y0 + 2.0 * h, 0.0), Vec3::new(bar, depth, 2.0 * h), iron);
+        boxed(&mut g, Vec3::new(0.0, y0 + 2.0 * h, s), Vec3::new(2.0 * h, depth, bar), iron);
     }
     // Finials on the top corners.
     for sx in [-1.0f32, 1.0] {
         for sz in [-1.0f32, 1.0] {
             g.append(&mesh::sphere_segments(
-                &Transform::at_scaled(
-                    Vec3::new(sx * h, y0 + 2.0 * h + 0.12, sz * h),
-                    Vec3::splat(0.3),
-                ),
+                &Transform::at_scaled(Vec3::new(sx * h, y0 + 2.0 * h + 0.12, sz * h), Vec3::splat(0.3)),
                 iron,
                 12,
                 8,
@@ -772,24 +549,16 @@ fn cage() -> Scene {
         if p.z > 4.0 {
             continue; // keep the view open
         }
-        g.append(&mesh::cylinder(
-            &Transform::at_scaled(p, Vec3::new(0.9, 6.0, 0.9)),
-            stone,
-        ));
+        g.append(&mesh::cylinder(&Transform::at_scaled(p, Vec3::new(0.9, 6.0, 0.9)), stone));
     }
-    boxed(
-        &mut g,
-        Vec3::new(0.0, 5.0, -12.0),
-        Vec3::new(40.0, 10.0, 0.6),
-        stone,
-    );
+    boxed(&mut g, Vec3::new(0.0, 5.0, -12.0), Vec3::new(40.0, 10.0, 0.6), stone);
 
     Scene {
         name: String::new(),
         description: String::new(),
         camera: Camera {
-            position: Vec3::new(6.0, 2.4, 10.0),
-            look_at: Vec3::new(-0.3, 2.8, 0.0),
+            position: Vec3::new(7.3, 3.0, 10.0),
+            look_at: Vec3::new(-0.3, 2.6, 0.0),
             up: Vec3::Y,
             fov_y_degrees: 60.0,
             near: 0.1,
@@ -828,15 +597,12 @@ fn terrain_height(x: f32, z: f32) -> f32 {
 }
 
 /// A 128 × 128 heightfield, 180 × 180 m, with smooth normals: rolling hills and a notched
-/// ridge against a very low sun.
+/// ridge with the low sun just behind one of its peaks.
 fn terrain() -> Scene {
     let n = TERRAIN_N;
     let (x0, x1, z0, z1) = (-90.0f32, 90.0f32, -125.0f32, 55.0f32);
     let step = Vec3::new((x1 - x0) / (n - 1) as f32, 0.0, (z1 - z0) / (n - 1) as f32);
-    let mut g = Geometry {
-        vertices: Vec::with_capacity(n * n),
-        indices: Vec::with_capacity((n - 1) * (n - 1) * 6),
-    };
+    let mut g = Geometry { vertices: Vec::with_capacity(n * n), indices: Vec::with_capacity((n - 1) * (n - 1) * 6) };
     let grass = Vec3::new(0.22, 0.26, 0.12);
     let rock = Vec3::new(0.42, 0.38, 0.33);
     for j in 0..n {
@@ -850,11 +616,7 @@ fn terrain() -> Scene {
             let normal = Vec3::new(-dx, 1.0, -dz).normalize();
             let rockiness = ((1.0 - normal.y) * 4.0 + (y - 10.0) / 15.0).clamp(0.0, 1.0);
             let albedo = grass.lerp(rock, rockiness);
-            g.vertices.push(Vertex {
-                position: [x, y, z],
-                normal: normal.to_array(),
-                albedo: albedo.to_array(),
-            });
+            g.vertices.push(Vertex { position: [x, y, z], normal: normal.to_array(), albedo: albedo.to_array() });
         }
     }
     for j in 0..n - 1 {
@@ -903,19 +665,8 @@ mod tests {
         for (name, _) in builtin_names() {
             let s = builtin(name).expect(name);
             assert!(s.geometry.triangle_count() > 0, "{name}");
-            assert!(
-                s.geometry
-                    .indices
-                    .iter()
-                    .all(|&i| (i as usize) < s.geometry.vertices.len())
-            );
-            assert!(
-                s.geometry.vertices.iter().all(|v| v
-                    .position
-                    .iter()
-                    .chain(&v.normal)
-                    .all(|c| c.is_finite()))
-            );
+            assert!(s.geometry.indices.iter().all(|&i| (i as usize) < s.geometry.vertices.len()));
+            assert!(s.geometry.vertices.iter().all(|v| v.position.iter().chain(&v.normal).all(|c| c.is_finite())));
         }
         assert!(builtin("nope").is_none());
         assert!(builtin(DEFAULT_SCENE).is_some());

@@ -3,8 +3,8 @@
 //! A scene file describes one [`Scene`]: camera, medium, one light, objects and render
 //! settings. Every key is optional unless marked *required*; unknown keys are errors. Numbers
 //! may be written as integers or floats. Paths (meshes, textures) are relative to the scene
-//! file's directory; absolute paths and `..` components are rejected. A complete example with
-//! every key:
+//! file's directory; absolute paths, `..` components and symbolic links leading out of that
+//! directory are rejected. A complete example with every key:
 //!
 //! ```toml
 //! name = "portico"                       # default: the file stem
@@ -42,8 +42,10 @@
 //! texture = "gobo.png"                   # spot only: projected image, PNG (sRGB) or EXR (linear),
 //!                                        # at most 8192 × 8192; default none
 //!
-//! # Directional light:  [light] kind = "directional", direction = [0.0, -0.3, -1.0], intensity = 4.0
-//! # Point light:        [light] kind = "point", position = [0.0, 3.0, 0.0], intensity = 60.0
+//! # Directional light (a low sun: E ≈ 3–5):
+//! #   [light] kind = "directional", direction = [0.0, -0.3, -1.0], intensity = 4.0
+//! # Point light (I ≈ target irradiance × distance²):
+//! #   [light] kind = "point", position = [0.0, 3.0, 0.0], intensity = 60.0
 //!
 //! [[objects]]
 //! kind = "plane"                         # "plane" | "box" | "sphere" | "cylinder" | "mesh" (required)
@@ -76,8 +78,10 @@
 //! centred at the origin (see [`crate::mesh`]).
 //!
 //! Every error is a [`SceneError`] whose message is one line naming the file, the key and the
-//! offending value, e.g. `scenes/x.toml: medium.scattering[0] = -1: coefficients must be ≥ 0` or
-//! `scenes/x.toml:3:1: medium.scatterin: unknown field `scatterin`, expected one of ...`.
+//! offending value, e.g.
+//! ``scenes/x.toml: medium.scattering[0] = -1: coefficients must be ≥ 0 and finite`` or, for
+//! TOML syntax, type and unknown-key errors, with the line and column,
+//! ``scenes/x.toml:3:1: medium.scatterin: unknown field `scatterin`, expected one of `scattering`, ...``.
 
 use crate::mesh::{self, Transform};
 use crate::scene::{Geometry, RenderSettings, Scene};
@@ -188,19 +192,13 @@ fn one_line(s: &str) -> String {
 /// Reads and parses a scene file. Relative paths inside it resolve against its directory.
 pub fn load_scene_file(path: &Path) -> Result<Scene, SceneError> {
     let label = path.display().to_string();
-    let io = |message: String| SceneError::Io {
-        file: label.clone(),
-        message: one_line(&message),
-    };
+    let io = |message: String| SceneError::Io { file: label.clone(), message: one_line(&message) };
     let meta = std::fs::metadata(path).map_err(|e| io(format!("cannot read: {e}")))?;
     if !meta.is_file() {
         return Err(io("not a file".into()));
     }
     if meta.len() > MAX_SCENE_FILE_BYTES {
-        return Err(io(format!(
-            "{} bytes, more than the limit of {MAX_SCENE_FILE_BYTES}",
-            meta.len()
-        )));
+        return Err(io(format!("{} bytes, more than the limit of {MAX_SCENE_FILE_BYTES}", meta.len())));
     }
     let bytes = std::fs::read(path).map_err(|e| io(format!("cannot read: {e}")))?;
     let text = String::from_utf8(bytes).map_err(|e| io(format!("not UTF-8 text: {e}")))?;
@@ -213,10 +211,7 @@ pub fn load_scene_file(path: &Path) -> Result<Scene, SceneError> {
 /// meshes and textures the scene names.
 pub fn parse_scene_str(text: &str, file_label: &str, base_dir: &Path) -> Result<Scene, SceneError> {
     let raw = parse_raw(text, file_label)?;
-    let ctx = Ctx {
-        file: file_label.to_string(),
-        base_dir: base_dir.to_path_buf(),
-    };
+    let ctx = Ctx { file: file_label.to_string(), base_dir: base_dir.to_path_buf() };
     build(&ctx, raw)
 }
 
@@ -247,9 +242,7 @@ impl<'de> Deserialize<'de> for Rgb {
             fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Rgb, A::Error> {
                 let mut out = [0.0f32; 3];
                 for (i, o) in out.iter_mut().enumerate() {
-                    *o = seq
-                        .next_element()?
-                        .ok_or_else(|| de::Error::invalid_length(i, &self))?;
+                    *o = seq.next_element()?.ok_or_else(|| de::Error::invalid_length(i, &self))?;
                 }
                 if seq.next_element::<de::IgnoredAny>()?.is_some() {
                     return Err(de::Error::invalid_length(4, &self));
@@ -367,15 +360,8 @@ struct RawRender {
     techniques: BTreeMap<String, toml::Table>,
 }
 
-const RENDER_KEYS: &[&str] = &[
-    "width",
-    "height",
-    "shadow_map_size",
-    "shadow_bias",
-    "shadow_normal_offset_texels",
-    "ambient",
-    "exposure",
-];
+const RENDER_KEYS: &[&str] =
+    &["width", "height", "shadow_map_size", "shadow_bias", "shadow_normal_offset_texels", "ambient", "exposure"];
 
 /// A technique table under `[render]`; any other value there is an unknown key. Reading it
 /// through a seed (rather than failing after the value) keeps the key in the error's path.
@@ -389,10 +375,7 @@ impl<'de> de::DeserializeSeed<'de> for TechniqueTable<'_> {
         match toml::Value::deserialize(d)? {
             toml::Value::Table(t) => Ok(t),
             _ => {
-                let known = RENDER_KEYS
-                    .iter()
-                    .map(|k| format!("`{k}`"))
-                    .collect::<Vec<_>>();
+                let known = RENDER_KEYS.iter().map(|k| format!("`{k}`")).collect::<Vec<_>>();
                 Err(de::Error::custom(format!(
                     "unknown field `{}`, expected one of {} or a technique table such as [render.brute-force]",
                     self.key,
@@ -419,9 +402,7 @@ impl<'de> Deserialize<'de> for RawRender {
                         "height" => r.height = Some(map.next_value()?),
                         "shadow_map_size" => r.shadow_map_size = Some(map.next_value()?),
                         "shadow_bias" => r.shadow_bias = Some(map.next_value()?),
-                        "shadow_normal_offset_texels" => {
-                            r.shadow_normal_offset_texels = Some(map.next_value()?)
-                        }
+                        "shadow_normal_offset_texels" => r.shadow_normal_offset_texels = Some(map.next_value()?),
                         "ambient" => r.ambient = Some(map.next_value()?),
                         "exposure" => r.exposure = Some(map.next_value()?),
                         _ => {
@@ -445,11 +426,7 @@ fn parse_raw(text: &str, file: &str) -> Result<RawScene, SceneError> {
         Ok(de) => de,
         Err(e) => {
             let (line, column) = e.span().map(|s| line_col(text, s.start)).unwrap_or((0, 0));
-            let key = if line > 0 {
-                guess_key(text, line)
-            } else {
-                String::new()
-            };
+            let key = if line > 0 { guess_key(text, line) } else { String::new() };
             return Err(SceneError::Syntax {
                 file: file.to_string(),
                 line,
@@ -462,26 +439,13 @@ fn parse_raw(text: &str, file: &str) -> Result<RawScene, SceneError> {
     serde_path_to_error::deserialize::<_, RawScene>(de).map_err(|e| {
         let path = e.path().to_string();
         let inner = e.inner();
-        let (line, column) = inner
-            .span()
-            .map(|s| line_col(text, s.start))
-            .unwrap_or((0, 0));
+        let (line, column) = inner.span().map(|s| line_col(text, s.start)).unwrap_or((0, 0));
         let key = if path == "." || path.is_empty() {
-            if line > 0 {
-                guess_key(text, line)
-            } else {
-                String::new()
-            }
+            if line > 0 { guess_key(text, line) } else { String::new() }
         } else {
             path
         };
-        SceneError::Syntax {
-            file: file.to_string(),
-            line,
-            column,
-            key,
-            message: friendly(&one_line(inner.message())),
-        }
+        SceneError::Syntax { file: file.to_string(), line, column, key, message: friendly(&one_line(inner.message())) }
     })
 }
 
@@ -517,10 +481,8 @@ fn guess_key(text: &str, line: usize) -> String {
     let mut array_counts: BTreeMap<String, usize> = BTreeMap::new();
     let simple_key = |s: &str| {
         let s = s.trim();
-        (!s.is_empty()
-            && s.chars()
-                .all(|c| c.is_ascii_alphanumeric() || "_-.\"' ".contains(c)))
-        .then(|| s.replace([' ', '"', '\''], ""))
+        (!s.is_empty() && s.chars().all(|c| c.is_ascii_alphanumeric() || "_-.\"' ".contains(c)))
+            .then(|| s.replace([' ', '"', '\''], ""))
     };
     for (i, l) in text.lines().enumerate() {
         let t = l.trim();
@@ -552,10 +514,7 @@ fn guess_key(text: &str, line: usize) -> String {
             continue;
         }
         if is_target {
-            let key = t
-                .split('=')
-                .next()
-                .and_then(|k| if t.contains('=') { simple_key(k) } else { None });
+            let key = t.split('=').next().and_then(|k| if t.contains('=') { simple_key(k) } else { None });
             return match (table.is_empty(), key) {
                 (_, None) => table,
                 (true, Some(k)) => k,
@@ -589,12 +548,7 @@ fn fmt_vec(v: [f32; 3]) -> String {
 }
 
 impl Ctx {
-    fn err(
-        &self,
-        key: impl Into<String>,
-        value: impl Into<String>,
-        message: impl Into<String>,
-    ) -> SceneError {
+    fn err(&self, key: impl Into<String>, value: impl Into<String>, message: impl Into<String>) -> SceneError {
         SceneError::Invalid {
             file: self.file.clone(),
             key: one_line(&key.into()),
@@ -604,11 +558,7 @@ impl Ctx {
     }
 
     fn finite(&self, key: &str, v: f32) -> Result<f32, SceneError> {
-        if v.is_finite() {
-            Ok(v)
-        } else {
-            Err(self.err(key, fmt_num(v), "must be a finite number"))
-        }
+        if v.is_finite() { Ok(v) } else { Err(self.err(key, fmt_num(v), "must be a finite number")) }
     }
 
     fn finite3(&self, key: &str, v: [f32; 3]) -> Result<Vec3, SceneError> {
@@ -619,14 +569,7 @@ impl Ctx {
     }
 
     /// Finite, each component in [lo, hi].
-    fn ranged3(
-        &self,
-        key: &str,
-        v: [f32; 3],
-        lo: f32,
-        hi: f32,
-        what: &str,
-    ) -> Result<Vec3, SceneError> {
+    fn ranged3(&self, key: &str, v: [f32; 3], lo: f32, hi: f32, what: &str) -> Result<Vec3, SceneError> {
         self.finite3(key, v)?;
         for (i, c) in v.iter().enumerate() {
             if *c < lo || *c > hi {
@@ -654,20 +597,13 @@ impl Ctx {
         }
         let p = Path::new(value);
         let absolute = p.is_absolute()
-            || p.components()
-                .any(|c| matches!(c, Component::RootDir | Component::Prefix(_)))
+            || p.components().any(|c| matches!(c, Component::RootDir | Component::Prefix(_)))
             || value.starts_with(['/', '\\'])
-            || value.as_bytes().get(1) == Some(&b':');
+            || value.contains(':');
         if absolute {
-            return Err(self.err(
-                key,
-                shown,
-                "absolute paths are not allowed; give a path relative to the scene file",
-            ));
+            return Err(self.err(key, shown, "absolute paths are not allowed; give a path relative to the scene file"));
         }
-        if value.split(['/', '\\']).any(|c| c == "..")
-            || p.components().any(|c| matches!(c, Component::ParentDir))
-        {
+        if value.split(['/', '\\']).any(|c| c == "..") || p.components().any(|c| matches!(c, Component::ParentDir)) {
             return Err(self.err(
                 key,
                 shown,
@@ -676,21 +612,25 @@ impl Ctx {
         }
         let full = self.base_dir.join(p);
         if !full.is_file() {
-            return Err(self.err(
+            return Err(self.err(key, shown, format!("file not found (looked for {})", full.display())));
+        }
+        // A symbolic link must not lead out of the scene file's directory either.
+        let dir = if self.base_dir.as_os_str().is_empty() { Path::new(".") } else { self.base_dir.as_path() };
+        let base = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
+        match full.canonicalize() {
+            Ok(real) if real.starts_with(&base) => Ok(full),
+            Ok(real) => Err(self.err(
                 key,
                 shown,
-                format!("file not found (looked for {})", full.display()),
-            ));
+                format!("resolves to {}, outside the scene file's directory (a symbolic link?)", real.display()),
+            )),
+            Err(e) => Err(self.err(key, shown, format!("cannot resolve the path: {e}"))),
         }
-        Ok(full)
     }
 }
 
 fn build(ctx: &Ctx, raw: RawScene) -> Result<Scene, SceneError> {
-    let stem = Path::new(&ctx.file)
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let stem = Path::new(&ctx.file).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     let name = raw.name.unwrap_or(stem);
     let description = raw.description.map(|d| one_line(&d)).unwrap_or_default();
     let camera = build_camera(ctx, raw.camera.unwrap_or_default())?;
@@ -701,42 +641,19 @@ fn build(ctx: &Ctx, raw: RawScene) -> Result<Scene, SceneError> {
     for (i, o) in raw.objects.iter().enumerate() {
         geometry.append(&build_object(ctx, &format!("objects[{i}]"), o)?);
     }
-    Ok(Scene {
-        name,
-        description,
-        camera,
-        medium,
-        light,
-        geometry,
-        render,
-    })
+    Ok(Scene { name, description, camera, medium, light, geometry, render })
 }
 
 fn build_camera(ctx: &Ctx, c: RawCamera) -> Result<Camera, SceneError> {
     let d = Camera::default();
-    let position = c
-        .position
-        .map(|v| ctx.finite3("camera.position", v))
-        .transpose()?
-        .unwrap_or(d.position);
-    let look_at = c
-        .look_at
-        .map(|v| ctx.finite3("camera.look_at", v))
-        .transpose()?
-        .unwrap_or(d.look_at);
-    let up =
-        c.up.map(|v| ctx.direction("camera.up", v))
-            .transpose()?
-            .unwrap_or(d.up);
+    let position = c.position.map(|v| ctx.finite3("camera.position", v)).transpose()?.unwrap_or(d.position);
+    let look_at = c.look_at.map(|v| ctx.finite3("camera.look_at", v)).transpose()?.unwrap_or(d.look_at);
+    let up = c.up.map(|v| ctx.direction("camera.up", v)).transpose()?.unwrap_or(d.up);
     let fov = c.fov_y_degrees.unwrap_or(d.fov_y_degrees);
     let near = c.near.unwrap_or(d.near);
     let far = c.far.unwrap_or(d.far);
     if !(fov > 0.0 && fov < 180.0) {
-        return Err(ctx.err(
-            "camera.fov_y_degrees",
-            fmt_num(fov),
-            "must be in (0, 180) degrees",
-        ));
+        return Err(ctx.err("camera.fov_y_degrees", fmt_num(fov), "must be in (0, 180) degrees"));
     }
     if !(near.is_finite() && near > 0.0) {
         return Err(ctx.err("camera.near", fmt_num(near), "must be a finite number > 0"));
@@ -750,27 +667,12 @@ fn build_camera(ctx: &Ctx, c: RawCamera) -> Result<Camera, SceneError> {
     }
     let view = look_at - position;
     if view.length() <= 1e-6 * (1.0 + position.length()) {
-        return Err(ctx.err(
-            "camera.look_at",
-            fmt_vec(look_at.to_array()),
-            "must differ from camera.position",
-        ));
+        return Err(ctx.err("camera.look_at", fmt_vec(look_at.to_array()), "must differ from camera.position"));
     }
     if view.normalize().cross(up).length() < 1e-4 {
-        return Err(ctx.err(
-            "camera.up",
-            fmt_vec(up.to_array()),
-            "must not be parallel to the view direction",
-        ));
+        return Err(ctx.err("camera.up", fmt_vec(up.to_array()), "must not be parallel to the view direction"));
     }
-    Ok(Camera {
-        position,
-        look_at,
-        up,
-        fov_y_degrees: fov,
-        near,
-        far,
-    })
+    Ok(Camera { position, look_at, up, fov_y_degrees: fov, near, far })
 }
 
 fn build_medium(ctx: &Ctx, m: RawMedium) -> Result<Medium, SceneError> {
@@ -791,11 +693,7 @@ fn build_medium(ctx: &Ctx, m: RawMedium) -> Result<Medium, SceneError> {
                 if g.is_finite() && g > -1.0 && g < 1.0 {
                     Ok(g)
                 } else {
-                    Err(ctx.err(
-                        "medium.phase.g",
-                        fmt_num(g),
-                        "asymmetry g must be in (-1, 1)",
-                    ))
+                    Err(ctx.err("medium.phase.g", fmt_num(g), "asymmetry g must be in (-1, 1)"))
                 }
             };
             let kind_name = match p.kind {
@@ -823,47 +721,28 @@ fn build_medium(ctx: &Ctx, m: RawMedium) -> Result<Medium, SceneError> {
             match p.kind {
                 PhaseKind::Isotropic => Phase::Isotropic,
                 PhaseKind::Rayleigh => Phase::Rayleigh,
-                PhaseKind::HenyeyGreenstein => Phase::HenyeyGreenstein {
-                    g: check_g(p.g.unwrap_or(0.7))?,
-                },
+                PhaseKind::HenyeyGreenstein => Phase::HenyeyGreenstein { g: check_g(p.g.unwrap_or(0.7))? },
                 PhaseKind::HoffmanPreetham => {
                     // The library's defaults, through its own serde implementation.
                     let mut t = toml::Table::new();
-                    t.insert(
-                        "kind".into(),
-                        toml::Value::String("hoffman-preetham".into()),
-                    );
+                    t.insert("kind".into(), toml::Value::String("hoffman-preetham".into()));
                     let (g_default, f_default) = match toml::Value::Table(t).try_into::<Phase>() {
-                        Ok(Phase::HoffmanPreetham {
-                            g,
-                            rayleigh_fraction,
-                        }) => (g, rayleigh_fraction),
+                        Ok(Phase::HoffmanPreetham { g, rayleigh_fraction }) => (g, rayleigh_fraction),
                         _ => (0.76, Vec3::new(5.8 / 26.8, 13.5 / 34.5, 33.1 / 54.1)),
                     };
                     let g = check_g(p.g.unwrap_or(g_default))?;
                     let rayleigh_fraction = match p.rayleigh_fraction {
-                        Some(f) => ctx.ranged3(
-                            "medium.phase.rayleigh_fraction",
-                            f.0,
-                            0.0,
-                            1.0,
-                            "fractions must be in [0, 1]",
-                        )?,
+                        Some(f) => {
+                            ctx.ranged3("medium.phase.rayleigh_fraction", f.0, 0.0, 1.0, "fractions must be in [0, 1]")?
+                        }
                         None => f_default,
                     };
-                    Phase::HoffmanPreetham {
-                        g,
-                        rayleigh_fraction,
-                    }
+                    Phase::HoffmanPreetham { g, rayleigh_fraction }
                 }
             }
         }
     };
-    Ok(Medium {
-        scattering,
-        absorption,
-        phase,
-    })
+    Ok(Medium { scattering, absorption, phase })
 }
 
 fn build_light(ctx: &Ctx, l: RawLight) -> Result<Light, SceneError> {
@@ -872,51 +751,20 @@ fn build_light(ctx: &Ctx, l: RawLight) -> Result<Light, SceneError> {
         LightKind::Spot => "spot",
         LightKind::Point => "point",
     };
-    let not_used = |key: &str, value: String| {
-        Err(ctx.err(
-            format!("light.{key}"),
-            value,
-            format!("not used by a {kind} light"),
-        ))
-    };
+    let not_used =
+        |key: &str, value: String| Err(ctx.err(format!("light.{key}"), value, format!("not used by a {kind} light")));
     let color = match l.color {
-        Some(c) => ctx.ranged3(
-            "light.color",
-            c.0,
-            0.0,
-            f32::MAX,
-            "colour components must be ≥ 0 and finite",
-        )?,
+        Some(c) => ctx.ranged3("light.color", c.0, 0.0, f32::MAX, "colour components must be ≥ 0 and finite")?,
         None => Vec3::ONE,
     };
-    let default_intensity = if l.kind == LightKind::Directional {
-        1.0
-    } else {
-        50.0
-    };
+    let default_intensity = if l.kind == LightKind::Directional { 1.0 } else { 50.0 };
     let intensity = l.intensity.unwrap_or(default_intensity);
     if !(intensity.is_finite() && intensity >= 0.0) {
-        return Err(ctx.err(
-            "light.intensity",
-            fmt_num(intensity),
-            "must be finite and ≥ 0",
-        ));
+        return Err(ctx.err("light.intensity", fmt_num(intensity), "must be finite and ≥ 0"));
     }
-    let required = |key: &str| {
-        ctx.err(
-            format!("light.{key}"),
-            "(missing)",
-            format!("required for a {kind} light"),
-        )
-    };
-    let position = l
-        .position
-        .map(|p| ctx.finite3("light.position", p))
-        .transpose()?;
-    let direction = l
-        .direction
-        .map(|d| ctx.direction("light.direction", d))
-        .transpose()?;
+    let required = |key: &str| ctx.err(format!("light.{key}"), "(missing)", format!("required for a {kind} light"));
+    let position = l.position.map(|p| ctx.finite3("light.position", p)).transpose()?;
+    let direction = l.direction.map(|d| ctx.direction("light.direction", d)).transpose()?;
     if l.kind != LightKind::Spot {
         if let Some(v) = l.outer_angle_degrees {
             return not_used("outer_angle_degrees", fmt_num(v));
@@ -933,43 +781,26 @@ fn build_light(ctx: &Ctx, l: RawLight) -> Result<Light, SceneError> {
             if let Some(p) = position {
                 return not_used("position", fmt_vec(p.to_array()));
             }
-            let direction =
-                direction.unwrap_or_else(|| Vec3::from(DEFAULT_SUN_DIRECTION).normalize());
-            Ok(Light::Directional {
-                direction,
-                color,
-                intensity,
-            })
+            let direction = direction.unwrap_or_else(|| Vec3::from(DEFAULT_SUN_DIRECTION).normalize());
+            Ok(Light::Directional { direction, color, intensity })
         }
         LightKind::Point => {
             if let Some(d) = l.direction {
                 return not_used("direction", fmt_vec(d));
             }
             let position = position.ok_or_else(|| required("position"))?;
-            Ok(Light::Point {
-                position,
-                color,
-                intensity,
-            })
+            Ok(Light::Point { position, color, intensity })
         }
         LightKind::Spot => {
             let position = position.ok_or_else(|| required("position"))?;
             let direction = direction.ok_or_else(|| required("direction"))?;
             let outer = l.outer_angle_degrees.unwrap_or(30.0);
             if !(outer > 0.0 && outer <= 89.0) {
-                return Err(ctx.err(
-                    "light.outer_angle_degrees",
-                    fmt_num(outer),
-                    "must be in (0, 89] degrees",
-                ));
+                return Err(ctx.err("light.outer_angle_degrees", fmt_num(outer), "must be in (0, 89] degrees"));
             }
             let inner = l.inner_angle_degrees.unwrap_or(0.8 * outer);
             if !(0.0..=89.0).contains(&inner) {
-                return Err(ctx.err(
-                    "light.inner_angle_degrees",
-                    fmt_num(inner),
-                    "must be in [0, 89] degrees",
-                ));
+                return Err(ctx.err("light.inner_angle_degrees", fmt_num(inner), "must be in [0, 89] degrees"));
             }
             if inner > outer {
                 return Err(ctx.err(
@@ -982,8 +813,7 @@ fn build_light(ctx: &Ctx, l: RawLight) -> Result<Light, SceneError> {
                 None => None,
                 Some(t) => {
                     let full = ctx.path("light.texture", t)?;
-                    let tex = load_texture(&full)
-                        .map_err(|m| ctx.err("light.texture", format!("{t:?}"), m))?;
+                    let tex = load_texture(&full).map_err(|m| ctx.err("light.texture", format!("{t:?}"), m))?;
                     Some(Arc::new(tex))
                 }
             };
@@ -1005,11 +835,7 @@ fn build_render(ctx: &Ctx, r: RawRender) -> Result<RenderSettings, SceneError> {
     let size = |key: &str, v: Option<u32>, default: u32| -> Result<u32, SceneError> {
         let v = v.unwrap_or(default);
         if v == 0 || v > MAX_IMAGE_SIZE {
-            return Err(ctx.err(
-                key,
-                v.to_string(),
-                format!("must be between 1 and {MAX_IMAGE_SIZE}"),
-            ));
+            return Err(ctx.err(key, v.to_string(), format!("must be between 1 and {MAX_IMAGE_SIZE}")));
         }
         Ok(v)
     };
@@ -1024,22 +850,12 @@ fn build_render(ctx: &Ctx, r: RawRender) -> Result<RenderSettings, SceneError> {
     }
     if let Some(b) = r.shadow_normal_offset_texels {
         if !(b.is_finite() && b >= 0.0) {
-            return Err(ctx.err(
-                "render.shadow_normal_offset_texels",
-                fmt_num(b),
-                "must be finite and ≥ 0",
-            ));
+            return Err(ctx.err("render.shadow_normal_offset_texels", fmt_num(b), "must be finite and ≥ 0"));
         }
         s.shadow.normal_offset_texels = b;
     }
     if let Some(a) = r.ambient {
-        s.ambient = ctx.ranged3(
-            "render.ambient",
-            a.0,
-            0.0,
-            f32::MAX,
-            "must be finite and ≥ 0",
-        )?;
+        s.ambient = ctx.ranged3("render.ambient", a.0, 0.0, f32::MAX, "must be finite and ≥ 0")?;
     }
     if let Some(e) = r.exposure {
         if !(e.is_finite() && e > 0.0) {
@@ -1058,45 +874,26 @@ fn build_render(ctx: &Ctx, r: RawRender) -> Result<RenderSettings, SceneError> {
 fn check_table_finite(ctx: &Ctx, key: &str, t: &toml::Table) -> Result<(), SceneError> {
     fn check(ctx: &Ctx, key: &str, v: &toml::Value) -> Result<(), SceneError> {
         match v {
-            toml::Value::Float(f) if !f.is_finite() => {
-                Err(ctx.err(key, fmt_num(*f as f32), "must be a finite number"))
-            }
-            toml::Value::Array(a) => a
-                .iter()
-                .enumerate()
-                .try_for_each(|(i, v)| check(ctx, &format!("{key}[{i}]"), v)),
-            toml::Value::Table(t) => t
-                .iter()
-                .try_for_each(|(k, v)| check(ctx, &format!("{key}.{k}"), v)),
+            toml::Value::Float(f) if !f.is_finite() => Err(ctx.err(key, fmt_num(*f as f32), "must be a finite number")),
+            toml::Value::Array(a) => a.iter().enumerate().try_for_each(|(i, v)| check(ctx, &format!("{key}[{i}]"), v)),
+            toml::Value::Table(t) => t.iter().try_for_each(|(k, v)| check(ctx, &format!("{key}.{k}"), v)),
             _ => Ok(()),
         }
     }
-    t.iter()
-        .try_for_each(|(k, v)| check(ctx, &format!("{key}.{k}"), v))
+    t.iter().try_for_each(|(k, v)| check(ctx, &format!("{key}.{k}"), v))
 }
 
 fn build_object(ctx: &Ctx, key: &str, o: &RawObject) -> Result<Geometry, SceneError> {
-    let translate = o
-        .translate
-        .map(|v| ctx.finite3(&format!("{key}.translate"), v))
-        .transpose()?
-        .unwrap_or(Vec3::ZERO);
-    let rotate = o
-        .rotate_degrees
-        .map(|v| ctx.finite3(&format!("{key}.rotate_degrees"), v))
-        .transpose()?
-        .unwrap_or(Vec3::ZERO);
+    let translate = o.translate.map(|v| ctx.finite3(&format!("{key}.translate"), v)).transpose()?.unwrap_or(Vec3::ZERO);
+    let rotate =
+        o.rotate_degrees.map(|v| ctx.finite3(&format!("{key}.rotate_degrees"), v)).transpose()?.unwrap_or(Vec3::ZERO);
     let scale = match o.scale {
         None => Vec3::ONE,
         Some(s) => {
             let v = ctx.finite3(&format!("{key}.scale"), s.0)?;
             for (i, c) in s.0.iter().enumerate() {
                 if *c == 0.0 {
-                    return Err(ctx.err(
-                        format!("{key}.scale[{i}]"),
-                        fmt_num(*c),
-                        "scale must be non-zero",
-                    ));
+                    return Err(ctx.err(format!("{key}.scale[{i}]"), fmt_num(*c), "scale must be non-zero"));
                 }
             }
             v
@@ -1104,29 +901,13 @@ fn build_object(ctx: &Ctx, key: &str, o: &RawObject) -> Result<Geometry, SceneEr
     };
     let albedo = o
         .albedo
-        .map(|a| {
-            ctx.ranged3(
-                &format!("{key}.albedo"),
-                a.0,
-                0.0,
-                1.0,
-                "albedo must be in [0, 1]",
-            )
-        })
+        .map(|a| ctx.ranged3(&format!("{key}.albedo"), a.0, 0.0, 1.0, "albedo must be in [0, 1]"))
         .transpose()?;
-    let t = Transform {
-        translate,
-        rotate_degrees: rotate,
-        scale,
-    };
+    let t = Transform { translate, rotate_degrees: rotate, scale };
     if let Some(p) = &o.path
         && o.kind != ObjectKind::Mesh
     {
-        return Err(ctx.err(
-            format!("{key}.path"),
-            format!("{p:?}"),
-            "only `kind = \"mesh\"` objects take a path",
-        ));
+        return Err(ctx.err(format!("{key}.path"), format!("{p:?}"), "only `kind = \"mesh\"` objects take a path"));
     }
     let a = albedo.unwrap_or(mesh::DEFAULT_ALBEDO);
     Ok(match o.kind {
@@ -1140,38 +921,27 @@ fn build_object(ctx: &Ctx, key: &str, o: &RawObject) -> Result<Geometry, SceneEr
                 return Err(ctx.err(pkey, "(missing)", "required for `kind = \"mesh\"`"));
             };
             let full = ctx.path(&pkey, p)?;
-            mesh::load_mesh(&full, &t, albedo)
-                .map_err(|e| ctx.err(&pkey, format!("{p:?}"), e.to_string()))?
+            mesh::load_mesh(&full, &t, albedo).map_err(|e| ctx.err(&pkey, format!("{p:?}"), e.to_string()))?
         }
     })
 }
 
 /// sRGB transfer function → linear.
 fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
 }
 
 /// Loads a spot-light texture: PNG (or any 8/16-bit image) is taken as sRGB and converted to
 /// linear; float images (EXR) are taken as linear. At most [`MAX_TEXTURE_SIZE`] per side.
 /// Returns a one-line message on failure.
 pub fn load_texture(path: &Path) -> Result<RgbTexture, String> {
-    let (w, h) = image::image_dimensions(path)
-        .map_err(|e| format!("cannot read image: {}", one_line(&e.to_string())))?;
+    let (w, h) =
+        image::image_dimensions(path).map_err(|e| format!("cannot read image: {}", one_line(&e.to_string())))?;
     if w == 0 || h == 0 || w > MAX_TEXTURE_SIZE || h > MAX_TEXTURE_SIZE {
-        return Err(format!(
-            "image is {w}×{h}; sides must be between 1 and {MAX_TEXTURE_SIZE}"
-        ));
+        return Err(format!("image is {w}×{h}; sides must be between 1 and {MAX_TEXTURE_SIZE}"));
     }
-    let img = image::open(path)
-        .map_err(|e| format!("cannot decode image: {}", one_line(&e.to_string())))?;
-    let linear_source = matches!(
-        img,
-        image::DynamicImage::ImageRgb32F(_) | image::DynamicImage::ImageRgba32F(_)
-    );
+    let img = image::open(path).map_err(|e| format!("cannot decode image: {}", one_line(&e.to_string())))?;
+    let linear_source = matches!(img, image::DynamicImage::ImageRgb32F(_) | image::DynamicImage::ImageRgba32F(_));
     let rgba = img.to_rgba32f();
     let (width, height) = rgba.dimensions();
     let texels = rgba
@@ -1184,9 +954,5 @@ pub fn load_texture(path: &Path) -> Result<RgbTexture, String> {
             [f(p[0]), f(p[1]), f(p[2]), p[3]]
         })
         .collect();
-    Ok(RgbTexture {
-        width,
-        height,
-        texels,
-    })
+    Ok(RgbTexture { width, height, texels })
 }

@@ -50,11 +50,13 @@ impl HostTextures {
     }
     /// View of the depth buffer.
     pub fn depth_view(&self) -> wgpu::TextureView {
-        self.depth.create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() })
+        self.depth
+            .create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() })
     }
 }
 
-const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 3] = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3];
+const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
+    wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3];
 
 impl GpuHost {
     /// Uploads the geometry and builds the pipelines.
@@ -69,7 +71,11 @@ impl GpuHost {
             let uniform_entry = |binding, visibility| wgpu::BindGroupLayoutEntry {
                 binding,
                 visibility,
-                ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
                 count: None,
             };
             let shadow_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -215,9 +221,30 @@ impl GpuHost {
         };
         let (shadow_map, depth, surface) = gpu.scoped("allocating host textures", || {
             (
-                tex("shadow map", sp.size, sp.size, sp.layers, wgpu::TextureFormat::Depth32Float, wgpu::TextureUsages::empty()),
-                tex("camera depth", desc.width, desc.height, 1, wgpu::TextureFormat::Depth32Float, wgpu::TextureUsages::empty()),
-                tex("surface radiance", desc.width, desc.height, 1, wgpu::TextureFormat::Rgba32Float, wgpu::TextureUsages::empty()),
+                tex(
+                    "shadow map",
+                    sp.size,
+                    sp.size,
+                    sp.layers,
+                    wgpu::TextureFormat::Depth32Float,
+                    wgpu::TextureUsages::empty(),
+                ),
+                tex(
+                    "camera depth",
+                    desc.width,
+                    desc.height,
+                    1,
+                    wgpu::TextureFormat::Depth32Float,
+                    wgpu::TextureUsages::empty(),
+                ),
+                tex(
+                    "surface radiance",
+                    desc.width,
+                    desc.height,
+                    1,
+                    wgpu::TextureFormat::Rgba32Float,
+                    wgpu::TextureUsages::empty(),
+                ),
             )
         })?;
         let spot_texture = gpu.upload_rgb_texture(spot);
@@ -261,7 +288,10 @@ impl GpuHost {
                     color_attachments: &[],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                         view,
-                        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
+                            store: wgpu::StoreOp::Store,
+                        }),
                         stencil_ops: None,
                     }),
                     timestamp_writes: writes,
@@ -304,7 +334,10 @@ impl GpuHost {
                     view: &surface_view,
                     depth_slice: None,
                     resolve_target: None,
-                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::BLACK), store: wgpu::StoreOp::Store },
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
                 })],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &depth_view,

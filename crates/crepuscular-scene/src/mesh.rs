@@ -40,29 +40,18 @@ pub struct Transform {
 
 impl Default for Transform {
     fn default() -> Self {
-        Self {
-            translate: Vec3::ZERO,
-            rotate_degrees: Vec3::ZERO,
-            scale: Vec3::ONE,
-        }
+        Self { translate: Vec3::ZERO, rotate_degrees: Vec3::ZERO, scale: Vec3::ONE }
     }
 }
 
 impl Transform {
     /// A pure translation.
     pub fn at(translate: Vec3) -> Self {
-        Self {
-            translate,
-            ..Self::default()
-        }
+        Self { translate, ..Self::default() }
     }
     /// Translation and per-axis scale, no rotation.
     pub fn at_scaled(translate: Vec3, scale: Vec3) -> Self {
-        Self {
-            translate,
-            scale,
-            ..Self::default()
-        }
+        Self { translate, scale, ..Self::default() }
     }
     /// Returns this transform with the given rotation (degrees, X then Y then Z).
     pub fn rotated(mut self, rotate_degrees: Vec3) -> Self {
@@ -76,9 +65,7 @@ impl Transform {
     }
     /// Object → world matrix `T·R·S`.
     pub fn matrix(&self) -> Mat4 {
-        Mat4::from_translation(self.translate)
-            * Mat4::from_mat3(self.rotation())
-            * Mat4::from_scale(self.scale)
+        Mat4::from_translation(self.translate) * Mat4::from_mat3(self.rotation()) * Mat4::from_scale(self.scale)
     }
 }
 
@@ -98,17 +85,9 @@ impl Placer {
         let det = m3.determinant();
         // Cofactor matrix = det·M⁻ᵀ; it exists for singular matrices too. Multiplying by the
         // determinant's sign gives the direction of M⁻ᵀ·n.
-        let cof = Mat3::from_cols(
-            m3.y_axis.cross(m3.z_axis),
-            m3.z_axis.cross(m3.x_axis),
-            m3.x_axis.cross(m3.y_axis),
-        );
+        let cof = Mat3::from_cols(m3.y_axis.cross(m3.z_axis), m3.z_axis.cross(m3.x_axis), m3.x_axis.cross(m3.y_axis));
         let s = if det < 0.0 { -1.0 } else { 1.0 };
-        Self {
-            m,
-            normal_m: cof * s,
-            flip: det < 0.0,
-        }
+        Self { m, normal_m: cof * s, flip: det < 0.0 }
     }
     fn point(&self, p: Vec3) -> Vec3 {
         self.m.transform_point3(p)
@@ -116,11 +95,7 @@ impl Placer {
     fn normal(&self, n: Vec3) -> Vec3 {
         let w = self.normal_m * n;
         let l = w.length();
-        if l > 1e-30 && l.is_finite() {
-            w / l
-        } else {
-            n.normalize_or(Vec3::Y)
-        }
+        if l > 1e-30 && l.is_finite() { w / l } else { n.normalize_or(Vec3::Y) }
     }
 }
 
@@ -133,11 +108,7 @@ struct Builder<'a> {
 
 impl<'a> Builder<'a> {
     fn new(placer: &'a Placer, albedo: Vec3) -> Self {
-        Self {
-            g: Geometry::default(),
-            placer,
-            albedo: albedo.to_array(),
-        }
+        Self { g: Geometry::default(), placer, albedo: albedo.to_array() }
     }
     /// Adds an object-space vertex; returns its index.
     fn vertex(&mut self, p: Vec3, n: Vec3) -> u32 {
@@ -171,15 +142,7 @@ pub fn plane(transform: &Transform, albedo: Vec3) -> Geometry {
     let placer = Placer::new(transform.matrix());
     let mut b = Builder::new(&placer, albedo);
     let h = 0.5;
-    b.quad(
-        [
-            Vec3::new(-h, 0.0, -h),
-            Vec3::new(-h, 0.0, h),
-            Vec3::new(h, 0.0, h),
-            Vec3::new(h, 0.0, -h),
-        ],
-        Vec3::Y,
-    );
+    b.quad([Vec3::new(-h, 0.0, -h), Vec3::new(-h, 0.0, h), Vec3::new(h, 0.0, h), Vec3::new(h, 0.0, -h)], Vec3::Y);
     b.g
 }
 
@@ -221,11 +184,7 @@ pub fn sphere_segments(transform: &Transform, albedo: Vec3, around: u32, rings: 
         let theta = PI * j as f32 / rings as f32;
         for i in 0..=around {
             let phi = 2.0 * PI * i as f32 / around as f32;
-            let n = Vec3::new(
-                theta.sin() * phi.cos(),
-                theta.cos(),
-                -theta.sin() * phi.sin(),
-            );
+            let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), -theta.sin() * phi.sin());
             b.vertex(n * 0.5, n);
         }
     }
@@ -281,11 +240,7 @@ pub fn cylinder_segments(transform: &Transform, albedo: Vec3, segments: u32) -> 
         }
         for i in 0..segments {
             let (p, q) = (first + i, first + (i + 1) % segments);
-            if y > 0.0 {
-                b.tri(c, p, q)
-            } else {
-                b.tri(c, q, p)
-            }
+            if y > 0.0 { b.tri(c, p, q) } else { b.tri(c, q, p) }
         }
     }
     b.g
@@ -297,13 +252,7 @@ pub fn triangle(a: Vec3, b: Vec3, c: Vec3, albedo: Vec3) -> Geometry {
     let n = (b - a).cross(c - a).normalize_or(Vec3::Y).to_array();
     let albedo = albedo.to_array();
     Geometry {
-        vertices: [a, b, c]
-            .map(|p| Vertex {
-                position: p.to_array(),
-                normal: n,
-                albedo,
-            })
-            .to_vec(),
+        vertices: [a, b, c].map(|p| Vertex { position: p.to_array(), normal: n, albedo }).to_vec(),
         indices: vec![0, 1, 2],
     }
 }
@@ -314,13 +263,7 @@ pub fn quad(corners: [Vec3; 4], albedo: Vec3) -> Geometry {
     let n = (c - a).cross(d - b).normalize_or(Vec3::Y).to_array();
     let albedo = albedo.to_array();
     Geometry {
-        vertices: corners
-            .map(|p| Vertex {
-                position: p.to_array(),
-                normal: n,
-                albedo,
-            })
-            .to_vec(),
+        vertices: corners.map(|p| Vertex { position: p.to_array(), normal: n, albedo }).to_vec(),
         indices: vec![0, 1, 2, 0, 2, 3],
     }
 }
@@ -329,10 +272,7 @@ pub fn quad(corners: [Vec3; 4], albedo: Vec3) -> Geometry {
 // Import.
 
 fn mesh_err(path: &Path, message: impl std::fmt::Display) -> SceneError {
-    SceneError::Mesh {
-        file: path.display().to_string(),
-        message: message.to_string(),
-    }
+    SceneError::Mesh { file: path.display().to_string(), message: message.to_string() }
 }
 
 /// Collects imported triangles, checks them and places them in the world.
@@ -346,12 +286,7 @@ struct Importer<'p> {
 
 impl<'p> Importer<'p> {
     fn new(path: &'p Path) -> Self {
-        Self {
-            path,
-            g: Geometry::default(),
-            dropped: 0,
-            seen: 0,
-        }
+        Self { path, g: Geometry::default(), dropped: 0, seen: 0 }
     }
 
     fn count(&mut self, triangles: usize) -> Result<(), SceneError> {
@@ -359,10 +294,7 @@ impl<'p> Importer<'p> {
         if self.seen > MAX_MESH_TRIANGLES {
             return Err(mesh_err(
                 self.path,
-                format!(
-                    "{} triangles or more, more than the limit of {MAX_MESH_TRIANGLES}",
-                    self.seen
-                ),
+                format!("{} triangles or more, more than the limit of {MAX_MESH_TRIANGLES}", self.seen),
             ));
         }
         Ok(())
@@ -385,50 +317,32 @@ impl<'p> Importer<'p> {
         let world: Vec<Vec3> = positions.iter().map(|&p| placer.point(p)).collect();
         for (i, (p, w)) in positions.iter().zip(&world).enumerate() {
             if !p.is_finite() || !w.is_finite() {
-                return Err(mesh_err(
-                    self.path,
-                    format!("vertex {i} has a non-finite position {p}"),
-                ));
+                return Err(mesh_err(self.path, format!("vertex {i} has a non-finite position {p}")));
             }
         }
         if let Some(ns) = normals {
             if ns.len() != positions.len() {
-                return Err(mesh_err(
-                    self.path,
-                    format!("{} normals for {} positions", ns.len(), positions.len()),
-                ));
+                return Err(mesh_err(self.path, format!("{} normals for {} positions", ns.len(), positions.len())));
             }
             if let Some((i, n)) = ns.iter().enumerate().find(|(_, n)| !n.is_finite()) {
-                return Err(mesh_err(
-                    self.path,
-                    format!("vertex {i} has a non-finite normal {n}"),
-                ));
+                return Err(mesh_err(self.path, format!("vertex {i} has a non-finite normal {n}")));
             }
         }
         if let Some(&bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
-            return Err(mesh_err(
-                self.path,
-                format!("index {bad} out of range for {} vertices", positions.len()),
-            ));
+            return Err(mesh_err(self.path, format!("index {bad} out of range for {} vertices", positions.len())));
         }
         let area2 = |t: &[u32]| {
-            let (a, b, c) = (
-                world[t[0] as usize],
-                world[t[1] as usize],
-                world[t[2] as usize],
-            );
+            let (a, b, c) = (world[t[0] as usize], world[t[1] as usize], world[t[2] as usize]);
             (b - a).cross(c - a)
         };
         match normals {
             Some(ns) => {
                 let base = self.g.vertices.len() as u32;
-                self.g
-                    .vertices
-                    .extend(world.iter().zip(ns).map(|(p, &n)| Vertex {
-                        position: p.to_array(),
-                        normal: placer.normal(n).to_array(),
-                        albedo,
-                    }));
+                self.g.vertices.extend(world.iter().zip(ns).map(|(p, &n)| Vertex {
+                    position: p.to_array(),
+                    normal: placer.normal(n).to_array(),
+                    albedo,
+                }));
                 for t in indices.chunks_exact(3) {
                     let c = area2(t);
                     if c.length_squared() <= 0.0 || c.is_nan() {
@@ -459,15 +373,9 @@ impl<'p> Importer<'p> {
                     let n = c.normalize_or(Vec3::Y).to_array();
                     let base = self.g.vertices.len() as u32;
                     for i in order {
-                        self.g.vertices.push(Vertex {
-                            position: world[i as usize].to_array(),
-                            normal: n,
-                            albedo,
-                        });
+                        self.g.vertices.push(Vertex { position: world[i as usize].to_array(), normal: n, albedo });
                     }
-                    self.g
-                        .indices
-                        .extend_from_slice(&[base, base + 1, base + 2]);
+                    self.g.indices.extend_from_slice(&[base, base + 1, base + 2]);
                 }
             }
         }
@@ -476,11 +384,7 @@ impl<'p> Importer<'p> {
 
     fn finish(self) -> Geometry {
         if self.dropped > 0 {
-            log::warn!(
-                "{}: dropped {} zero-area triangles",
-                self.path.display(),
-                self.dropped
-            );
+            log::warn!("{}: dropped {} zero-area triangles", self.path.display(), self.dropped);
         }
         self.g
     }
@@ -497,27 +401,17 @@ impl<'p> Importer<'p> {
 ///   Images are not loaded. Buffer URIs must be relative paths without `..` (or `data:` URIs).
 /// - OBJ: faces are triangulated; normals are used when every vertex has one, else flat
 ///   normals are computed. Albedo: `albedo` if given, else the MTL diffuse colour if the
-///   material library loads, else [`DEFAULT_ALBEDO`].
+///   material library loads (only from the OBJ's directory or below), else [`DEFAULT_ALBEDO`].
 ///
 /// Errors (naming the file): unreadable or malformed files, indices out of range, non-finite
 /// positions or normals, more than [`MAX_MESH_TRIANGLES`] triangles, an unknown extension.
 /// Zero-area triangles are dropped and counted in a `log::warn!`. Never panics.
-pub fn load_mesh(
-    path: &Path,
-    transform: &Transform,
-    albedo: Option<Vec3>,
-) -> Result<Geometry, SceneError> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase());
+pub fn load_mesh(path: &Path, transform: &Transform, albedo: Option<Vec3>) -> Result<Geometry, SceneError> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
     let run = || match ext.as_deref() {
         Some("gltf") | Some("glb") => load_gltf(path, transform, albedo),
         Some("obj") => load_obj(path, transform, albedo),
-        _ => Err(mesh_err(
-            path,
-            "unknown mesh format (expected .gltf, .glb or .obj)",
-        )),
+        _ => Err(mesh_err(path, "unknown mesh format (expected .gltf, .glb or .obj)")),
     };
     // The importers check what they read, but a malformed file must never take the process
     // down: turn any panic inside a third-party parser into an error.
@@ -527,47 +421,36 @@ pub fn load_mesh(
     }
 }
 
-fn load_obj(
-    path: &Path,
-    transform: &Transform,
-    albedo: Option<Vec3>,
-) -> Result<Geometry, SceneError> {
-    let options = tobj::LoadOptions {
-        triangulate: true,
-        single_index: true,
-        ..Default::default()
+fn load_obj(path: &Path, transform: &Transform, albedo: Option<Vec3>) -> Result<Geometry, SceneError> {
+    let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
+    let file = std::fs::File::open(path).map_err(|e| mesh_err(path, e))?;
+    let mut reader = std::io::BufReader::new(file);
+    let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    // Material libraries load only from the OBJ's directory or below (no absolute paths, no
+    // `..`); a library that fails to load leaves the default albedo.
+    let load_mtl = |p: &Path| {
+        if !is_safe_relative(&p.to_string_lossy()) {
+            log::warn!("{}: ignoring material library {:?} outside the mesh's directory", path.display(), p);
+            return Err(tobj::LoadError::OpenFileFailed);
+        }
+        tobj::load_mtl(base.join(p))
     };
-    let (models, materials) = tobj::load_obj(path, &options).map_err(|e| mesh_err(path, e))?;
+    let (models, materials) = tobj::load_obj_buf(&mut reader, &options, load_mtl).map_err(|e| mesh_err(path, e))?;
     let materials = materials.unwrap_or_default();
     let total: usize = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
     let mut imp = Importer::new(path);
     if total > MAX_MESH_TRIANGLES {
-        return Err(mesh_err(
-            path,
-            format!("{total} triangles, more than the limit of {MAX_MESH_TRIANGLES}"),
-        ));
+        return Err(mesh_err(path, format!("{total} triangles, more than the limit of {MAX_MESH_TRIANGLES}")));
     }
     let m = transform.matrix();
     for model in &models {
         let mesh = &model.mesh;
         if mesh.positions.len() % 3 != 0 || mesh.indices.len() % 3 != 0 {
-            return Err(mesh_err(
-                path,
-                format!("malformed data in object `{}`", model.name),
-            ));
+            return Err(mesh_err(path, format!("malformed data in object `{}`", model.name)));
         }
-        let positions: Vec<Vec3> = mesh
-            .positions
-            .chunks_exact(3)
-            .map(|c| Vec3::new(c[0], c[1], c[2]))
-            .collect();
-        let normals: Vec<Vec3> = mesh
-            .normals
-            .chunks_exact(3)
-            .map(|c| Vec3::new(c[0], c[1], c[2]))
-            .collect();
-        let normals =
-            (!normals.is_empty() && normals.len() == positions.len()).then_some(normals.as_slice());
+        let positions: Vec<Vec3> = mesh.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+        let normals: Vec<Vec3> = mesh.normals.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+        let normals = (!normals.is_empty() && normals.len() == positions.len()).then_some(normals.as_slice());
         let a = albedo
             .or_else(|| {
                 mesh.material_id
@@ -583,32 +466,50 @@ fn load_obj(
     Ok(imp.finish())
 }
 
+/// True for a relative path that stays inside its base directory: not empty, not absolute (no
+/// leading `/` or `\`, no drive letter or URI scheme), no `..` component (either separator).
+pub(crate) fn is_safe_relative(p: &str) -> bool {
+    !p.trim().is_empty()
+        && !p.starts_with(['/', '\\'])
+        && !p.contains(':')
+        && !Path::new(p).is_absolute()
+        && !p.split(['/', '\\']).any(|c| c.trim() == "..")
+}
+
+/// Decodes `%XX` escapes (the glTF importer decodes them before opening a URI).
+fn percent_decode(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = b.get(i + 1..i + 3).and_then(|h| std::str::from_utf8(h).ok());
+        match (b[i], hex.and_then(|h| u8::from_str_radix(h, 16).ok())) {
+            (b'%', Some(v)) => {
+                out.push(v);
+                i += 3;
+            }
+            (c, _) => {
+                out.push(c);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
 /// Rejects buffer URIs that would read outside the glTF file's directory.
 fn check_gltf_uri(path: &Path, uri: &str) -> Result<(), SceneError> {
     if uri.starts_with("data:") {
         return Ok(());
     }
-    let bad = uri.contains("://")
-        || uri.starts_with('/')
-        || uri.starts_with('\\')
-        || uri.contains(':')
-        || uri
-            .split(['/', '\\'])
-            .any(|c| c == ".." || c == "%2e%2e" || c == "%2E%2E");
+    let bad = !is_safe_relative(uri) || !is_safe_relative(&percent_decode(uri));
     if bad {
-        return Err(mesh_err(
-            path,
-            format!("buffer uri {uri:?} must be a relative path inside the mesh's directory"),
-        ));
+        return Err(mesh_err(path, format!("buffer uri {uri:?} must be a relative path inside the mesh's directory")));
     }
     Ok(())
 }
 
-fn load_gltf(
-    path: &Path,
-    transform: &Transform,
-    albedo: Option<Vec3>,
-) -> Result<Geometry, SceneError> {
+fn load_gltf(path: &Path, transform: &Transform, albedo: Option<Vec3>) -> Result<Geometry, SceneError> {
     let bytes = std::fs::read(path).map_err(|e| mesh_err(path, e))?;
     let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| mesh_err(path, e))?;
     drop(bytes);
@@ -619,8 +520,7 @@ fn load_gltf(
     }
     let base = path.parent().unwrap_or(Path::new("."));
     let doc = &gltf.document;
-    let buffers =
-        gltf::import_buffers(doc, Some(base), gltf.blob.clone()).map_err(|e| mesh_err(path, e))?;
+    let buffers = gltf::import_buffers(doc, Some(base), gltf.blob.clone()).map_err(|e| mesh_err(path, e))?;
 
     let mut imp = Importer::new(path);
     let root = transform.matrix();
@@ -652,17 +552,11 @@ fn walk_node(
     depth: usize,
 ) -> Result<(), SceneError> {
     if depth > MAX_NODE_DEPTH {
-        return Err(mesh_err(
-            imp.path,
-            format!("node hierarchy deeper than {MAX_NODE_DEPTH} (a cycle?)"),
-        ));
+        return Err(mesh_err(imp.path, format!("node hierarchy deeper than {MAX_NODE_DEPTH} (a cycle?)")));
     }
     let local = Mat4::from_cols_array_2d(&node.transform().matrix());
     if !local.is_finite() {
-        return Err(mesh_err(
-            imp.path,
-            format!("node {} has a non-finite transform", node.index()),
-        ));
+        return Err(mesh_err(imp.path, format!("node {} has a non-finite transform", node.index())));
     }
     let m = parent * local;
     if let Some(mesh) = node.mesh() {
@@ -686,10 +580,7 @@ fn add_gltf_mesh(
     let path = imp.path;
     for prim in mesh.primitives() {
         let mode = prim.mode();
-        if !matches!(
-            mode,
-            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-        ) {
+        if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
             continue;
         }
         let what = |s: &str| format!("mesh {} primitive {}: {s}", mesh.index(), prim.index());
@@ -710,15 +601,10 @@ fn add_gltf_mesh(
         }
         let index_count = match prim.indices() {
             Some(acc) => {
-                if !matches!(
-                    acc.data_type(),
-                    DataType::U8 | DataType::U16 | DataType::U32
-                ) || acc.dimensions() != Dimensions::Scalar
+                if !matches!(acc.data_type(), DataType::U8 | DataType::U16 | DataType::U32)
+                    || acc.dimensions() != Dimensions::Scalar
                 {
-                    return Err(mesh_err(
-                        path,
-                        what("indices are not unsigned integer scalars"),
-                    ));
+                    return Err(mesh_err(path, what("indices are not unsigned integer scalars")));
                 }
                 acc.count()
             }
@@ -732,10 +618,7 @@ fn add_gltf_mesh(
         if imp.seen.saturating_add(tris) > MAX_MESH_TRIANGLES {
             return Err(mesh_err(
                 path,
-                format!(
-                    "{} triangles or more, more than the limit of {MAX_MESH_TRIANGLES}",
-                    imp.seen + tris
-                ),
+                format!("{} triangles or more, more than the limit of {MAX_MESH_TRIANGLES}", imp.seen + tris),
             ));
         }
         let reader = prim.reader(|b| buffers.get(b.index()).map(|d| d.0.as_slice()));
@@ -748,9 +631,7 @@ fn add_gltf_mesh(
             Some(acc) if acc.count() > 0 => Some(
                 reader
                     .read_normals()
-                    .ok_or_else(|| {
-                        mesh_err(path, what("NORMAL data missing or out of its buffer"))
-                    })?
+                    .ok_or_else(|| mesh_err(path, what("NORMAL data missing or out of its buffer")))?
                     .map(Vec3::from)
                     .collect(),
             ),
@@ -765,21 +646,16 @@ fn add_gltf_mesh(
                 .collect(),
             None => (0..positions.len() as u32).collect(),
         };
-        let indices: Vec<u32> = match mode {
-            Mode::Triangles => raw[..raw.len() / 3 * 3].to_vec(),
-            Mode::TriangleStrip => (0..raw.len().saturating_sub(2))
-                .flat_map(|i| {
-                    if i % 2 == 0 {
-                        [raw[i], raw[i + 1], raw[i + 2]]
-                    } else {
-                        [raw[i + 1], raw[i], raw[i + 2]]
-                    }
-                })
-                .collect(),
-            _ => (1..raw.len().saturating_sub(1))
-                .flat_map(|i| [raw[0], raw[i], raw[i + 1]])
-                .collect(),
-        };
+        let indices: Vec<u32> =
+            match mode {
+                Mode::Triangles => raw[..raw.len() / 3 * 3].to_vec(),
+                Mode::TriangleStrip => (0..raw.len().saturating_sub(2))
+                    .flat_map(|i| {
+                        if i % 2 == 0 { [raw[i], raw[i + 1], raw[i + 2]] } else { [raw[i + 1], raw[i], raw[i + 2]] }
+                    })
+                    .collect(),
+                _ => (1..raw.len().saturating_sub(1)).flat_map(|i| [raw[0], raw[i], raw[i + 1]]).collect(),
+            };
         let a = albedo.unwrap_or_else(|| {
             let material = prim.material();
             if material.index().is_none() {
@@ -787,11 +663,7 @@ fn add_gltf_mesh(
             }
             let c = material.pbr_metallic_roughness().base_color_factor();
             let c = Vec3::new(c[0], c[1], c[2]);
-            if c.is_finite() {
-                c.clamp(Vec3::ZERO, Vec3::ONE)
-            } else {
-                DEFAULT_ALBEDO
-            }
+            if c.is_finite() { c.clamp(Vec3::ZERO, Vec3::ONE) } else { DEFAULT_ALBEDO }
         });
         imp.add(&positions, normals.as_deref(), &indices, m, a)?;
     }

@@ -115,12 +115,7 @@ fn plane_dist(p: &[f64; 4], c: &[f64; 4]) -> f64 {
 
 /// Clips a convex polygon against one plane (Sutherland–Hodgman). Vertices exactly on the
 /// plane count as inside.
-fn clip_polygon(
-    input: &[ClipVert],
-    plane: &[f64; 4],
-    out: &mut [ClipVert; MAX_POLY],
-    is_near: bool,
-) -> usize {
+fn clip_polygon(input: &[ClipVert], plane: &[f64; 4], out: &mut [ClipVert; MAX_POLY], is_near: bool) -> usize {
     let mut n = 0;
     let count = input.len();
     for i in 0..count {
@@ -262,10 +257,7 @@ fn setup_triangle(
             bbox: [x0 as u32, x1 as u32, y0 as u32, y1 as u32],
         });
         if want_persp {
-            persps.push(Persp {
-                inv_w: idx.map(|j| iw[j]),
-                b_over_w: idx.map(|j| poly[j].b.map(|b| b * iw[j])),
-            });
+            persps.push(Persp { inv_w: idx.map(|j| iw[j]), b_over_w: idx.map(|j| poly[j].b.map(|b| b * iw[j])) });
         }
     }
 }
@@ -288,17 +280,7 @@ fn setup(
             let mut tris = Vec::with_capacity((end - start) as usize);
             let mut persps = Vec::new();
             for t in start..end {
-                setup_triangle(
-                    geometry,
-                    &view_proj,
-                    &planes,
-                    width,
-                    height,
-                    t,
-                    want_persp,
-                    &mut tris,
-                    &mut persps,
-                );
+                setup_triangle(geometry, &view_proj, &planes, width, height, t, want_persp, &mut tris, &mut persps);
             }
             (tris, persps)
         })
@@ -348,13 +330,7 @@ struct Edges {
 
 impl Edges {
     fn new(t: &ScreenTri) -> Self {
-        let mut e = Edges {
-            ax: [0.0; 3],
-            ay: [0.0; 3],
-            dx: [0.0; 3],
-            dy: [0.0; 3],
-            min: [0.0; 3],
-        };
+        let mut e = Edges { ax: [0.0; 3], ay: [0.0; 3], dx: [0.0; 3], dy: [0.0; 3], min: [0.0; 3] };
         for k in 0..3 {
             let (a, b) = ((k + 1) % 3, (k + 2) % 3);
             e.ax[k] = t.x[a];
@@ -431,8 +407,7 @@ fn raster_band(
             let row_off = (y - band_y0) * width;
             for x in lo..=hi {
                 if ev[0] >= e.min[0] && ev[1] >= e.min[1] && ev[2] >= e.min[2] {
-                    let d = ((ev[0] * t.z[0] + ev[1] * t.z[1] + ev[2] * t.z[2]) * t.inv_area)
-                        .clamp(0.0, 1.0) as f32;
+                    let d = ((ev[0] * t.z[0] + ev[1] * t.z[1] + ev[2] * t.z[2]) * t.inv_area).clamp(0.0, 1.0) as f32;
                     let i = row_off + x as usize;
                     if d < depth[i] {
                         depth[i] = d;
@@ -480,15 +455,7 @@ pub fn rasterize(geometry: &Geometry, view_proj: Mat4, width: u32, height: u32) 
             let rows = depth.len() / w;
             let y0 = b * BAND_ROWS;
             let mut ids = vec![u32::MAX; depth.len()];
-            raster_band(
-                &tris,
-                &items[offsets[b]..offsets[b + 1]],
-                w,
-                y0,
-                rows,
-                depth,
-                Some(&mut ids),
-            );
+            raster_band(&tris, &items[offsets[b]..offsets[b + 1]], w, y0, rows, depth, Some(&mut ids));
             for (i, &id) in ids.iter().enumerate() {
                 if id == u32::MAX {
                     continue;
@@ -502,10 +469,7 @@ pub fn rasterize(geometry: &Geometry, view_proj: Mat4, width: u32, height: u32) 
                 let denom = l[0] * p.inv_w[0] + l[1] * p.inv_w[1] + l[2] * p.inv_w[2];
                 let mut bc = [0.0f64; 3];
                 for (j, b) in bc.iter_mut().enumerate() {
-                    *b = (l[0] * p.b_over_w[0][j]
-                        + l[1] * p.b_over_w[1][j]
-                        + l[2] * p.b_over_w[2][j])
-                        / denom;
+                    *b = (l[0] * p.b_over_w[0][j] + l[1] * p.b_over_w[1][j] + l[2] * p.b_over_w[2][j]) / denom;
                 }
                 triangle[i] = t.tri;
                 bary[i] = bc.map(|b| b as f32);
@@ -517,12 +481,7 @@ pub fn rasterize(geometry: &Geometry, view_proj: Mat4, width: u32, height: u32) 
 /// Depth only: like [`rasterize`] without triangle ids and barycentrics (faster). Returns
 /// `size_w × size_h` [0, 1] depths, row-major from the top-left pixel, 1.0 where nothing was
 /// drawn.
-pub fn rasterize_depth_only(
-    geometry: &Geometry,
-    view_proj: Mat4,
-    size_w: u32,
-    size_h: u32,
-) -> Vec<f32> {
+pub fn rasterize_depth_only(geometry: &Geometry, view_proj: Mat4, size_w: u32, size_h: u32) -> Vec<f32> {
     let pixels = size_w as usize * size_h as usize;
     let mut depth = vec![1.0f32; pixels];
     if pixels == 0 {
@@ -532,21 +491,10 @@ pub fn rasterize_depth_only(
     let w = size_w as usize;
     let bands = (size_h as usize).div_ceil(BAND_ROWS);
     let (offsets, items) = bin(&tris, bands);
-    depth
-        .par_chunks_mut(BAND_ROWS * w)
-        .enumerate()
-        .for_each(|(b, depth)| {
-            let rows = depth.len() / w;
-            raster_band(
-                &tris,
-                &items[offsets[b]..offsets[b + 1]],
-                w,
-                b * BAND_ROWS,
-                rows,
-                depth,
-                None,
-            );
-        });
+    depth.par_chunks_mut(BAND_ROWS * w).enumerate().for_each(|(b, depth)| {
+        let rows = depth.len() / w;
+        raster_band(&tris, &items[offsets[b]..offsets[b + 1]], w, b * BAND_ROWS, rows, depth, None);
+    });
     depth
 }
 
@@ -559,8 +507,5 @@ pub fn render_shadow_map(geometry: &Geometry, projection: &ShadowProjection) -> 
     for vp in &projection.view_proj[..layers] {
         depth.extend(rasterize_depth_only(geometry, *vp, n, n));
     }
-    ShadowMap {
-        projection: projection.clone(),
-        depth,
-    }
+    ShadowMap { projection: projection.clone(), depth }
 }

@@ -7,11 +7,7 @@ use crepuscular_scene::{Geometry, Vertex};
 use glam::{DVec3, Mat4, Vec3};
 
 fn vertex(p: Vec3) -> Vertex {
-    Vertex {
-        position: p.to_array(),
-        normal: [0.0, 1.0, 0.0],
-        albedo: [0.5; 3],
-    }
+    Vertex { position: p.to_array(), normal: [0.0, 1.0, 0.0], albedo: [0.5; 3] }
 }
 
 fn geometry(tris: &[[Vec3; 3]]) -> Geometry {
@@ -41,10 +37,7 @@ fn covered_count(buf: &DepthBuffer) -> usize {
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f32 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         ((self.0 >> 40) as f32) / (1u64 << 24) as f32
     }
 }
@@ -60,11 +53,7 @@ fn right_triangle_covers_exactly_the_expected_pixels() {
         // are not: x + y ≤ 62.
         for y in 0..h {
             for x in 0..w {
-                assert_eq!(
-                    buf.covered(x, y),
-                    x + y <= 62,
-                    "pixel {x},{y} winding {winding:?}"
-                );
+                assert_eq!(buf.covered(x, y), x + y <= 62, "pixel {x},{y} winding {winding:?}");
             }
         }
         assert_eq!(covered_count(&buf), 63 * 64 / 2);
@@ -100,8 +89,7 @@ fn general_triangle_matches_point_in_triangle_away_from_edges() {
     let (w, h) = (320, 180);
     let s = [(13.3, 20.7), (301.9, 61.2), (97.1, 171.4)];
     let buf = rasterize(&geometry(&[screen_tri(s, w, h, 0.3)]), Mat4::IDENTITY, w, h);
-    let area =
-        0.5 * ((s[1].0 - s[0].0) * (s[2].1 - s[0].1) - (s[1].1 - s[0].1) * (s[2].0 - s[0].0)).abs();
+    let area = 0.5 * ((s[1].0 - s[0].0) * (s[2].1 - s[0].1) - (s[1].1 - s[0].1) * (s[2].0 - s[0].0)).abs();
     let perimeter: f32 = (0..3)
         .map(|i| {
             let (a, b) = (s[i], s[(i + 1) % 3]);
@@ -168,11 +156,8 @@ fn jittered_mesh(w: u32, h: u32, seed: u64) -> Vec<[Vec3; 3]> {
         for i in 0..nx {
             let p = |a: usize, b: usize| pts[(j + b) * (nx + 1) + i + a];
             let (p00, p10, p01, p11) = (p(0, 0), p(1, 0), p(0, 1), p(1, 1));
-            let pair = if (i + j) % 2 == 0 {
-                [[p00, p10, p11], [p00, p11, p01]]
-            } else {
-                [[p00, p10, p01], [p10, p11, p01]]
-            };
+            let pair =
+                if (i + j) % 2 == 0 { [[p00, p10, p11], [p00, p11, p01]] } else { [[p00, p10, p01], [p10, p11, p01]] };
             for mut t in pair {
                 if rng.next() < 0.5 {
                     t.swap(1, 2);
@@ -268,16 +253,8 @@ fn depth_of_a_plane_matches_the_analytic_depth() {
     let d = 7.0;
     let big = 100.0;
     let plane = [
-        [
-            Vec3::new(-big, -big, -d),
-            Vec3::new(big, -big, -d),
-            Vec3::new(big, big, -d),
-        ],
-        [
-            Vec3::new(-big, -big, -d),
-            Vec3::new(big, big, -d),
-            Vec3::new(-big, big, -d),
-        ],
+        [Vec3::new(-big, -big, -d), Vec3::new(big, -big, -d), Vec3::new(big, big, -d)],
+        [Vec3::new(-big, -big, -d), Vec3::new(big, big, -d), Vec3::new(-big, big, -d)],
     ];
     let buf = rasterize(&geometry(&plane), vp, w, h);
     let expect = ndc_depth(d as f64, 0.1, 100.0);
@@ -292,10 +269,7 @@ fn depth_of_a_plane_matches_the_analytic_depth() {
     // barycentrics reproduce the intersection point (perspective-correct interpolation).
     let n = DVec3::new(0.3, 0.5, 1.0).normalize();
     let p0 = DVec3::new(0.0, 0.0, -6.0);
-    let (a, b) = (
-        n.cross(DVec3::X).normalize(),
-        n.cross(DVec3::X).normalize().cross(n),
-    );
+    let (a, b) = (n.cross(DVec3::X).normalize(), n.cross(DVec3::X).normalize().cross(n));
     let s = 40.0;
     let corner = |i: f64, j: f64| (p0 + a * (i * s) + b * (j * s)).as_vec3();
     let tilted = [
@@ -321,28 +295,15 @@ fn depth_of_a_plane_matches_the_analytic_depth() {
             let i = buf.index(x, y);
             assert_ne!(buf.triangle[i], u32::MAX, "pixel {x},{y}");
             let expect = ndc_depth(view_dist, 0.1, 100.0);
-            assert!(
-                (buf.depth[i] as f64 - expect).abs() < 1e-5,
-                "pixel {x},{y}: {} vs {expect}",
-                buf.depth[i]
-            );
+            assert!((buf.depth[i] as f64 - expect).abs() < 1e-5, "pixel {x},{y}: {} vs {expect}", buf.depth[i]);
             let bc = buf.bary[i];
             assert!((bc.iter().sum::<f32>() - 1.0).abs() < 1e-5, "bary {bc:?}");
-            assert!(
-                bc.iter().all(|&b| b > -1e-4 && b < 1.0 + 1e-4),
-                "bary {bc:?}"
-            );
+            assert!(bc.iter().all(|&b| b > -1e-4 && b < 1.0 + 1e-4), "bary {bc:?}");
             let tri = buf.triangle[i] as usize;
             let p: DVec3 = (0..3)
-                .map(|k| {
-                    Vec3::from(g.vertices[g.indices[3 * tri + k] as usize].position).as_dvec3()
-                        * bc[k] as f64
-                })
+                .map(|k| Vec3::from(g.vertices[g.indices[3 * tri + k] as usize].position).as_dvec3() * bc[k] as f64)
                 .sum();
-            assert!(
-                (p - hit).length() < 1e-3 * (1.0 + t),
-                "pixel {x},{y}: {p} vs {hit}"
-            );
+            assert!((p - hit).length() < 1e-3 * (1.0 + t), "pixel {x},{y}: {p} vs {hit}");
             checked += 1;
         }
     }
@@ -364,16 +325,8 @@ fn ground_plane_behind_the_camera_is_clipped_without_artifacts() {
     let e = 500.0;
     // Corners behind the camera: every triangle crosses the near plane.
     let ground = [
-        [
-            Vec3::new(-e, 0.0, -e),
-            Vec3::new(e, 0.0, e),
-            Vec3::new(e, 0.0, -e),
-        ],
-        [
-            Vec3::new(-e, 0.0, -e),
-            Vec3::new(-e, 0.0, e),
-            Vec3::new(e, 0.0, e),
-        ],
+        [Vec3::new(-e, 0.0, -e), Vec3::new(e, 0.0, e), Vec3::new(e, 0.0, -e)],
+        [Vec3::new(-e, 0.0, -e), Vec3::new(-e, 0.0, e), Vec3::new(e, 0.0, e)],
     ];
     let g = geometry(&ground);
     // Attribute: albedo = (x, z, 1) per vertex, interpolated with the barycentrics.
@@ -408,12 +361,7 @@ fn ground_plane_behind_the_camera_is_clipped_without_artifacts() {
                 let bc = buf.bary[i];
                 assert!((bc.iter().sum::<f32>() - 1.0).abs() < 1e-5, "bary {bc:?}");
                 let attr: [f64; 3] = std::array::from_fn(|c| {
-                    (0..3)
-                        .map(|k| {
-                            g2.vertices[g2.indices[3 * tri + k] as usize].albedo[c] as f64
-                                * bc[k] as f64
-                        })
-                        .sum()
+                    (0..3).map(|k| g2.vertices[g2.indices[3 * tri + k] as usize].albedo[c] as f64 * bc[k] as f64).sum()
                 });
                 let tol = 1e-3 * (1.0 + t * t);
                 assert!(
@@ -431,27 +379,12 @@ fn ground_plane_behind_the_camera_is_clipped_without_artifacts() {
 fn far_plane_clips() {
     let (w, h) = (64, 64);
     // z ∈ [0, w]: a triangle beyond the far plane is not drawn, one crossing it is cut.
-    let beyond = [
-        Vec3::new(-1.0, -1.0, 1.5),
-        Vec3::new(1.0, -1.0, 1.5),
-        Vec3::new(0.0, 1.0, 1.5),
-    ];
-    assert_eq!(
-        covered_count(&rasterize(&geometry(&[beyond]), Mat4::IDENTITY, w, h)),
-        0
-    );
+    let beyond = [Vec3::new(-1.0, -1.0, 1.5), Vec3::new(1.0, -1.0, 1.5), Vec3::new(0.0, 1.0, 1.5)];
+    assert_eq!(covered_count(&rasterize(&geometry(&[beyond]), Mat4::IDENTITY, w, h)), 0);
     // Depth 0.5 on the left edge, 1.5 on the right: the left half is drawn.
     let crossing = [
-        [
-            Vec3::new(-1.0, -1.0, 0.5),
-            Vec3::new(1.0, -1.0, 1.5),
-            Vec3::new(1.0, 1.0, 1.5),
-        ],
-        [
-            Vec3::new(-1.0, -1.0, 0.5),
-            Vec3::new(1.0, 1.0, 1.5),
-            Vec3::new(-1.0, 1.0, 0.5),
-        ],
+        [Vec3::new(-1.0, -1.0, 0.5), Vec3::new(1.0, -1.0, 1.5), Vec3::new(1.0, 1.0, 1.5)],
+        [Vec3::new(-1.0, -1.0, 0.5), Vec3::new(1.0, 1.0, 1.5), Vec3::new(-1.0, 1.0, 0.5)],
     ];
     let buf = rasterize(&geometry(&crossing), Mat4::IDENTITY, w, h);
     for y in 0..h {
@@ -467,16 +400,8 @@ fn depth_test_is_less_in_primitive_order() {
     let (w, h) = (32, 32);
     let full = |z: f32| {
         [
-            [
-                Vec3::new(-1.0, -1.0, z),
-                Vec3::new(3.0, -1.0, z),
-                Vec3::new(-1.0, 3.0, z),
-            ],
-            [
-                Vec3::new(1.0, 1.0, z),
-                Vec3::new(-3.0, 1.0, z),
-                Vec3::new(1.0, -3.0, z),
-            ],
+            [Vec3::new(-1.0, -1.0, z), Vec3::new(3.0, -1.0, z), Vec3::new(-1.0, 3.0, z)],
+            [Vec3::new(1.0, 1.0, z), Vec3::new(-3.0, 1.0, z), Vec3::new(1.0, -3.0, z)],
         ]
     };
     let mut tris = Vec::new();
@@ -493,38 +418,18 @@ fn depth_test_is_less_in_primitive_order() {
 fn degenerate_and_invalid_triangles_are_skipped() {
     let (w, h) = (64, 64);
     let mut g = geometry(&[
-        [
-            Vec3::ZERO,
-            Vec3::new(0.5, 0.5, 0.5),
-            Vec3::new(1.0, 1.0, 0.5),
-        ], // collinear
-        [Vec3::new(0.1, 0.1, 0.5); 3], // a point
-        [
-            Vec3::new(f32::NAN, 0.0, 0.5),
-            Vec3::new(1.0, 0.0, 0.5),
-            Vec3::new(0.0, 1.0, 0.5),
-        ],
-        [
-            Vec3::new(f32::INFINITY, 0.0, 0.5),
-            Vec3::new(1.0, 0.0, 0.5),
-            Vec3::new(0.0, 1.0, 0.5),
-        ],
-        [
-            Vec3::new(-1.0, 0.0, -0.5),
-            Vec3::new(1.0, 0.0, -0.5),
-            Vec3::new(0.0, 1.0, -0.5),
-        ], // behind
+        [Vec3::ZERO, Vec3::new(0.5, 0.5, 0.5), Vec3::new(1.0, 1.0, 0.5)], // collinear
+        [Vec3::new(0.1, 0.1, 0.5); 3],                                    // a point
+        [Vec3::new(f32::NAN, 0.0, 0.5), Vec3::new(1.0, 0.0, 0.5), Vec3::new(0.0, 1.0, 0.5)],
+        [Vec3::new(f32::INFINITY, 0.0, 0.5), Vec3::new(1.0, 0.0, 0.5), Vec3::new(0.0, 1.0, 0.5)],
+        [Vec3::new(-1.0, 0.0, -0.5), Vec3::new(1.0, 0.0, -0.5), Vec3::new(0.0, 1.0, -0.5)], // behind
     ]);
     g.indices.extend([0, 1, 99]); // out of range
     g.indices.extend([0, 1]); // incomplete
     let buf = rasterize(&g, Mat4::IDENTITY, w, h);
     assert_eq!(covered_count(&buf), 0);
     assert!(buf.depth.iter().all(|&d| d == 1.0));
-    assert!(
-        rasterize_depth_only(&g, Mat4::IDENTITY, w, h)
-            .iter()
-            .all(|&d| d == 1.0)
-    );
+    assert!(rasterize_depth_only(&g, Mat4::IDENTITY, w, h).iter().all(|&d| d == 1.0));
     // A NaN matrix, an empty image.
     let nan = Mat4::from_cols_array(&[f32::NAN; 16]);
     assert_eq!(covered_count(&rasterize(&g, nan, w, h)), 0);
@@ -539,14 +444,7 @@ fn room(min: Vec3, max: Vec3) -> Geometry {
             if i & 4 == 0 { min.z } else { max.z },
         )
     };
-    let faces = [
-        [0, 2, 6, 4],
-        [1, 3, 7, 5],
-        [0, 1, 5, 4],
-        [2, 3, 7, 6],
-        [0, 1, 3, 2],
-        [4, 5, 7, 6],
-    ];
+    let faces = [[0, 2, 6, 4], [1, 3, 7, 5], [0, 1, 5, 4], [2, 3, 7, 6], [0, 1, 3, 2], [4, 5, 7, 6]];
     let mut tris = Vec::new();
     for f in faces {
         tris.push([c(f[0]), c(f[1]), c(f[2])]);
@@ -559,21 +457,14 @@ fn room(min: Vec3, max: Vec3) -> Geometry {
 fn point_light_shadow_map_has_six_layers() {
     // Light at the origin; walls at x = +2, x = −3, and ±3 on y and z.
     let g = room(Vec3::new(-3.0, -3.0, -3.0), Vec3::new(2.0, 3.0, 3.0));
-    let light = Light::Point {
-        position: Vec3::ZERO,
-        color: Vec3::ONE,
-        intensity: 1.0,
-    };
+    let light = Light::Point { position: Vec3::ZERO, color: Vec3::ONE, intensity: 1.0 };
     let size = 64;
     let proj = ShadowProjection::fit(&light, &Camera::default(), 1.0, g.bounds(), size);
     assert_eq!(proj.layers, 6);
     let map = render_shadow_map(&g, &proj);
     let n = (size * size) as usize;
     assert_eq!(map.depth.len(), 6 * n);
-    assert!(
-        map.depth.iter().all(|&d| d < 1.0),
-        "the room surrounds the light"
-    );
+    assert!(map.depth.iter().all(|&d| d < 1.0), "the room surrounds the light");
     for layer in 0..6u32 {
         for y in 0..size {
             for x in 0..size {
@@ -589,18 +480,9 @@ fn point_light_shadow_map_has_six_layers() {
     }
     // Lookups through the map agree: a point just in front of a wall is lit, one behind a
     // wall (outside the room) in shadow.
-    assert_eq!(
-        map.visibility(Vec3::ZERO, Vec3::new(1.9, 0.2, 0.1), 0.02),
-        1.0
-    );
-    assert_eq!(
-        map.visibility(Vec3::ZERO, Vec3::new(2.5, 0.2, 0.1), 0.02),
-        0.0
-    );
-    assert_eq!(
-        map.visibility(Vec3::ZERO, Vec3::new(0.1, -0.3, -3.5), 0.02),
-        0.0
-    );
+    assert_eq!(map.visibility(Vec3::ZERO, Vec3::new(1.9, 0.2, 0.1), 0.02), 1.0);
+    assert_eq!(map.visibility(Vec3::ZERO, Vec3::new(2.5, 0.2, 0.1), 0.02), 0.0);
+    assert_eq!(map.visibility(Vec3::ZERO, Vec3::new(0.1, -0.3, -3.5), 0.02), 0.0);
 
     // A spot light has one layer.
     let spot = Light::Spot {
@@ -615,11 +497,7 @@ fn point_light_shadow_map_has_six_layers() {
     let proj = ShadowProjection::fit(&spot, &Camera::default(), 1.0, g.bounds(), size);
     let map = render_shadow_map(&g, &proj);
     assert_eq!(map.depth.len(), n);
-    assert!(
-        map.depth
-            .iter()
-            .all(|&d| (proj.linear(d) - 3.0).abs() < 3e-3)
-    );
+    assert!(map.depth.iter().all(|&d| (proj.linear(d) - 3.0).abs() < 3e-3));
 }
 
 /// About 50k triangles: a wavy terrain of 200×120 quads plus scattered small boxes.
@@ -641,11 +519,7 @@ fn big_scene() -> Geometry {
     let mut rng = Lcg(7);
     let mut g = geometry(&tris);
     while g.triangle_count() < 50_000 {
-        let c = Vec3::new(
-            rng.next() * 60.0 - 30.0,
-            rng.next() * 4.0,
-            -rng.next() * 50.0,
-        );
+        let c = Vec3::new(rng.next() * 60.0 - 30.0, rng.next() * 4.0, -rng.next() * 50.0);
         let s = 0.2 + rng.next();
         g.append(&room(c - Vec3::splat(s), c + Vec3::splat(s)));
     }
@@ -672,11 +546,7 @@ fn timing_50k_triangles() {
     let depth = rasterize_depth_only(&g, vp, 1920, 1080);
     let depth_only = t.elapsed();
     assert_eq!(buf.depth, depth);
-    let light = Light::Point {
-        position: Vec3::new(0.0, 6.0, -20.0),
-        color: Vec3::ONE,
-        intensity: 1.0,
-    };
+    let light = Light::Point { position: Vec3::new(0.0, 6.0, -20.0), color: Vec3::ONE, intensity: 1.0 };
     let proj = ShadowProjection::fit(&light, &cam, 16.0 / 9.0, g.bounds(), 4096);
     let mut one = proj.clone();
     one.layers = 1;

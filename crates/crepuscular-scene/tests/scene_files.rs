@@ -48,11 +48,7 @@ f 2 3 7 6
 fn write_png(dir: &Path, name: &str) -> PathBuf {
     let mut img = image::RgbImage::new(4, 2);
     for (x, _, p) in img.enumerate_pixels_mut() {
-        *p = if x < 2 {
-            image::Rgb([255, 128, 0])
-        } else {
-            image::Rgb([0, 0, 255])
-        };
+        *p = if x < 2 { image::Rgb([255, 128, 0]) } else { image::Rgb([0, 0, 255]) };
     }
     let p = dir.join(name);
     img.save(&p).unwrap();
@@ -74,25 +70,12 @@ fn every_builtin_loads_with_geometry() {
         assert!(s.geometry.triangle_count() > 0, "{name} has no triangles");
         assert_eq!(s.geometry.indices.len() % 3, 0);
         let nv = s.geometry.vertices.len();
-        assert!(
-            s.geometry.indices.iter().all(|&i| (i as usize) < nv),
-            "{name}: index out of range"
-        );
+        assert!(s.geometry.indices.iter().all(|&i| (i as usize) < nv), "{name}: index out of range");
         for v in &s.geometry.vertices {
-            assert!(
-                v.position.iter().all(|c| c.is_finite()),
-                "{name}: non-finite position"
-            );
+            assert!(v.position.iter().all(|c| c.is_finite()), "{name}: non-finite position");
             let n = Vec3::from(v.normal);
-            assert!(
-                (n.length() - 1.0).abs() < 1e-3,
-                "{name}: normal {n} not unit"
-            );
-            assert!(
-                v.albedo.iter().all(|&c| (0.0..=1.0).contains(&c)),
-                "{name}: albedo {:?}",
-                v.albedo
-            );
+            assert!((n.length() - 1.0).abs() < 1e-3, "{name}: normal {n} not unit");
+            assert!(v.albedo.iter().all(|&c| (0.0..=1.0).contains(&c)), "{name}: albedo {:?}", v.albedo);
         }
         assert_eq!((s.render.width, s.render.height), (960, 540), "{name}");
         assert_eq!(s.render.shadow.size, 2048, "{name}");
@@ -102,10 +85,7 @@ fn every_builtin_loads_with_geometry() {
         // The camera must not sit inside geometry bounds' exterior in a silly way: it sees
         // something, i.e. the geometry is within the far plane.
         let b = s.geometry.bounds();
-        assert!(
-            (b.center() - c.position).length() < c.far + b.radius(),
-            "{name}"
-        );
+        assert!((b.center() - c.position).length() < c.far + b.radius(), "{name}");
     }
     assert!(builtin("no-such-scene").is_none());
 }
@@ -119,9 +99,7 @@ fn builtin_lights_are_the_advertised_kinds() {
     assert_eq!(kind("cage"), "point");
     assert_eq!(kind("stained-glass"), "spot");
     match builtin("stained-glass").unwrap().light {
-        Light::Spot {
-            texture: Some(t), ..
-        } => {
+        Light::Spot { texture: Some(t), .. } => {
             assert_eq!((t.width, t.height), (256, 256));
             assert_eq!(t.texels.len(), 256 * 256);
             // Coloured panes and dark lead lines.
@@ -165,11 +143,7 @@ fn terrain_is_a_128_grid() {
 #[test]
 fn builtins_are_deterministic() {
     for (name, _) in builtin_names() {
-        assert_eq!(
-            builtin(name).unwrap().geometry,
-            builtin(name).unwrap().geometry,
-            "{name}"
-        );
+        assert_eq!(builtin(name).unwrap().geometry, builtin(name).unwrap().geometry, "{name}");
     }
 }
 
@@ -195,10 +169,7 @@ fn documented_example() -> String {
             out.push('\n');
         }
     }
-    assert!(
-        out.contains("[camera]"),
-        "example not found in file.rs docs"
-    );
+    assert!(out.contains("[camera]"), "example not found in file.rs docs");
     out
 }
 
@@ -219,15 +190,7 @@ fn documented_example_parses_with_all_keys() {
     assert_eq!(s.medium.absorption, Vec3::splat(0.005));
     assert_eq!(s.medium.phase, Phase::HenyeyGreenstein { g: 0.6 });
     match &s.light {
-        Light::Spot {
-            position,
-            direction,
-            outer_angle_degrees,
-            inner_angle_degrees,
-            color,
-            intensity,
-            texture,
-        } => {
+        Light::Spot { position, direction, outer_angle_degrees, inner_angle_degrees, color, intensity, texture } => {
             assert_eq!(*position, Vec3::new(-10.0, 9.0, 0.0));
             assert!((direction.length() - 1.0).abs() < 1e-6);
             assert!((*direction - Vec3::new(1.0, -0.95, 0.0).normalize()).length() < 1e-6);
@@ -238,25 +201,16 @@ fn documented_example_parses_with_all_keys() {
             assert_eq!((t.width, t.height), (4, 2));
             // sRGB → linear: 255 → 1, 128 → 0.2158, 0 → 0.
             let p = t.texels[0];
-            assert!(
-                (p[0] - 1.0).abs() < 1e-6 && (p[1] - 0.2158).abs() < 1e-3 && p[2] == 0.0,
-                "{p:?}"
-            );
+            assert!((p[0] - 1.0).abs() < 1e-6 && (p[1] - 0.2158).abs() < 1e-3 && p[2] == 0.0, "{p:?}");
         }
         other => panic!("expected a spot light, got {other:?}"),
     }
     // Plane (2 triangles) + cube mesh (12 triangles).
     assert_eq!(s.geometry.triangle_count(), 2 + 12);
     // The mesh is scaled 1.5, rotated and translated by 2 in x: its bounds.
-    let mesh_xs: Vec<f32> = s.geometry.vertices[4..]
-        .iter()
-        .map(|v| v.position[0])
-        .collect();
+    let mesh_xs: Vec<f32> = s.geometry.vertices[4..].iter().map(|v| v.position[0]).collect();
     let max_x = mesh_xs.iter().cloned().fold(f32::MIN, f32::max);
-    assert!(
-        (max_x - (2.0 + 1.5 * 0.5 * 2f32.sqrt())).abs() < 1e-4,
-        "{max_x}"
-    );
+    assert!((max_x - (2.0 + 1.5 * 0.5 * 2f32.sqrt())).abs() < 1e-4, "{max_x}");
     // The plane is 60 × 60 with the given albedo.
     assert_eq!(s.geometry.vertices[0].albedo, [0.6, 0.55, 0.5]);
     assert!((s.geometry.bounds().min.x + 30.0).abs() < 1e-4);
@@ -267,10 +221,7 @@ fn documented_example_parses_with_all_keys() {
     assert_eq!((r.shadow.bias, r.shadow.normal_offset_texels), (0.02, 1.5));
     assert_eq!(r.ambient, Vec3::splat(0.03));
     assert_eq!(r.exposure, 1.0);
-    let bf = r
-        .techniques
-        .get("brute-force")
-        .expect("technique table kept");
+    let bf = r.techniques.get("brute-force").expect("technique table kept");
     assert_eq!(bf.get("steps").and_then(|v| v.as_integer()), Some(32));
     assert_eq!(r.techniques.len(), 1);
 }
@@ -285,11 +236,7 @@ fn minimal_file_takes_defaults() {
     assert_eq!(s.medium, crepuscular::Medium::default());
     assert_eq!(s.render, crepuscular_scene::RenderSettings::default());
     match s.light {
-        Light::Directional {
-            direction,
-            color,
-            intensity,
-        } => {
+        Light::Directional { direction, color, intensity } => {
             assert!((direction - Vec3::new(0.0, -1.0, -1.0).normalize()).length() < 1e-6);
             assert_eq!((color, intensity), (Vec3::ONE, 1.0));
         }
@@ -298,9 +245,7 @@ fn minimal_file_takes_defaults() {
     assert_eq!(s.geometry.triangle_count(), 0);
     // No [light] at all: the default sun.
     let s = parse_scene_str("", "empty.toml", Path::new(".")).unwrap();
-    assert!(
-        matches!(s.light, Light::Directional { direction, .. } if direction.z > 0.0 && direction.y < 0.0)
-    );
+    assert!(matches!(s.light, Light::Directional { direction, .. } if direction.z > 0.0 && direction.y < 0.0));
     assert_eq!(s.name, "empty");
 }
 
@@ -337,13 +282,7 @@ scale = 10
     )
     .unwrap();
     match spot.light {
-        Light::Spot {
-            outer_angle_degrees,
-            inner_angle_degrees,
-            intensity,
-            texture,
-            ..
-        } => {
+        Light::Spot { outer_angle_degrees, inner_angle_degrees, intensity, texture, .. } => {
             assert_eq!(outer_angle_degrees, 40.0);
             assert!((inner_angle_degrees - 32.0).abs() < 1e-5);
             assert_eq!(intensity, 50.0);
@@ -352,12 +291,7 @@ scale = 10
         other => panic!("{other:?}"),
     }
     assert_eq!(spot.medium.phase, Phase::Rayleigh);
-    let iso = parse_scene_str(
-        "[medium]\nphase = { kind = \"isotropic\" }",
-        "i.toml",
-        Path::new("."),
-    )
-    .unwrap();
+    let iso = parse_scene_str("[medium]\nphase = { kind = \"isotropic\" }", "i.toml", Path::new(".")).unwrap();
     assert_eq!(iso.medium.phase, Phase::Isotropic);
 }
 
@@ -371,18 +305,9 @@ fn check_bad(dir: &Path, file: &str, text: &str, key: &str, also: &[&str]) -> St
         Err(e) => e,
     };
     let msg = err.to_string();
-    assert!(
-        !msg.contains('\n') && !msg.contains('\r'),
-        "{file}: not one line: {msg:?}"
-    );
-    assert!(
-        msg.contains(file),
-        "{file}: message does not name the file: {msg}"
-    );
-    assert!(
-        msg.contains(key),
-        "{file}: message does not name the key {key}: {msg}"
-    );
+    assert!(!msg.contains('\n') && !msg.contains('\r'), "{file}: not one line: {msg:?}");
+    assert!(msg.contains(file), "{file}: message does not name the file: {msg}");
+    assert!(msg.contains(key), "{file}: message does not name the key {key}: {msg}");
     for a in also {
         assert!(msg.contains(a), "{file}: message lacks {a:?}: {msg}");
     }
@@ -395,21 +320,10 @@ fn bad_files_fail_with_one_line_naming_file_and_key() {
     let dir = temp_dir("bad");
     write(&dir, "ok.obj", CUBE_OBJ);
     // Syntax error: location and (guessed) key.
-    let m = check_bad(
-        &dir,
-        "syntax.toml",
-        "[camera]\nfov_y_degrees = 60\nposition = [0, 1, \n",
-        "camera.position",
-        &[],
-    );
+    let m =
+        check_bad(&dir, "syntax.toml", "[camera]\nfov_y_degrees = 60\nposition = [0, 1, \n", "camera.position", &[]);
     assert!(m.contains("syntax.toml:3:"), "{m}");
-    check_bad(
-        &dir,
-        "syntax2.toml",
-        "[render]\nwidth = = 3\n",
-        "render.width",
-        &["syntax2.toml:2:"],
-    );
+    check_bad(&dir, "syntax2.toml", "[render]\nwidth = = 3\n", "render.width", &["syntax2.toml:2:"]);
     check_bad(&dir, "unclosed.toml", "name = \"x\n", "name", &[]);
     // Unknown keys, everywhere.
     check_bad(
@@ -419,20 +333,8 @@ fn bad_files_fail_with_one_line_naming_file_and_key() {
         "medium.scatterin",
         &["unknown field", "unknown.toml:2:"],
     );
-    check_bad(
-        &dir,
-        "unknown_top.toml",
-        "nmae = \"x\"\n",
-        "nmae",
-        &["unknown field"],
-    );
-    check_bad(
-        &dir,
-        "unknown_light.toml",
-        "[light]\ndirection = [0,-1,0]\ncolour = [1,1,1]\n",
-        "light.colour",
-        &[],
-    );
+    check_bad(&dir, "unknown_top.toml", "nmae = \"x\"\n", "nmae", &["unknown field"]);
+    check_bad(&dir, "unknown_light.toml", "[light]\ndirection = [0,-1,0]\ncolour = [1,1,1]\n", "light.colour", &[]);
     check_bad(
         &dir,
         "unknown_obj.toml",
@@ -447,107 +349,23 @@ fn bad_files_fail_with_one_line_naming_file_and_key() {
         "medium.phase.gg",
         &[],
     );
-    check_bad(
-        &dir,
-        "unknown_render.toml",
-        "[render]\nwdth = 10\n",
-        "wdth",
-        &["render"],
-    );
-    check_bad(
-        &dir,
-        "unknown_kind.toml",
-        "[[objects]]\nkind = \"torus\"\n",
-        "objects[0].kind",
-        &["torus"],
-    );
-    check_bad(
-        &dir,
-        "unknown_phase_kind.toml",
-        "[medium]\nphase = { kind = \"mie\" }\n",
-        "medium.phase.kind",
-        &["mie"],
-    );
+    check_bad(&dir, "unknown_render.toml", "[render]\nwdth = 10\n", "wdth", &["render"]);
+    check_bad(&dir, "unknown_kind.toml", "[[objects]]\nkind = \"torus\"\n", "objects[0].kind", &["torus"]);
+    check_bad(&dir, "unknown_phase_kind.toml", "[medium]\nphase = { kind = \"mie\" }\n", "medium.phase.kind", &["mie"]);
     // Wrong types.
-    check_bad(
-        &dir,
-        "type.toml",
-        "[camera]\nfov_y_degrees = \"wide\"\n",
-        "camera.fov_y_degrees",
-        &["type.toml:2:"],
-    );
-    check_bad(
-        &dir,
-        "type2.toml",
-        "[camera]\nposition = [1, 2]\n",
-        "camera.position",
-        &[],
-    );
-    check_bad(
-        &dir,
-        "type3.toml",
-        "[render]\nwidth = -5\n",
-        "render.width",
-        &[],
-    );
-    check_bad(
-        &dir,
-        "type4.toml",
-        "[medium]\nscattering = [0.1, \"a\", 0.1]\n",
-        "medium.scattering",
-        &[],
-    );
+    check_bad(&dir, "type.toml", "[camera]\nfov_y_degrees = \"wide\"\n", "camera.fov_y_degrees", &["type.toml:2:"]);
+    check_bad(&dir, "type2.toml", "[camera]\nposition = [1, 2]\n", "camera.position", &[]);
+    check_bad(&dir, "type3.toml", "[render]\nwidth = -5\n", "render.width", &[]);
+    check_bad(&dir, "type4.toml", "[medium]\nscattering = [0.1, \"a\", 0.1]\n", "medium.scattering", &[]);
     check_bad(&dir, "type5.toml", "camera = 3\n", "camera", &[]);
     // Values out of range.
-    check_bad(
-        &dir,
-        "neg.toml",
-        "[medium]\nscattering = [-1, 0.1, 0.1]\n",
-        "medium.scattering[0]",
-        &["= -1", "≥ 0"],
-    );
-    check_bad(
-        &dir,
-        "neg2.toml",
-        "[medium]\nabsorption = -0.5\n",
-        "medium.absorption[0]",
-        &["-0.5"],
-    );
-    check_bad(
-        &dir,
-        "nan.toml",
-        "[medium]\nscattering = [0.1, nan, 0.1]\n",
-        "medium.scattering[1]",
-        &["nan"],
-    );
-    check_bad(
-        &dir,
-        "nan2.toml",
-        "[camera]\nnear = nan\n",
-        "camera.near",
-        &["nan"],
-    );
-    check_bad(
-        &dir,
-        "inf.toml",
-        "[camera]\nposition = [0, inf, 0]\n",
-        "camera.position[1]",
-        &["inf"],
-    );
-    check_bad(
-        &dir,
-        "nan3.toml",
-        "[render]\nexposure = nan\n",
-        "render.exposure",
-        &[],
-    );
-    check_bad(
-        &dir,
-        "nan4.toml",
-        "[render.brute-force]\nsteps = nan\n",
-        "render.brute-force.steps",
-        &["nan"],
-    );
+    check_bad(&dir, "neg.toml", "[medium]\nscattering = [-1, 0.1, 0.1]\n", "medium.scattering[0]", &["= -1", "≥ 0"]);
+    check_bad(&dir, "neg2.toml", "[medium]\nabsorption = -0.5\n", "medium.absorption[0]", &["-0.5"]);
+    check_bad(&dir, "nan.toml", "[medium]\nscattering = [0.1, nan, 0.1]\n", "medium.scattering[1]", &["nan"]);
+    check_bad(&dir, "nan2.toml", "[camera]\nnear = nan\n", "camera.near", &["nan"]);
+    check_bad(&dir, "inf.toml", "[camera]\nposition = [0, inf, 0]\n", "camera.position[1]", &["inf"]);
+    check_bad(&dir, "nan3.toml", "[render]\nexposure = nan\n", "render.exposure", &[]);
+    check_bad(&dir, "nan4.toml", "[render.brute-force]\nsteps = nan\n", "render.brute-force.steps", &["nan"]);
     check_bad(
         &dir,
         "nan5.toml",
@@ -562,105 +380,21 @@ fn bad_files_fail_with_one_line_naming_file_and_key() {
         "medium.phase.g",
         &["= 1"],
     );
-    check_bad(
-        &dir,
-        "g2.toml",
-        "[medium]\nphase = { kind = \"isotropic\", g = 0.5 }\n",
-        "medium.phase.g",
-        &[],
-    );
-    check_bad(
-        &dir,
-        "zero.toml",
-        "[render]\nwidth = 0\n",
-        "render.width",
-        &["= 0"],
-    );
-    check_bad(
-        &dir,
-        "huge.toml",
-        "[render]\nheight = 100000\n",
-        "render.height",
-        &["100000"],
-    );
-    check_bad(
-        &dir,
-        "zero_shadow.toml",
-        "[render]\nshadow_map_size = 0\n",
-        "render.shadow_map_size",
-        &[],
-    );
-    check_bad(
-        &dir,
-        "near.toml",
-        "[camera]\nnear = 0\n",
-        "camera.near",
-        &[],
-    );
-    check_bad(
-        &dir,
-        "far.toml",
-        "[camera]\nnear = 5\nfar = 2\n",
-        "camera.far",
-        &[],
-    );
-    check_bad(
-        &dir,
-        "fov.toml",
-        "[camera]\nfov_y_degrees = 180\n",
-        "camera.fov_y_degrees",
-        &["180"],
-    );
-    check_bad(
-        &dir,
-        "lookat.toml",
-        "[camera]\nposition = [1, 2, 3]\nlook_at = [1, 2, 3]\n",
-        "camera.look_at",
-        &[],
-    );
-    check_bad(
-        &dir,
-        "up.toml",
-        "[camera]\nposition = [0, 5, 0]\nlook_at = [0, 0, 0]\n",
-        "camera.up",
-        &[],
-    );
-    check_bad(
-        &dir,
-        "dir.toml",
-        "[light]\ndirection = [0, 0, 0]\n",
-        "light.direction",
-        &["[0, 0, 0]"],
-    );
-    check_bad(
-        &dir,
-        "nodir.toml",
-        "[light]\nkind = \"spot\"\nposition = [0, 1, 0]\n",
-        "light.direction",
-        &["required"],
-    );
-    check_bad(
-        &dir,
-        "intensity.toml",
-        "[light]\ndirection = [0,-1,0]\nintensity = -2\n",
-        "light.intensity",
-        &["-2"],
-    );
+    check_bad(&dir, "g2.toml", "[medium]\nphase = { kind = \"isotropic\", g = 0.5 }\n", "medium.phase.g", &[]);
+    check_bad(&dir, "zero.toml", "[render]\nwidth = 0\n", "render.width", &["= 0"]);
+    check_bad(&dir, "huge.toml", "[render]\nheight = 100000\n", "render.height", &["100000"]);
+    check_bad(&dir, "zero_shadow.toml", "[render]\nshadow_map_size = 0\n", "render.shadow_map_size", &[]);
+    check_bad(&dir, "near.toml", "[camera]\nnear = 0\n", "camera.near", &[]);
+    check_bad(&dir, "far.toml", "[camera]\nnear = 5\nfar = 2\n", "camera.far", &[]);
+    check_bad(&dir, "fov.toml", "[camera]\nfov_y_degrees = 180\n", "camera.fov_y_degrees", &["180"]);
+    check_bad(&dir, "lookat.toml", "[camera]\nposition = [1, 2, 3]\nlook_at = [1, 2, 3]\n", "camera.look_at", &[]);
+    check_bad(&dir, "up.toml", "[camera]\nposition = [0, 5, 0]\nlook_at = [0, 0, 0]\n", "camera.up", &[]);
+    check_bad(&dir, "dir.toml", "[light]\ndirection = [0, 0, 0]\n", "light.direction", &["[0, 0, 0]"]);
+    check_bad(&dir, "nodir.toml", "[light]\nkind = \"spot\"\nposition = [0, 1, 0]\n", "light.direction", &["required"]);
+    check_bad(&dir, "intensity.toml", "[light]\ndirection = [0,-1,0]\nintensity = -2\n", "light.intensity", &["-2"]);
     let spot = "[light]\nkind = \"spot\"\nposition = [0, 5, 0]\ndirection = [0, -1, 0]\n";
-    check_bad(
-        &dir,
-        "outer.toml",
-        &format!("{spot}outer_angle_degrees = 95\n"),
-        "light.outer_angle_degrees",
-        &["95"],
-    );
-    check_bad(
-        &dir,
-        "outer0.toml",
-        &format!("{spot}outer_angle_degrees = 0\n"),
-        "light.outer_angle_degrees",
-        &[],
-    );
+    check_bad(&dir, "outer.toml", &format!("{spot}outer_angle_degrees = 95\n"), "light.outer_angle_degrees", &["95"]);
+    check_bad(&dir, "outer0.toml", &format!("{spot}outer_angle_degrees = 0\n"), "light.outer_angle_degrees", &[]);
     check_bad(
         &dir,
         "inner.toml",
@@ -682,13 +416,7 @@ fn bad_files_fail_with_one_line_naming_file_and_key() {
         "objects[0].albedo[0]",
         &["1.5"],
     );
-    check_bad(
-        &dir,
-        "scale.toml",
-        "[[objects]]\nkind = \"box\"\nscale = [1, 0, 1]\n",
-        "objects[0].scale[1]",
-        &[],
-    );
+    check_bad(&dir, "scale.toml", "[[objects]]\nkind = \"box\"\nscale = [1, 0, 1]\n", "objects[0].scale[1]", &[]);
     // Files: missing, escaping, absolute.
     check_bad(
         &dir,
@@ -697,13 +425,7 @@ fn bad_files_fail_with_one_line_naming_file_and_key() {
         "objects[0].path",
         &["nope.obj", "not found"],
     );
-    check_bad(
-        &dir,
-        "nopath.toml",
-        "[[objects]]\nkind = \"mesh\"\n",
-        "objects[0].path",
-        &["required"],
-    );
+    check_bad(&dir, "nopath.toml", "[[objects]]\nkind = \"mesh\"\n", "objects[0].path", &["required"]);
     check_bad(
         &dir,
         "dotdot.toml",
@@ -740,35 +462,11 @@ fn bad_files_fail_with_one_line_naming_file_and_key() {
         "objects[0].path",
         &["absolute"],
     );
-    check_bad(
-        &dir,
-        "texdotdot.toml",
-        &format!("{spot}texture = \"../gobo.png\"\n"),
-        "light.texture",
-        &[],
-    );
-    check_bad(
-        &dir,
-        "texmissing.toml",
-        &format!("{spot}texture = \"gobo.png\"\n"),
-        "light.texture",
-        &["not found"],
-    );
+    check_bad(&dir, "texdotdot.toml", &format!("{spot}texture = \"../gobo.png\"\n"), "light.texture", &[]);
+    check_bad(&dir, "texmissing.toml", &format!("{spot}texture = \"gobo.png\"\n"), "light.texture", &["not found"]);
     write(&dir, "notimage.png", "this is not a png");
-    check_bad(
-        &dir,
-        "texbad.toml",
-        &format!("{spot}texture = \"notimage.png\"\n"),
-        "light.texture",
-        &[],
-    );
-    check_bad(
-        &dir,
-        "pathonbox.toml",
-        "[[objects]]\nkind = \"box\"\npath = \"ok.obj\"\n",
-        "objects[0].path",
-        &[],
-    );
+    check_bad(&dir, "texbad.toml", &format!("{spot}texture = \"notimage.png\"\n"), "light.texture", &[]);
+    check_bad(&dir, "pathonbox.toml", "[[objects]]\nkind = \"box\"\npath = \"ok.obj\"\n", "objects[0].path", &[]);
     // A mesh that fails to import names the scene file, the key and the mesh file.
     write(&dir, "broken.obj", "v 0 0 0\nv 1 0 0\nf 1 2 7\n");
     check_bad(
@@ -778,6 +476,27 @@ fn bad_files_fail_with_one_line_naming_file_and_key() {
         "objects[0].path",
         &["broken.obj"],
     );
+}
+
+#[cfg(unix)]
+#[test]
+fn symlinks_out_of_the_scene_directory_are_rejected() {
+    let outside = temp_dir("outside");
+    let target = write(&outside, "secret.obj", CUBE_OBJ);
+    let dir = temp_dir("symlink");
+    std::os::unix::fs::symlink(&target, dir.join("link.obj")).unwrap();
+    check_bad(
+        &dir,
+        "symlink.toml",
+        "[[objects]]\nkind = \"mesh\"\npath = \"link.obj\"\n",
+        "objects[0].path",
+        &["outside"],
+    );
+    // A link inside the directory is fine.
+    write(&dir, "real.obj", CUBE_OBJ);
+    std::os::unix::fs::symlink(dir.join("real.obj"), dir.join("inside.obj")).unwrap();
+    let p = write(&dir, "ok.toml", "[[objects]]\nkind = \"mesh\"\npath = \"inside.obj\"\n");
+    assert_eq!(load_scene_file(&p).unwrap().geometry.triangle_count(), 12);
 }
 
 #[test]
@@ -794,20 +513,9 @@ fn unreadable_scene_file_is_an_error() {
 
 #[test]
 fn parse_errors_carry_line_and_column() {
-    let e = parse_scene_str(
-        "\n\n[medium]\n  scatterin = 0.1\n",
-        "x/y.toml",
-        Path::new("."),
-    )
-    .unwrap_err();
+    let e = parse_scene_str("\n\n[medium]\n  scatterin = 0.1\n", "x/y.toml", Path::new(".")).unwrap_err();
     match &e {
-        SceneError::Syntax {
-            file,
-            line,
-            column,
-            key,
-            ..
-        } => {
+        SceneError::Syntax { file, line, column, key, .. } => {
             assert_eq!(file, "x/y.toml");
             assert_eq!(*line, 4);
             assert_eq!(*column, 3);
@@ -815,21 +523,9 @@ fn parse_errors_carry_line_and_column() {
         }
         other => panic!("{other:?}"),
     }
-    assert!(
-        e.to_string()
-            .starts_with("x/y.toml:4:3: medium.scatterin: unknown field `scatterin`"),
-        "{e}"
-    );
-    let e = parse_scene_str(
-        "[medium]\nscattering = [-1, 0, 0]\n",
-        "scenes/x.toml",
-        Path::new("."),
-    )
-    .unwrap_err();
-    assert_eq!(
-        e.to_string(),
-        "scenes/x.toml: medium.scattering[0] = -1: coefficients must be ≥ 0 and finite"
-    );
+    assert!(e.to_string().starts_with("x/y.toml:4:3: medium.scatterin: unknown field `scatterin`"), "{e}");
+    let e = parse_scene_str("[medium]\nscattering = [-1, 0, 0]\n", "scenes/x.toml", Path::new(".")).unwrap_err();
+    assert_eq!(e.to_string(), "scenes/x.toml: medium.scattering[0] = -1: coefficients must be ≥ 0 and finite");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -846,23 +542,15 @@ fn obj_imports_with_the_right_triangle_count() {
         let v = &g.vertices[t[0] as usize];
         let n = Vec3::from(v.normal);
         assert!((n.length() - 1.0).abs() < 1e-5);
-        let c = (0..3)
-            .map(|k| Vec3::from(g.vertices[t[k] as usize].position))
-            .sum::<Vec3>()
-            / 3.0;
+        let c = (0..3).map(|k| Vec3::from(g.vertices[t[k] as usize].position)).sum::<Vec3>() / 3.0;
         assert!(n.dot(c) > 0.0, "normal {n} at {c} points inward");
     }
     // Transform and albedo.
-    let t = Transform {
-        translate: Vec3::new(10.0, 0.0, 0.0),
-        rotate_degrees: Vec3::ZERO,
-        scale: Vec3::splat(2.0),
-    };
+    let t = Transform { translate: Vec3::new(10.0, 0.0, 0.0), rotate_degrees: Vec3::ZERO, scale: Vec3::splat(2.0) };
     let g = load_mesh(&p, &t, Some(Vec3::new(0.2, 0.3, 0.4))).unwrap();
     let b = g.bounds();
     assert!(
-        (b.min - Vec3::new(9.0, -1.0, -1.0)).length() < 1e-5
-            && (b.max - Vec3::new(11.0, 1.0, 1.0)).length() < 1e-5
+        (b.min - Vec3::new(9.0, -1.0, -1.0)).length() < 1e-5 && (b.max - Vec3::new(11.0, 1.0, 1.0)).length() < 1e-5
     );
     assert!(g.vertices.iter().all(|v| v.albedo == [0.2, 0.3, 0.4]));
 
@@ -877,6 +565,13 @@ fn obj_imports_with_the_right_triangle_count() {
     assert_eq!(g.triangle_count(), 1);
     assert_eq!(g.vertices[g.indices[0] as usize].normal, [0.0, 1.0, 0.0]);
     assert_eq!(g.vertices[g.indices[0] as usize].albedo, [0.8, 0.1, 0.1]);
+    // A material library outside the mesh's directory is ignored (default albedo), not read.
+    let sub = dir.join("sub");
+    std::fs::create_dir_all(&sub).unwrap();
+    let p = write(&sub, "escape.obj", "mtllib ../m.mtl\nusemtl red\nv 0 0 0\nv 1 0 0\nv 0 0 1\nf 1 3 2\n");
+    let g = load_mesh(&p, &Transform::default(), None).unwrap();
+    assert_eq!(g.triangle_count(), 1);
+    assert_eq!(g.vertices[0].albedo, [0.7; 3]);
 }
 
 #[test]
@@ -895,10 +590,7 @@ fn bad_obj_files_error_instead_of_panicking() {
         match load_mesh(&p, &Transform::default(), None) {
             Ok(g) => {
                 // A truncated file may still be a valid, smaller mesh; it must be consistent.
-                assert!(
-                    g.indices.iter().all(|&i| (i as usize) < g.vertices.len()),
-                    "{name}"
-                );
+                assert!(g.indices.iter().all(|&i| (i as usize) < g.vertices.len()), "{name}");
                 assert_ne!(*name, "oob.obj");
                 assert_ne!(*name, "nan.obj");
                 assert_ne!(*name, "inf.obj");
@@ -911,12 +603,7 @@ fn bad_obj_files_error_instead_of_panicking() {
     }
     assert!(load_mesh(&dir.join("absent.obj"), &Transform::default(), None).is_err());
     let p = write(&dir, "x.ply", "ply\n");
-    assert!(
-        load_mesh(&p, &Transform::default(), None)
-            .unwrap_err()
-            .to_string()
-            .contains("x.ply")
-    );
+    assert!(load_mesh(&p, &Transform::default(), None).unwrap_err().to_string().contains("x.ply"));
 }
 
 fn base64(data: &[u8]) -> String {
@@ -967,25 +654,13 @@ fn gltf_imports_with_the_right_triangle_count() {
     let g = load_mesh(&p, &Transform::default(), None).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(g.triangle_count(), 1);
     // Node transforms: scale 2 then translate z by 5.
-    let ps: Vec<Vec3> = g
-        .indices
-        .iter()
-        .map(|&i| Vec3::from(g.vertices[i as usize].position))
-        .collect();
-    assert!(
-        ps.contains(&Vec3::new(2.0, 0.0, 5.0)) && ps.contains(&Vec3::new(0.0, 2.0, 5.0)),
-        "{ps:?}"
-    );
+    let ps: Vec<Vec3> = g.indices.iter().map(|&i| Vec3::from(g.vertices[i as usize].position)).collect();
+    assert!(ps.contains(&Vec3::new(2.0, 0.0, 5.0)) && ps.contains(&Vec3::new(0.0, 2.0, 5.0)), "{ps:?}");
     // Flat normal computed: +Z (counter-clockwise in XY).
     assert_eq!(g.vertices[0].normal, [0.0, 0.0, 1.0]);
     // Material base colour as albedo when the object gives none.
     assert_eq!(g.vertices[0].albedo, [0.9, 0.2, 0.1]);
-    let g = load_mesh(
-        &p,
-        &Transform::at(Vec3::new(1.0, 0.0, 0.0)),
-        Some(Vec3::splat(0.5)),
-    )
-    .unwrap();
+    let g = load_mesh(&p, &Transform::at(Vec3::new(1.0, 0.0, 0.0)), Some(Vec3::splat(0.5))).unwrap();
     assert_eq!(g.vertices[0].albedo, [0.5; 3]);
     assert!(g.vertices.iter().any(|v| v.position == [3.0, 0.0, 5.0]));
 
@@ -995,7 +670,7 @@ fn gltf_imports_with_the_right_triangle_count() {
     for i in [0u16, 1, 2, 2, 1, 3] {
         bin.extend(i.to_le_bytes());
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let json = format!(
@@ -1010,7 +685,7 @@ fn gltf_imports_with_the_right_triangle_count() {
         bin.len()
     );
     let mut json = json.into_bytes();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let total = 12 + 8 + json.len() + 8 + bin.len();
@@ -1028,28 +703,17 @@ fn gltf_imports_with_the_right_triangle_count() {
     let g = load_mesh(&p, &Transform::default(), None).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(g.triangle_count(), 2);
     assert_eq!(g.vertices.len(), 4);
-    assert!(
-        g.vertices
-            .iter()
-            .all(|v| v.normal == [0.0, 0.0, 1.0] && v.albedo == [0.7; 3])
-    );
+    assert!(g.vertices.iter().all(|v| v.normal == [0.0, 0.0, 1.0] && v.albedo == [0.7; 3]));
 
     // Truncated GLB files error.
     for cut in [4, 12, 20, 40, glb.len() - 10] {
         let p = write(&dir, "cut.glb", &glb[..cut]);
         let e = load_mesh(&p, &Transform::default(), None).expect_err("truncated glb");
-        assert!(
-            e.to_string().contains("cut.glb") && !e.to_string().contains('\n'),
-            "{e}"
-        );
+        assert!(e.to_string().contains("cut.glb") && !e.to_string().contains('\n'), "{e}");
     }
 
     // In a scene file.
-    let p = write(
-        &dir,
-        "scene.toml",
-        "[[objects]]\nkind = \"mesh\"\npath = \"tri.gltf\"\n",
-    );
+    let p = write(&dir, "scene.toml", "[[objects]]\nkind = \"mesh\"\npath = \"tri.gltf\"\n");
     assert_eq!(load_scene_file(&p).unwrap().geometry.triangle_count(), 1);
 }
 
@@ -1063,36 +727,15 @@ fn bad_gltf_files_error_instead_of_panicking() {
         ("short_buffer.gltf", one_triangle_gltf(400, 3)),
         ("count_too_big.gltf", one_triangle_gltf(36, 300)),
         ("count_zero.gltf", one_triangle_gltf(36, 0)),
-        (
-            "escape.gltf",
-            good.replace("data:application/octet-stream;base64,", "../secret.bin#"),
-        ),
-        (
-            "absolute.gltf",
-            good.replace("data:application/octet-stream;base64,", "/etc/"),
-        ),
-        (
-            "missing_buffer.gltf",
-            good.replace("data:application/octet-stream;base64,", "nope.bin?"),
-        ),
-        (
-            "bad_node.gltf",
-            good.replace("\"children\": [1]", "\"children\": [7]"),
-        ),
-        (
-            "cycle.gltf",
-            good.replace(
-                "{ \"mesh\": 0, \"scale\": [2, 2, 2] }",
-                "{ \"mesh\": 0, \"children\": [0] }",
-            ),
-        ),
-        (
-            "nan.gltf",
-            good.replace(
-                "\"translation\": [0, 0, 5]",
-                "\"matrix\": [0,0,0,0, 0,0,0,0, 0,0,0,0, 0,0,0,1]",
-            ),
-        ),
+        ("escape.gltf", good.replace("data:application/octet-stream;base64,", "../secret.bin#")),
+        ("absolute.gltf", good.replace("data:application/octet-stream;base64,", "/etc/")),
+        ("missing_buffer.gltf", good.replace("data:application/octet-stream;base64,", "nope.bin?")),
+        ("bad_node.gltf", good.replace("\"children\": [1]", "\"children\": [7]")),
+        ("cycle.gltf", good.replace("{ \"mesh\": 0, \"scale\": [2, 2, 2] }", "{ \"mesh\": 0, \"children\": [0] }")),
+        ("escape_encoded.gltf", good.replace("data:application/octet-stream;base64,", "%2e%2e%2Fsecret.bin#")),
+        ("escape_encoded2.gltf", good.replace("data:application/octet-stream;base64,", "sub/..%2F..%2Fsecret.bin#")),
+        ("file_scheme.gltf", good.replace("data:application/octet-stream;base64,", "file:///etc/")),
+        ("nan.gltf", good.replace("\"translation\": [0, 0, 5]", "\"matrix\": [0,0,0,0, 0,0,0,0, 0,0,0,0, 0,0,0,1]")),
     ];
     for (name, text) in &cases {
         let p = write(&dir, name, text);
@@ -1102,10 +745,7 @@ fn bad_gltf_files_error_instead_of_panicking() {
             ("count_zero.gltf", Ok(g)) => assert_eq!(g.triangle_count(), 0),
             // A singular node matrix collapses the triangle: dropped, not an error.
             ("nan.gltf", Ok(g)) => assert_eq!(g.triangle_count(), 0),
-            (_, Ok(g)) => panic!(
-                "{name}: expected an error, got {} triangles",
-                g.triangle_count()
-            ),
+            (_, Ok(g)) => panic!("{name}: expected an error, got {} triangles", g.triangle_count()),
             (_, Err(e)) => {
                 let m = e.to_string();
                 assert!(m.contains(*name) && !m.contains('\n'), "{m}");
@@ -1126,61 +766,30 @@ fn primitives_have_unit_normals_and_expected_sizes() {
     ] {
         assert_eq!(g.triangle_count(), tris, "{name}");
         let b = g.bounds();
-        assert!(
-            (b.max.x - 0.5).abs() < 1e-5 && (b.min.x + 0.5).abs() < 1e-5,
-            "{name}"
-        );
+        assert!((b.max.x - 0.5).abs() < 1e-5 && (b.min.x + 0.5).abs() < 1e-5, "{name}");
         for tri in g.indices.chunks_exact(3) {
-            let p: Vec<Vec3> = tri
-                .iter()
-                .map(|&i| Vec3::from(g.vertices[i as usize].position))
-                .collect();
+            let p: Vec<Vec3> = tri.iter().map(|&i| Vec3::from(g.vertices[i as usize].position)).collect();
             let face = (p[1] - p[0]).cross(p[2] - p[0]);
             assert!(face.length() > 0.0, "{name}: degenerate triangle");
             let n = Vec3::from(g.vertices[tri[0] as usize].normal);
             assert!((n.length() - 1.0).abs() < 1e-5, "{name}");
             // Winding agrees with the normal (counter-clockwise front faces).
-            assert!(
-                face.dot(n) > 0.0,
-                "{name}: winding disagrees with the normal"
-            );
+            assert!(face.dot(n) > 0.0, "{name}: winding disagrees with the normal");
         }
     }
     // Rotation order X then Y then Z; mirroring keeps winding consistent.
-    let t = Transform {
-        translate: Vec3::ZERO,
-        rotate_degrees: Vec3::new(90.0, 0.0, 0.0),
-        scale: Vec3::ONE,
-    };
+    let t = Transform { translate: Vec3::ZERO, rotate_degrees: Vec3::new(90.0, 0.0, 0.0), scale: Vec3::ONE };
     let g = mesh::plane(&t, a);
     assert!((Vec3::from(g.vertices[0].normal) - Vec3::Z).length() < 1e-5);
-    let t = Transform {
-        translate: Vec3::ZERO,
-        rotate_degrees: Vec3::new(90.0, 90.0, 0.0),
-        scale: Vec3::ONE,
-    };
+    let t = Transform { translate: Vec3::ZERO, rotate_degrees: Vec3::new(90.0, 90.0, 0.0), scale: Vec3::ONE };
     let g = mesh::plane(&t, a);
-    assert!(
-        (Vec3::from(g.vertices[0].normal) - Vec3::X).length() < 1e-5,
-        "{:?}",
-        g.vertices[0].normal
-    );
-    let t = Transform {
-        translate: Vec3::ZERO,
-        rotate_degrees: Vec3::ZERO,
-        scale: Vec3::new(-1.0, 2.0, 3.0),
-    };
+    assert!((Vec3::from(g.vertices[0].normal) - Vec3::X).length() < 1e-5, "{:?}", g.vertices[0].normal);
+    let t = Transform { translate: Vec3::ZERO, rotate_degrees: Vec3::ZERO, scale: Vec3::new(-1.0, 2.0, 3.0) };
     let g = mesh::cuboid(&t, a);
     for tri in g.indices.chunks_exact(3) {
-        let p: Vec<Vec3> = tri
-            .iter()
-            .map(|&i| Vec3::from(g.vertices[i as usize].position))
-            .collect();
+        let p: Vec<Vec3> = tri.iter().map(|&i| Vec3::from(g.vertices[i as usize].position)).collect();
         let n = Vec3::from(g.vertices[tri[0] as usize].normal);
         assert!((p[1] - p[0]).cross(p[2] - p[0]).dot(n) > 0.0);
-        assert!(
-            n.dot((p[0] + p[1] + p[2]) / 3.0) > 0.0,
-            "mirrored cube normal points inward"
-        );
+        assert!(n.dot((p[0] + p[1] + p[2]) / 3.0) > 0.0, "mirrored cube normal points inward");
     }
 }

@@ -83,11 +83,9 @@ impl FrameDesc {
         let vp = self.camera.view_projection(self.aspect());
         let (light_dir, cos_outer, cos_inner) = match &self.light {
             Light::Directional { direction, .. } => (direction.normalize(), 0.0, 0.0),
-            Light::Spot { direction, outer_angle_degrees, inner_angle_degrees, .. } => (
-                direction.normalize(),
-                outer_angle_degrees.to_radians().cos(),
-                inner_angle_degrees.to_radians().cos(),
-            ),
+            Light::Spot { direction, outer_angle_degrees, inner_angle_degrees, .. } => {
+                (direction.normalize(), outer_angle_degrees.to_radians().cos(), inner_angle_degrees.to_radians().cos())
+            }
             Light::Point { .. } => (Vec3::ZERO, 0.0, 0.0),
         };
         let color = match &self.light {

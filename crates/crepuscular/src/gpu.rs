@@ -201,9 +201,18 @@ impl GpuContext {
             view_formats: &[],
         });
         self.queue.write_texture(
-            wgpu::TexelCopyTextureInfo { texture: &tex, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+            wgpu::TexelCopyTextureInfo {
+                texture: &tex,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
             data,
-            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(width * bytes_per_texel), rows_per_image: Some(height) },
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(width * bytes_per_texel),
+                rows_per_image: Some(height),
+            },
             wgpu::Extent3d { width, height, depth_or_array_layers: layers },
         );
         tex
@@ -221,7 +230,15 @@ impl GpuContext {
                 16,
                 bytemuck::cast_slice(&t.texels),
             ),
-            None => self.upload_texture("white", wgpu::TextureFormat::Rgba32Float, 1, 1, 1, 16, bytemuck::cast_slice(&[1.0f32; 4])),
+            None => self.upload_texture(
+                "white",
+                wgpu::TextureFormat::Rgba32Float,
+                1,
+                1,
+                1,
+                16,
+                bytemuck::cast_slice(&[1.0f32; 4]),
+            ),
         }
     }
 
@@ -411,7 +428,15 @@ impl UploadedFrame {
         gpu.check_texture_size("image size", d.width, d.height)?;
         gpu.check_texture_size("shadow_map_size", sp.size, sp.size)?;
         gpu.scoped("uploading a CPU frame", || {
-            let depth = gpu.upload_texture("depth", wgpu::TextureFormat::R32Float, d.width, d.height, 1, 4, bytemuck::cast_slice(frame.depth));
+            let depth = gpu.upload_texture(
+                "depth",
+                wgpu::TextureFormat::R32Float,
+                d.width,
+                d.height,
+                1,
+                4,
+                bytemuck::cast_slice(frame.depth),
+            );
             let shadow = gpu.upload_texture(
                 "shadow map",
                 wgpu::TextureFormat::R32Float,
@@ -427,13 +452,20 @@ impl UploadedFrame {
                     dimension: Some(wgpu::TextureViewDimension::D2Array),
                     ..Default::default()
                 }),
-                spot_texture: frame.spot_texture().map(|t| gpu.upload_rgb_texture(Some(t)).create_view(&Default::default())),
+                spot_texture: frame
+                    .spot_texture()
+                    .map(|t| gpu.upload_rgb_texture(Some(t)).create_view(&Default::default())),
             }
         })
     }
 
     /// The frame boundary over these textures.
     pub fn frame<'a>(&'a self, desc: &'a crate::frame::FrameDesc) -> crate::GpuFrame<'a> {
-        crate::GpuFrame { desc, depth: &self.depth, shadow_map: &self.shadow_map, spot_texture: self.spot_texture.as_ref() }
+        crate::GpuFrame {
+            desc,
+            depth: &self.depth,
+            shadow_map: &self.shadow_map,
+            spot_texture: self.spot_texture.as_ref(),
+        }
     }
 }

@@ -26,11 +26,8 @@ pub fn light_incident(light: &Light, medium: &Medium, spot_view_proj: &glam::Mat
             let d = d2.sqrt();
             let wl = v / d;
             let cos_a = wl.dot(direction.normalize());
-            let cone = Light::spot_cone(
-                outer_angle_degrees.to_radians().cos(),
-                inner_angle_degrees.to_radians().cos(),
-                cos_a,
-            );
+            let cone =
+                Light::spot_cone(outer_angle_degrees.to_radians().cos(), inner_angle_degrees.to_radians().cos(), cos_a);
             if cone <= 0.0 {
                 return (Vec3::ZERO, wl);
             }
@@ -59,7 +56,14 @@ pub fn light_position(light: &Light) -> Vec3 {
 /// σs·p(cos θ)·L_in(x)·V(x) at a point x on a view ray of unit direction `view_dir`: the
 /// in-scattered radiance per unit length before transmittance to the eye. Mirrors
 /// `inscatter_density` in WGSL.
-pub fn inscatter_density(light: &Light, medium: &Medium, shadow: &ShadowMap, bias: f32, view_dir: Vec3, p: Vec3) -> Vec3 {
+pub fn inscatter_density(
+    light: &Light,
+    medium: &Medium,
+    shadow: &ShadowMap,
+    bias: f32,
+    view_dir: Vec3,
+    p: Vec3,
+) -> Vec3 {
     let (l_in, wl) = light_incident(light, medium, &shadow.projection.view_proj[0], p);
     if l_in == Vec3::ZERO {
         return Vec3::ZERO;
@@ -76,7 +80,13 @@ pub fn inscatter_density(light: &Light, medium: &Medium, shadow: &ShadowMap, bia
 /// Lambert surface radiance with the same light and shadow map, plus ambient·albedo. The
 /// normal is flipped to face the camera (surfaces are double-sided). Mirrors
 /// `surface_radiance` in common.wgsl.
-pub fn surface_radiance(desc: &crate::frame::FrameDesc, shadow: &ShadowMap, p: Vec3, normal: Vec3, albedo: Vec3) -> Vec3 {
+pub fn surface_radiance(
+    desc: &crate::frame::FrameDesc,
+    shadow: &ShadowMap,
+    p: Vec3,
+    normal: Vec3,
+    albedo: Vec3,
+) -> Vec3 {
     let mut n = normal.normalize_or_zero();
     if n.dot(desc.camera.position - p) < 0.0 {
         n = -n;

@@ -357,7 +357,11 @@ mod tests {
 
     #[test]
     fn f32_and_f64_phase_agree() {
-        for p in [Phase::HenyeyGreenstein { g: 0.7 }, Phase::Rayleigh, Phase::HoffmanPreetham { g: 0.8, rayleigh_fraction: Vec3::new(0.2, 0.4, 0.6) }] {
+        for p in [
+            Phase::HenyeyGreenstein { g: 0.7 },
+            Phase::Rayleigh,
+            Phase::HoffmanPreetham { g: 0.8, rayleigh_fraction: Vec3::new(0.2, 0.4, 0.6) },
+        ] {
             for i in 0..=20 {
                 let c = -1.0 + i as f32 * 0.1;
                 let a = p.eval(c);

@@ -49,11 +49,9 @@ impl ToneMap {
     /// (`width * height * 3` bytes). Alpha is ignored.
     pub fn to_rgb8(&self, img: &Image) -> Vec<u8> {
         let mut out = vec![0u8; img.pixels.len() * 3];
-        out.par_chunks_mut(3)
-            .zip(img.pixels.par_iter())
-            .for_each(|(dst, p)| {
-                dst.copy_from_slice(&self.apply([p[0], p[1], p[2]]));
-            });
+        out.par_chunks_mut(3).zip(img.pixels.par_iter()).for_each(|(dst, p)| {
+            dst.copy_from_slice(&self.apply([p[0], p[1], p[2]]));
+        });
         out
     }
 }
@@ -100,11 +98,7 @@ pub fn srgb_oetf(linear: f32) -> f32 {
         return 0.0;
     }
     let x = linear.clamp(0.0, 1.0);
-    if x <= 0.003_130_8 {
-        12.92 * x
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    }
+    if x <= 0.003_130_8 { 12.92 * x } else { 1.055 * x.powf(1.0 / 2.4) - 0.055 }
 }
 
 /// The sRGB electro-optical transfer function, the inverse of [`srgb_oetf`]: encoded `[0, 1]` →
@@ -114,11 +108,7 @@ pub fn srgb_eotf(encoded: f32) -> f32 {
         return 0.0;
     }
     let v = encoded.clamp(0.0, 1.0);
-    if v <= 0.040_45 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
+    if v <= 0.040_45 { v / 12.92 } else { ((v + 0.055) / 1.055).powf(2.4) }
 }
 
 /// Final composite `L = T · L_surface + L_scatt` per pixel and channel, with alpha 1.
@@ -138,11 +128,7 @@ pub fn composite(surface: &Image, inscatter: &Image, transmittance: &[[f32; 3]])
         inscatter.width,
         inscatter.height
     );
-    assert_eq!(
-        surface.pixels.len(),
-        inscatter.pixels.len(),
-        "composite: pixel counts differ"
-    );
+    assert_eq!(surface.pixels.len(), inscatter.pixels.len(), "composite: pixel counts differ");
     assert_eq!(
         transmittance.len(),
         surface.pixels.len(),
@@ -155,20 +141,9 @@ pub fn composite(surface: &Image, inscatter: &Image, transmittance: &[[f32; 3]])
         .par_iter()
         .zip(inscatter.pixels.par_iter())
         .zip(transmittance.par_iter())
-        .map(|((s, l), t)| {
-            [
-                t[0] * s[0] + l[0],
-                t[1] * s[1] + l[1],
-                t[2] * s[2] + l[2],
-                1.0,
-            ]
-        })
+        .map(|((s, l), t)| [t[0] * s[0] + l[0], t[1] * s[1] + l[1], t[2] * s[2] + l[2], 1.0])
         .collect();
-    Image {
-        width: surface.width,
-        height: surface.height,
-        pixels,
-    }
+    Image { width: surface.width, height: surface.height, pixels }
 }
 
 #[cfg(test)]
@@ -229,10 +204,7 @@ mod tests {
 
     #[test]
     fn exposure_scales_input() {
-        assert_eq!(
-            ToneMap::new(2.0).apply([0.1; 3]),
-            ToneMap::new(1.0).apply([0.2; 3])
-        );
+        assert_eq!(ToneMap::new(2.0).apply([0.1; 3]), ToneMap::new(1.0).apply([0.2; 3]));
     }
 
     #[test]
@@ -253,10 +225,7 @@ mod tests {
         let rgb = ToneMap::default().to_rgb8(&img);
         assert_eq!(rgb.len(), 18);
         for (i, p) in img.pixels.iter().enumerate() {
-            assert_eq!(
-                &rgb[i * 3..i * 3 + 3],
-                &ToneMap::default().apply([p[0], p[1], p[2]])
-            );
+            assert_eq!(&rgb[i * 3..i * 3 + 3], &ToneMap::default().apply([p[0], p[1], p[2]]));
         }
     }
 

@@ -111,17 +111,33 @@ fn point_quadrature(desc: &FrameDesc) -> Image {
 
 fn media() -> Vec<Medium> {
     vec![
-        Medium { scattering: Vec3::new(0.02, 0.03, 0.05), absorption: Vec3::splat(0.01), phase: Phase::HenyeyGreenstein { g: 0.7 } },
+        Medium {
+            scattering: Vec3::new(0.02, 0.03, 0.05),
+            absorption: Vec3::splat(0.01),
+            phase: Phase::HenyeyGreenstein { g: 0.7 },
+        },
         Medium { scattering: Vec3::splat(0.1), absorption: Vec3::ZERO, phase: Phase::Isotropic },
         Medium { scattering: Vec3::new(0.05, 0.08, 0.12), absorption: Vec3::splat(0.02), phase: Phase::Rayleigh },
-        Medium { scattering: Vec3::splat(0.04), absorption: Vec3::splat(0.0), phase: Phase::HoffmanPreetham { g: 0.76, rayleigh_fraction: Vec3::new(0.2, 0.4, 0.6) } },
+        Medium {
+            scattering: Vec3::splat(0.04),
+            absorption: Vec3::splat(0.0),
+            phase: Phase::HoffmanPreetham { g: 0.76, rayleigh_fraction: Vec3::new(0.2, 0.4, 0.6) },
+        },
         // σt = 0 in one channel: the closed form's limit σs·p·E·s.
-        Medium { scattering: Vec3::new(0.0, 0.05, 0.05), absorption: Vec3::ZERO, phase: Phase::HenyeyGreenstein { g: -0.3 } },
+        Medium {
+            scattering: Vec3::new(0.0, 0.05, 0.05),
+            absorption: Vec3::ZERO,
+            phase: Phase::HenyeyGreenstein { g: -0.3 },
+        },
     ]
 }
 
 fn sun() -> Light {
-    Light::Directional { direction: Vec3::new(0.3, -0.2, 1.0).normalize(), color: Vec3::new(1.0, 0.9, 0.8), intensity: 4.0 }
+    Light::Directional {
+        direction: Vec3::new(0.3, -0.2, 1.0).normalize(),
+        color: Vec3::new(1.0, 0.9, 0.8),
+        intensity: 4.0,
+    }
 }
 
 fn cpu_frame<'a>(d: &'a FrameDesc, depth: &'a [f32], sm: &'a ShadowMap) -> CpuFrame<'a> {
@@ -133,7 +149,9 @@ fn directional_reference_matches_the_closed_form_tightly() {
     for m in media() {
         let (d, depth, sm) = frame(sun(), m.clone());
         let exact = directional_closed_form(&d);
-        let (img, _) = reference::render(&cpu_frame(&d, &depth, &sm), &ReferenceSettings { steps: 1024, seed: 3 }, &|_, _| {}).unwrap();
+        let (img, _) =
+            reference::render(&cpu_frame(&d, &depth, &sm), &ReferenceSettings { steps: 1024, seed: 3 }, &|_, _| {})
+                .unwrap();
         let e = common::max_rel(&img, &exact, 1e-9);
         assert!(e < 1e-3, "{m:?}: reference off the closed form by {e}");
     }
@@ -176,7 +194,9 @@ fn point_light_reference_matches_an_independent_quadrature() {
     for m in media() {
         let (d, depth, sm) = frame(lamp(), m.clone());
         let exact = point_quadrature(&d);
-        let (img, _) = reference::render(&cpu_frame(&d, &depth, &sm), &ReferenceSettings { steps: 2048, seed: 5 }, &|_, _| {}).unwrap();
+        let (img, _) =
+            reference::render(&cpu_frame(&d, &depth, &sm), &ReferenceSettings { steps: 2048, seed: 5 }, &|_, _| {})
+                .unwrap();
         let e = common::max_rel(&img, &exact, 1e-9);
         assert!(e < 5e-3, "{m:?}: reference off the quadrature by {e}");
     }

@@ -97,7 +97,11 @@ pub fn frame_pass_layout(device: &wgpu::Device, label: &str) -> wgpu::BindGroupL
     let uniform = |binding| wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
         count: None,
     };
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -168,7 +172,12 @@ impl BruteForce {
 
     /// Renders the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
     /// the frame's size). Pass list: `march`.
-    pub fn render(&mut self, gpu: &GpuContext, frame: &GpuFrame, output: &wgpu::TextureView) -> Result<TechniqueStats, Error> {
+    pub fn render(
+        &mut self,
+        gpu: &GpuContext,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<TechniqueStats, Error> {
         self.settings.validate()?;
         let desc = frame.desc;
         gpu.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&desc.uniforms()));

@@ -54,7 +54,9 @@ impl<'a> Integrand<'a> {
         let d = frame.desc;
         let dv = |v: glam::Vec3| v.as_dvec3();
         let (color, axis, co, ci) = match &d.light {
-            Light::Directional { direction, color, intensity } => (dv(*color) * *intensity as f64, dv(direction.normalize()), 0.0, 0.0),
+            Light::Directional { direction, color, intensity } => {
+                (dv(*color) * *intensity as f64, dv(direction.normalize()), 0.0, 0.0)
+            }
             Light::Spot { direction, color, intensity, outer_angle_degrees, inner_angle_degrees, .. } => (
                 dv(*color) * *intensity as f64,
                 dv(direction.normalize()),
@@ -92,7 +94,8 @@ impl<'a> Integrand<'a> {
         let tx = ((ndc.x * 0.5 + 0.5) * n).floor().min(n - 1.0) as u32;
         let ty = ((0.5 - ndc.y * 0.5) * n).floor().min(n - 1.0) as u32;
         let (near, far) = (pr.near as f64, pr.far as f64);
-        let lin = |d: f64| if pr.orthographic { near + d * (far - near) } else { near * far / (far - d * (far - near)) };
+        let lin =
+            |d: f64| if pr.orthographic { near + d * (far - near) } else { near * far / (far - d * (far - near)) };
         let stored = lin(sm.texel(layer, tx, ty) as f64);
         if lin(ndc.z) <= stored + self.frame.desc.shadow_bias as f64 { 1.0 } else { 0.0 }
     }
@@ -206,7 +209,10 @@ pub fn render(
     }
     let mut extra = std::collections::BTreeMap::new();
     extra.insert("steps".into(), n as f64);
-    extra.insert("convergence_mean_rel_change_half_vs_full".into(), if count > 0 { sum_rel / count as f64 } else { 0.0 });
+    extra.insert(
+        "convergence_mean_rel_change_half_vs_full".into(),
+        if count > 0 { sum_rel / count as f64 } else { 0.0 },
+    );
     extra.insert("convergence_max_rel_change_half_vs_full".into(), max_rel);
     let stats = TechniqueStats {
         technique: "reference".into(),

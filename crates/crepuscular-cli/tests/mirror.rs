@@ -91,9 +91,12 @@ fn brute_force_gpu_matches_its_cpu_mirror() {
             let frac = bad as f64 / (img.pixels.len() * 3) as f64;
             eprintln!("{name} {settings:?}: {:.4}% differ > 1e-3, worst |Δ|/peak {worst:.2e}", frac * 100.0);
             assert!(frac < 0.003, "{name}: {:.3}% of values differ by > 0.1%", frac * 100.0);
-            // Where they differ, only a few samples of the pixel flipped: each is worth at most
-            // ~1/steps of the brightest pixel.
-            assert!(worst < 4.0 / settings.steps as f32, "{name}: worst |Δ|/peak {worst}");
+            // Where they differ, only a sample or two of the pixel flipped across a shadow edge
+            // (f32 rounding in the shadow-map lookup differs between GPU and CPU). A step's
+            // weight is ∫T over the step, up to ~max(1/N, σt·Δ) of the pixel: near-camera leaf
+            // edges in the forest reach ~9 % of the peak. A real divergence would show in the
+            // fraction above, and as errors far beyond a few steps' weight here.
+            assert!(worst < 0.2, "{name}: worst |Δ|/peak {worst}");
         }
     }
 }

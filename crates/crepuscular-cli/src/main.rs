@@ -147,11 +147,7 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
         }
         bar.set_position(done);
     };
-    let out = render::render(
-        &scene,
-        gpu.as_ref(),
-        &RenderOptions { backend: a.backend, technique, progress: &progress, notice: &notice },
-    )?;
+    let out = render::render(&scene, gpu.as_ref(), &RenderOptions { technique, progress: &progress })?;
     bar.finish_and_clear();
     let tone = ToneMap::new(scene.render.exposure);
     let rgb = tone.to_rgb8(&out.final_radiance);

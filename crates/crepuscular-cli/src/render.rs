@@ -140,14 +140,10 @@ pub struct RenderStats {
 
 /// Options of one render.
 pub struct RenderOptions<'a> {
-    /// Backend.
-    pub backend: Backend,
     /// Technique.
     pub technique: TechniqueChoice,
     /// Progress for long CPU work: (done, total).
     pub progress: &'a (dyn Fn(u64, u64) + Sync),
-    /// Printed notices (e.g. falling back to the CPU).
-    pub notice: &'a dyn Fn(&str),
 }
 
 /// The frame description of a scene at its render size.

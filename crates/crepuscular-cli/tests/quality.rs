@@ -9,7 +9,7 @@ use crepuscular::techniques::reference::ReferenceSettings;
 use crepuscular::tonemap::{ToneMap, composite};
 use crepuscular::{CpuFrame, Image};
 use crepuscular_cli::metrics::compare;
-use crepuscular_cli::render::{Backend, RenderOptions, TechniqueChoice, frame_desc, render};
+use crepuscular_cli::render::{RenderOptions, TechniqueChoice, frame_desc, render};
 use crepuscular_scene::{builtin, host_cpu};
 
 /// (scene, minimum PSNR dB, maximum FLIP mean) for brute-force at its default 64 steps,
@@ -69,14 +69,7 @@ fn brute_force_vs_reference_on_every_builtin_scene_gpu() {
     let Some(gpu) = test_gpu("brute_force_vs_reference_on_every_builtin_scene_gpu") else { return };
     for (name, _) in builtin::builtin_names() {
         let scene = small(name);
-        let run = |technique| {
-            render(
-                &scene,
-                Some(&gpu),
-                &RenderOptions { backend: Backend::Gpu, technique, progress: &|_, _| {}, notice: &|_| {} },
-            )
-            .unwrap()
-        };
+        let run = |technique| render(&scene, Some(&gpu), &RenderOptions { technique, progress: &|_, _| {} }).unwrap();
         let bf = run(TechniqueChoice::BruteForce(BruteForceSettings::default()));
         let rf = run(TechniqueChoice::Reference(REFERENCE));
         assert_eq!(bf.stats.backend, "gpu");

@@ -42,17 +42,22 @@ pub struct HostTextures {
 impl HostTextures {
     /// `D2Array` view of the shadow map, as the effect binds it.
     pub fn shadow_view(&self) -> wgpu::TextureView {
-        self.shadow_map.create_view(&wgpu::TextureViewDescriptor {
-            dimension: Some(wgpu::TextureViewDimension::D2Array),
-            aspect: wgpu::TextureAspect::DepthOnly,
-            ..Default::default()
-        })
+        shadow_array_view(&self.shadow_map)
     }
     /// View of the depth buffer.
     pub fn depth_view(&self) -> wgpu::TextureView {
         self.depth
             .create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() })
     }
+}
+
+/// All layers of a shadow map as the `D2Array` depth view that shaders bind.
+fn shadow_array_view(shadow_map: &wgpu::Texture) -> wgpu::TextureView {
+    shadow_map.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        aspect: wgpu::TextureAspect::DepthOnly,
+        ..Default::default()
+    })
 }
 
 const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
@@ -204,7 +209,7 @@ impl GpuHost {
         gpu.check_texture_size("shadow_map_size", sp.size, sp.size)?;
         gpu.check_texture_size("image size", desc.width, desc.height)?;
         let device = &gpu.device;
-        let tex = |label, w, h, layers, format, extra| {
+        let tex = |label, w, h, layers, format| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
                 size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: layers },
@@ -214,37 +219,15 @@ impl GpuHost {
                 format,
                 usage: wgpu::TextureUsages::RENDER_ATTACHMENT
                     | wgpu::TextureUsages::TEXTURE_BINDING
-                    | wgpu::TextureUsages::COPY_SRC
-                    | extra,
+                    | wgpu::TextureUsages::COPY_SRC,
                 view_formats: &[],
             })
         };
         let (shadow_map, depth, surface) = gpu.scoped("allocating host textures", || {
             (
-                tex(
-                    "shadow map",
-                    sp.size,
-                    sp.size,
-                    sp.layers,
-                    wgpu::TextureFormat::Depth32Float,
-                    wgpu::TextureUsages::empty(),
-                ),
-                tex(
-                    "camera depth",
-                    desc.width,
-                    desc.height,
-                    1,
-                    wgpu::TextureFormat::Depth32Float,
-                    wgpu::TextureUsages::empty(),
-                ),
-                tex(
-                    "surface radiance",
-                    desc.width,
-                    desc.height,
-                    1,
-                    wgpu::TextureFormat::Rgba32Float,
-                    wgpu::TextureUsages::empty(),
-                ),
+                tex("shadow map", sp.size, sp.size, sp.layers, wgpu::TextureFormat::Depth32Float),
+                tex("camera depth", desc.width, desc.height, 1, wgpu::TextureFormat::Depth32Float),
+                tex("surface radiance", desc.width, desc.height, 1, wgpu::TextureFormat::Rgba32Float),
             )
         })?;
         let spot_texture = gpu.upload_rgb_texture(spot);
@@ -310,11 +293,7 @@ impl GpuHost {
             contents: bytemuck::bytes_of(&desc.uniforms()),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let shadow_view = shadow_map.create_view(&wgpu::TextureViewDescriptor {
-            dimension: Some(wgpu::TextureViewDimension::D2Array),
-            aspect: wgpu::TextureAspect::DepthOnly,
-            ..Default::default()
-        });
+        let shadow_view = shadow_array_view(&shadow_map);
         let spot_view = spot_texture.create_view(&Default::default());
         let bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("surface"),

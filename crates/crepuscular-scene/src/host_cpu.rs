@@ -47,9 +47,7 @@ pub fn render(geometry: &Geometry, desc: &FrameDesc) -> CpuHost {
         };
         let (x, y) = ((i as u32 % desc.width), (i as u32 / desc.width));
         // World position from the depth buffer, as the GPU's interpolated position would give.
-        let ndc_x = (x as f32 + 0.5) / desc.width as f32 * 2.0 - 1.0;
-        let ndc_y = 1.0 - (y as f32 + 0.5) / desc.height as f32 * 2.0;
-        let p = inv.project_point3(Vec3::new(ndc_x, ndc_y, db.depth[i]));
+        let p = inv.project_point3(desc.pixel_ndc(x, y).extend(db.depth[i]));
         let l = surface_radiance(desc, &shadow_map, p, lerp(|v| v.normal), lerp(|v| v.albedo));
         *px = [l.x, l.y, l.z, 1.0];
     });

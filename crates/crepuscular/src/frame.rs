@@ -116,12 +116,18 @@ impl FrameDesc {
         }
     }
 
+    /// NDC x, y of the centre of pixel (x, y) (row 0 at the top, y up in NDC).
+    pub fn pixel_ndc(&self, x: u32, y: u32) -> glam::Vec2 {
+        glam::Vec2::new(
+            (x as f32 + 0.5) / self.width as f32 * 2.0 - 1.0,
+            1.0 - (y as f32 + 0.5) / self.height as f32 * 2.0,
+        )
+    }
+
     /// Unit direction of the view ray through the centre of pixel (x, y), computed as the
     /// shaders do (`pixel_ray` in common.wgsl): unproject the far-plane point.
     pub fn pixel_ray(&self, inv_view_proj: &Mat4, x: u32, y: u32) -> Vec3 {
-        let ndc_x = (x as f32 + 0.5) / self.width as f32 * 2.0 - 1.0;
-        let ndc_y = 1.0 - (y as f32 + 0.5) / self.height as f32 * 2.0;
-        let p = inv_view_proj.project_point3(Vec3::new(ndc_x, ndc_y, 1.0));
+        let p = inv_view_proj.project_point3(self.pixel_ndc(x, y).extend(1.0));
         (p - self.camera.position).normalize()
     }
 

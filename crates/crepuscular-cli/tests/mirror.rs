@@ -4,6 +4,7 @@
 
 use crepuscular::CpuFrame;
 use crepuscular::gpu::{UploadedFrame, test_gpu};
+use crepuscular::march::SpotSteps;
 use crepuscular::techniques::brute_force::{self, BruteForce, BruteForceSettings};
 use crepuscular_cli::render::frame_desc;
 use crepuscular_scene::{GpuHost, builtin, host, host_cpu};
@@ -65,8 +66,14 @@ fn brute_force_gpu_matches_its_cpu_mirror() {
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
-        for settings in [BruteForceSettings::default(), BruteForceSettings { steps: 17, jitter: true, frame_index: 7 }]
-        {
+        let spot = |spot_steps| BruteForceSettings { steps: 32, spot_steps, ..Default::default() };
+        for settings in [
+            BruteForceSettings::default(),
+            BruteForceSettings { steps: 17, jitter: true, frame_index: 7, ..Default::default() },
+            spot(SpotSteps::ExactCone),
+            spot(SpotSteps::AppendixBConstant),
+            spot(SpotSteps::AppendixBSmoothstep),
+        ] {
             let (cpu, _) = brute_force::cpu::march(&frame, &settings).unwrap();
             let up = UploadedFrame::new(&gpu, &frame).unwrap();
             let out = gpu.create_output_texture(desc.width, desc.height);

@@ -65,7 +65,33 @@ fn frame_uniforms_match_the_wgsl_layout() {
         assert_eq!(*wo as usize, ro, "offset of {rn}");
     }
     assert_eq!(span as usize, std::mem::size_of::<FrameUniforms>());
+}
+
+/// Checks a pass's `Params` uniform block against its Rust twin: member names, offsets, size.
+pub fn check_params(wgsl: &str, rust: &[(&str, usize)], size: usize) {
+    let module = parse("params", &crepuscular::shaders::compose(wgsl));
     let (members, span) = struct_members(&module, "Params");
-    assert_eq!(members.len(), 4);
-    assert_eq!(span as usize, std::mem::size_of::<crepuscular::techniques::brute_force::MarchParams>());
+    let named: Vec<_> = members.iter().filter(|(n, _)| !n.starts_with("_pad")).collect();
+    assert_eq!(named.len(), rust.len(), "Params field count: {members:?}");
+    for ((wn, wo), (rn, ro)) in named.iter().zip(rust) {
+        assert_eq!(wn, rn);
+        assert_eq!(*wo as usize, *ro, "offset of {rn}");
+    }
+    assert_eq!(span as usize, size);
+}
+
+#[test]
+fn pass_params_match_the_wgsl_layout() {
+    use crepuscular::techniques::brute_force::{MARCH_WGSL, MarchParams};
+    check_params(
+        MARCH_WGSL,
+        &[
+            ("steps", offset_of!(MarchParams, steps)),
+            ("jitter", offset_of!(MarchParams, jitter)),
+            ("frame_index", offset_of!(MarchParams, frame_index)),
+            ("spot_steps", offset_of!(MarchParams, spot_steps)),
+            ("spot_denominator", offset_of!(MarchParams, spot_denominator)),
+        ],
+        std::mem::size_of::<MarchParams>(),
+    );
 }

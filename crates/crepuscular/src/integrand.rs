@@ -53,6 +53,16 @@ pub fn light_position(light: &Light) -> Vec3 {
     }
 }
 
+/// L_in(x)·V(x) and ω_l: the integrand without σs and the phase function, for passes that look
+/// the phase function up in a table. Mirrors `lit_incident` in WGSL.
+pub fn lit_incident(light: &Light, medium: &Medium, shadow: &ShadowMap, bias: f32, p: Vec3) -> (Vec3, Vec3) {
+    let (l_in, wl) = light_incident(light, medium, &shadow.projection.view_proj[0], p);
+    if l_in == Vec3::ZERO {
+        return (l_in, wl);
+    }
+    (l_in * shadow.visibility(light_position(light), p, bias), wl)
+}
+
 /// σs·p(cos θ)·L_in(x)·V(x) at a point x on a view ray of unit direction `view_dir`: the
 /// in-scattered radiance per unit length before transmittance to the eye. Mirrors
 /// `inscatter_density` in WGSL.
@@ -64,17 +74,13 @@ pub fn inscatter_density(
     view_dir: Vec3,
     p: Vec3,
 ) -> Vec3 {
-    let (l_in, wl) = light_incident(light, medium, &shadow.projection.view_proj[0], p);
+    let (l_in, wl) = lit_incident(light, medium, shadow, bias, p);
     if l_in == Vec3::ZERO {
-        return Vec3::ZERO;
-    }
-    let v = shadow.visibility(light_position(light), p, bias);
-    if v == 0.0 {
         return Vec3::ZERO;
     }
     // cos θ = dot(ω_l, −ω): θ = 0 looking straight into the light (DESIGN.md §1).
     let cos_theta = -wl.dot(view_dir);
-    medium.scattering * medium.phase.eval(cos_theta) * l_in * v
+    medium.scattering * medium.phase.eval(cos_theta) * l_in
 }
 
 /// Lambert surface radiance with the same light and shadow map, plus ambient·albedo. The

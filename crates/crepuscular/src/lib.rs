@@ -12,6 +12,7 @@ pub mod frame;
 pub mod gpu;
 pub mod image;
 pub mod integrand;
+pub mod march;
 pub mod model;
 pub mod shaders;
 pub mod shadow;

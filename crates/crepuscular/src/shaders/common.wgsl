@@ -212,6 +212,17 @@ fn light_incident(f: Frame, spot_tex: texture_2d<f32>, p: vec3<f32>) -> Incident
     return r;
 }
 
+// integrand.rs lit_incident: L_in(x)·V(x) and ω_l — the integrand without σs and the phase
+// function, for passes that look the phase function up in a table.
+fn lit_incident(f: Frame, shadow_map: texture_2d_array<f32>, spot_tex: texture_2d<f32>, p: vec3<f32>) -> Incident {
+    var li = light_incident(f, spot_tex, p);
+    if all(li.radiance == vec3<f32>(0.0)) {
+        return li;
+    }
+    li.radiance *= shadow_visibility(f, shadow_map, p, f.shadow_params.z);
+    return li;
+}
+
 // integrand.rs inscatter_density: σs·p(cos θ)·L_in(x)·V(x).
 fn inscatter_density(
     f: Frame,
@@ -220,16 +231,99 @@ fn inscatter_density(
     view_dir: vec3<f32>,
     p: vec3<f32>,
 ) -> vec3<f32> {
-    let li = light_incident(f, spot_tex, p);
+    let li = lit_incident(f, shadow_map, spot_tex, p);
     if all(li.radiance == vec3<f32>(0.0)) {
         return vec3<f32>(0.0);
     }
-    let v = shadow_visibility(f, shadow_map, p, f.shadow_params.z);
-    if v == 0.0 {
-        return vec3<f32>(0.0);
-    }
     let cos_theta = -dot(li.dir, view_dir);
-    return f.sigma_s.xyz * phase(f, cos_theta) * li.radiance * v;
+    return f.sigma_s.xyz * phase(f, cos_theta) * li.radiance;
+}
+
+// ---- Where the N steps go (march.rs; Wyman & Ramsey 2008, Appendix B) ----
+
+// march.rs SpotCone::contains: inside the forward cone of the spot light.
+fn cone_contains(f: Frame, p: vec3<f32>) -> bool {
+    let v = p - f.light_pos.xyz;
+    return dot(v, f.light_dir.xyz) >= f.light_dir.w * length(v);
+}
+
+// march.rs cone_interval: the part [t0, t1] of o + t·d, t in [0, s], inside the cone
+// (t1 <= t0 when the ray misses it). Roots of (v·a)² = cos²·|v|², then midpoint tests.
+fn cone_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32) -> vec2<f32> {
+    if s <= 0.0 {
+        return vec2<f32>(0.0);
+    }
+    let axis = f.light_dir.xyz;
+    let v = o - f.light_pos.xyz;
+    let c2 = f.light_dir.w * f.light_dir.w;
+    let dv = dot(d, axis);
+    let va = dot(v, axis);
+    let qa = dv * dv - c2;
+    let qb = 2.0 * (dv * va - c2 * dot(d, v));
+    let qc = va * va - c2 * dot(v, v);
+    var cut0 = s;
+    var cut1 = s;
+    if abs(qa) > 1e-7 {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let q = -0.5 * (qb + sign(qb) * sqrt(disc));
+            cut0 = q / qa;
+            cut1 = select(cut0, qc / q, q != 0.0);
+        }
+    } else if qb != 0.0 {
+        cut0 = -qc / qb;
+    }
+    let lo = clamp(min(cut0, cut1), 0.0, s);
+    let hi = clamp(max(cut0, cut1), 0.0, s);
+    let bounds = array<f32, 4>(0.0, lo, hi, s);
+    var t0 = s;
+    var t1 = 0.0;
+    for (var i = 0; i < 3; i++) {
+        let a = bounds[i];
+        let b = bounds[i + 1];
+        if b > a && cone_contains(f, o + d * (0.5 * (a + b))) {
+            t0 = min(t0, a);
+            t1 = max(t1, b);
+        }
+    }
+    if t1 > t0 {
+        return vec2<f32>(t0, t1);
+    }
+    return vec2<f32>(0.0);
+}
+
+// march.rs appendix_b_chord: (d·sin φ, sin(β − φ/2)), Wyman & Ramsey 2008 App. B eq. 3–4.
+fn appendix_b_chord(d: f32, cos_beta: f32, cos_half: f32) -> vec2<f32> {
+    let sin_half = sqrt(max(1.0 - cos_half * cos_half, 0.0));
+    let sin_phi = 2.0 * sin_half * cos_half;
+    let sin_beta = sqrt(max(1.0 - cos_beta * cos_beta, 0.0));
+    return vec2<f32>(d * sin_phi, sin_beta * cos_half - cos_beta * sin_half);
+}
+
+// march.rs smooth_denominator: App. B's smoothstep clamp of the denominator to a floor k.
+fn smooth_denominator(den: f32, k: f32) -> f32 {
+    let t = clamp(den / (2.0 * k), 0.0, 1.0);
+    let w = t * t * (3.0 - 2.0 * t);
+    return k + (den - k) * w;
+}
+
+// march.rs march_interval: the interval of the view ray a technique marches with its N steps.
+// policy: 0 fixed, 1 exact-cone, 2 appendix-b-constant, 3 appendix-b-smoothstep.
+fn march_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
+    if f.ints.z != 1u || policy == 0u {
+        return vec2<f32>(0.0, s);
+    }
+    let c = cone_interval(f, o, d, s);
+    if c.y <= c.x || policy == 1u {
+        return c;
+    }
+    let dist = length(o + d * c.x - f.light_pos.xyz);
+    let ab = appendix_b_chord(dist, dot(d, f.light_dir.xyz), f.light_dir.w);
+    var den = denominator;
+    if policy == 3u {
+        den = smooth_denominator(ab.y, denominator);
+    }
+    return vec2<f32>(c.x, min(c.x + ab.x / den, s));
 }
 
 // A 32-bit integer hash (PCG, Jarzynski & Olano 2020), mirrored by `pcg_hash` in Rust.
@@ -289,4 +383,35 @@ fn surface_radiance(
         direct = albedo / PI * li.radiance * cosine * shadow_pcf(f, shadow_map, p, n);
     }
     return direct + f.ambient.xyz * albedo;
+}
+
+// march.rs march_steps: eq. 1 of Tóth & Umenhoffer 2009 over the interval iv = [t0, t1] of the
+// view ray from the eye along dir, cut into n equal steps Δ; sums the steps i = first,
+// first + stride, … < n (brute-force: 0, 1; interleaved: its block offset, M²), each sampled at
+// (i + j)·Δ and weighted by the transmittance integrated exactly over the step.
+fn march_steps(
+    f: Frame,
+    shadow_map: texture_2d_array<f32>,
+    spot_tex: texture_2d<f32>,
+    dir: vec3<f32>,
+    iv: vec2<f32>,
+    n: u32,
+    first: u32,
+    stride: u32,
+    j: f32,
+) -> vec3<f32> {
+    if iv.y <= iv.x {
+        return vec3<f32>(0.0);
+    }
+    let delta = (iv.y - iv.x) / f32(n);
+    let st = extinction(f);
+    let seg = segment_transmittance(st, delta);
+    var sum = vec3<f32>(0.0);
+    for (var i = first; i < n; i += stride) {
+        let t0 = iv.x + f32(i) * delta;
+        let t = iv.x + (f32(i) + j) * delta;
+        let p = f.camera_pos.xyz + dir * t;
+        sum += inscatter_density(f, shadow_map, spot_tex, dir, p) * exp(-st * t0) * seg;
+    }
+    return sum;
 }

@@ -5,31 +5,25 @@ use super::BruteForceSettings;
 use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
-use crate::integrand::inscatter_density;
-use crate::model::segment_transmittance;
+use crate::march::{SpotCone, frame_cone, march_interval, march_steps};
 use crate::shaders::pixel_jitter;
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
 use rayon::prelude::*;
 
-/// Mirrors `march_ray` in march.wgsl.
-pub fn march_ray(frame: &CpuFrame, settings: &BruteForceSettings, x: u32, y: u32, dir: Vec3, s: f32) -> Vec3 {
-    let desc = frame.desc;
-    let n = settings.steps;
-    let delta = s / n as f32;
+/// Mirrors `march_ray` in march.wgsl. `cone` is [`crate::march::frame_cone`] of the frame.
+pub fn march_ray(
+    frame: &CpuFrame,
+    settings: &BruteForceSettings,
+    cone: Option<&SpotCone>,
+    x: u32,
+    y: u32,
+    dir: Vec3,
+    s: f32,
+) -> Vec3 {
+    let iv = march_interval(cone, frame.desc.camera.position, dir, s, settings.spot_steps, settings.spot_denominator);
     let j = if settings.jitter { pixel_jitter(x, y, settings.frame_index) } else { 0.5 };
-    let st = desc.medium.extinction();
-    let seg = segment_transmittance(st, delta);
-    let mut sum = Vec3::ZERO;
-    for i in 0..n {
-        let t0 = i as f32 * delta;
-        let t = (i as f32 + j) * delta;
-        let p = desc.camera.position + dir * t;
-        sum += inscatter_density(&desc.light, &desc.medium, frame.shadow_map, desc.shadow_bias, dir, p)
-            * (-st * t0).exp()
-            * seg;
-    }
-    sum
+    march_steps(frame, dir, iv, settings.steps, 0, 1, j)
 }
 
 /// Mirrors the `march` entry point over the whole image.
@@ -38,13 +32,14 @@ pub fn march(frame: &CpuFrame, settings: &BruteForceSettings) -> Result<(Image, 
     let desc = frame.desc;
     let start = std::time::Instant::now();
     let inv = desc.camera.view_projection(desc.aspect()).inverse();
+    let cone = frame_cone(desc);
     let mut img = Image::new(desc.width, desc.height);
     img.pixels.par_chunks_mut(desc.width as usize).enumerate().for_each(|(y, row)| {
         for (x, px) in row.iter_mut().enumerate() {
             let (x, y) = (x as u32, y as u32);
             let dir = desc.pixel_ray(&inv, x, y);
             let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
-            let l = march_ray(frame, settings, x, y, dir, s);
+            let l = march_ray(frame, settings, cone.as_ref(), x, y, dir, s);
             *px = [l.x, l.y, l.z, 1.0];
         }
     });

@@ -5,7 +5,11 @@ struct Params {
     steps: u32,
     jitter: u32,
     frame_index: u32,
-    _pad: u32,
+    spot_steps: u32,
+    spot_denominator: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -15,25 +19,15 @@ struct Params {
 @group(0) @binding(4) var spot_tex: texture_2d<f32>;
 @group(0) @binding(5) var out_tex: texture_storage_2d<rgba32float, write>;
 
-// Eq. 1: L_scatt ≈ Σ_n σs·p·L_in(x(l_n))·V(x(l_n))·T(t_n)·Δ, with the transmittance integrated
-// exactly over each step (segment_transmittance).
+// Eq. 1 over the interval the spot-step policy picks ([0, s] for any light under "fixed"),
+// N steps, all evaluated by this pixel (march_steps in common.wgsl).
 fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec3<f32> {
-    let n = params.steps;
-    let delta = s / f32(n);
+    let iv = march_interval(frame, frame.camera_pos.xyz, dir, s, params.spot_steps, params.spot_denominator);
     var j = 0.5;
     if params.jitter == 1u {
         j = pixel_jitter(px, params.frame_index);
     }
-    let st = extinction(frame);
-    let seg = segment_transmittance(st, delta);
-    var sum = vec3<f32>(0.0);
-    for (var i = 0u; i < n; i++) {
-        let t0 = f32(i) * delta;
-        let t = (f32(i) + j) * delta;
-        let p = frame.camera_pos.xyz + dir * t;
-        sum += inscatter_density(frame, shadow_map, spot_tex, dir, p) * exp(-st * t0) * seg;
-    }
-    return sum;
+    return march_steps(frame, shadow_map, spot_tex, dir, iv, params.steps, 0u, 1u, j);
 }
 
 @compute @workgroup_size(8, 8)

@@ -12,6 +12,7 @@ pub mod cpu;
 use crate::error::Error;
 use crate::frame::GpuFrame;
 use crate::gpu::{GpuContext, PassTimer};
+use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
 use crate::stats::TechniqueStats;
 use serde::{Deserialize, Serialize};
 
@@ -32,11 +33,25 @@ pub struct BruteForceSettings {
     pub jitter: bool,
     /// Seed of the per-pixel jitter (change it per frame for temporal accumulation). Default 0.
     pub frame_index: u32,
+    /// Where the N steps go for a spot light (Wyman & Ramsey 2008, App. B): `"fixed"` (eye to
+    /// surface), `"exact-cone"` (the ray's chord inside the cone), `"appendix-b-constant"`,
+    /// `"appendix-b-smoothstep"`. Ignored for other lights. The cone policies cost one
+    /// ray–cone intersection per pixel and skip rays that miss the cone. Default `"fixed"`.
+    pub spot_steps: SpotSteps,
+    /// The App. B denominator: the constant of `appendix-b-constant`, the smoothstep floor of
+    /// `appendix-b-smoothstep` (a sine, in (0, 1]). Smaller marches longer chords. Default 0.3.
+    pub spot_denominator: f32,
 }
 
 impl Default for BruteForceSettings {
     fn default() -> Self {
-        Self { steps: 64, jitter: false, frame_index: 0 }
+        Self {
+            steps: 64,
+            jitter: false,
+            frame_index: 0,
+            spot_steps: SpotSteps::Fixed,
+            spot_denominator: DEFAULT_SPOT_DENOMINATOR,
+        }
     }
 }
 
@@ -46,7 +61,7 @@ impl BruteForceSettings {
         if !(1..=4096).contains(&self.steps) {
             return Err(Error::invalid("brute-force.steps", self.steps, "must be in 1..=4096"));
         }
-        Ok(())
+        validate_spot_denominator("brute-force.spot_denominator", self.spot_denominator)
     }
 }
 
@@ -60,13 +75,24 @@ pub struct MarchParams {
     pub jitter: u32,
     /// Jitter seed.
     pub frame_index: u32,
+    /// [`SpotSteps::code`].
+    pub spot_steps: u32,
+    /// App. B denominator.
+    pub spot_denominator: f32,
     /// Padding.
-    pub _pad: u32,
+    pub _pad: [u32; 3],
 }
 
 impl From<&BruteForceSettings> for MarchParams {
     fn from(s: &BruteForceSettings) -> Self {
-        Self { steps: s.steps, jitter: s.jitter as u32, frame_index: s.frame_index, _pad: 0 }
+        Self {
+            steps: s.steps,
+            jitter: s.jitter as u32,
+            frame_index: s.frame_index,
+            spot_steps: s.spot_steps.code(),
+            spot_denominator: s.spot_denominator,
+            _pad: [0; 3],
+        }
     }
 }
 

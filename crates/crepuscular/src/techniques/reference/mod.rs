@@ -11,6 +11,7 @@ use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
 use crate::integrand::light_position;
+use crate::march::cone_interval;
 use crate::model::Light;
 use crate::shaders::pcg_hash;
 use crate::stats::{PassTime, TechniqueStats};
@@ -156,6 +157,7 @@ pub fn render(
     let fwd = desc.camera.forward().as_dvec3();
     let (near, far) = (desc.camera.near as f64, desc.camera.far as f64);
     let n = settings.steps;
+    let cone = crate::march::frame_cone(desc);
     let done = AtomicU64::new(0);
     let w = desc.width as usize;
     // Per row: (pixels, sum of per-pixel relative half-vs-full change, count, max change).
@@ -172,13 +174,25 @@ pub fn render(
                 let d = frame.depth[y as usize * w + x as usize] as f64;
                 let lin = near * far / (far - d * (far - near));
                 let s = lin / dir.dot(fwd).max(1e-4);
-                let delta = s / n as f64;
+                // The light is zero outside a spot's cone: integrate only the ray's chord inside
+                // it (march.rs, exact-cone), widened by a margin against f32 rounding.
+                let (t_lo, t_hi) = match &cone {
+                    None => (0.0, s),
+                    Some(c) => match cone_interval(c, eye.as_vec3(), dir.as_vec3(), s as f32) {
+                        None => (0.0, 0.0),
+                        Some((a, b)) => {
+                            let m = 1e-3 * (b - a) as f64 + 1e-4;
+                            ((a as f64 - m).max(0.0), (b as f64 + m).min(s))
+                        }
+                    },
+                };
+                let delta = (t_hi - t_lo) / n as f64;
                 let (mut full, mut even) = (DVec3::ZERO, DVec3::ZERO);
                 let mut rng = pcg_hash(x ^ pcg_hash(y ^ pcg_hash(settings.seed)));
                 for k in 0..n {
                     rng = pcg_hash(rng);
                     let u = (rng >> 8) as f64 / 16777216.0;
-                    let t = (k as f64 + u) * delta;
+                    let t = t_lo + (k as f64 + u) * delta;
                     let f = integrand.density(dir, eye + dir * t) * (-integrand.sigma_t * t).exp();
                     full += f * delta;
                     if k % 2 == 0 {

@@ -1,0 +1,335 @@
+//! Where a ray-marching technique puts its N steps on a view ray: the spot-light step policy
+//! of Wyman & Ramsey 2008, Appendix B, shared by `brute-force`, `interleaved`, `subsampled` and
+//! `epipolar`. Each function has a WGSL twin of the same name in `shaders/common.wgsl`
+//! (`cone_interval`, `appendix_b_chord`, `march_interval`), with the same f32 arithmetic.
+//!
+//! Every policy returns an interval [t₀, t₁] of the view ray, measured from the eye, inside
+//! [0, s] (s = distance to the visible surface or the far plane): no policy ever marches past
+//! the surface or the far plane. For directional and point lights every policy is `Fixed`.
+
+use crate::error::Error;
+use crate::frame::{CpuFrame, FrameDesc};
+use crate::integrand::inscatter_density;
+use crate::model::Light;
+use crate::model::segment_transmittance;
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+/// How the N steps of a ray are placed for a spot light (`spot_steps` in every ray-marching
+/// technique's settings).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SpotSteps {
+    /// N steps from the eye to the surface, as for any light. Most steps of a ray that only
+    /// grazes the cone fall outside it and are wasted. The default.
+    #[default]
+    Fixed,
+    /// N steps over the exact chord of the ray inside the spot's cone (outer half-angle), from a
+    /// ray–cone intersection; rays that miss the cone cost nothing. Exact: the light is zero
+    /// outside the cone.
+    ExactCone,
+    /// Wyman & Ramsey 2008, App. B, eq. 3 with a constant denominator: from the point where the
+    /// ray enters the cone, march Δ = d·sinφ / `spot_denominator`. Cheap, but some rays stop
+    /// before the cone's far side and others march past it.
+    AppendixBConstant,
+    /// Wyman & Ramsey 2008, App. B, eq. 3–4: Δ = d·sinφ / sin(β − φ/2), with the denominator
+    /// clamped smoothly (smoothstep) to at least about `spot_denominator`, so Δ stays bounded
+    /// as the ray turns parallel to the cone's edge (β → φ/2).
+    AppendixBSmoothstep,
+}
+
+impl SpotSteps {
+    /// Code shared with WGSL (`march_interval`).
+    pub fn code(self) -> u32 {
+        match self {
+            SpotSteps::Fixed => 0,
+            SpotSteps::ExactCone => 1,
+            SpotSteps::AppendixBConstant => 2,
+            SpotSteps::AppendixBSmoothstep => 3,
+        }
+    }
+
+    /// Every policy, for sweeps.
+    pub const ALL: [SpotSteps; 4] =
+        [SpotSteps::Fixed, SpotSteps::ExactCone, SpotSteps::AppendixBConstant, SpotSteps::AppendixBSmoothstep];
+
+    /// The name used in settings.
+    pub fn name(self) -> &'static str {
+        match self {
+            SpotSteps::Fixed => "fixed",
+            SpotSteps::ExactCone => "exact-cone",
+            SpotSteps::AppendixBConstant => "appendix-b-constant",
+            SpotSteps::AppendixBSmoothstep => "appendix-b-smoothstep",
+        }
+    }
+}
+
+/// Default of every technique's `spot_denominator`.
+pub const DEFAULT_SPOT_DENOMINATOR: f32 = 0.3;
+
+/// Checks a technique's `spot_denominator` (`key` names it in the error).
+pub fn validate_spot_denominator(key: &str, v: f32) -> Result<(), Error> {
+    if !(v.is_finite() && v > 0.0 && v <= 1.0) {
+        return Err(Error::invalid(key, v, "must be in (0, 1]"));
+    }
+    Ok(())
+}
+
+/// The spot cone as the shaders see it: apex, unit axis, cos of the outer half-angle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpotCone {
+    /// Apex (the light's position).
+    pub apex: Vec3,
+    /// Unit axis.
+    pub axis: Vec3,
+    /// cos of the outer half-angle φ/2 (the cone reaches zero there).
+    pub cos_half: f32,
+}
+
+impl SpotCone {
+    /// The cone of a spot light, computed as `FrameDesc::uniforms` does; None for other lights.
+    pub fn of(light: &Light) -> Option<SpotCone> {
+        match light {
+            Light::Spot { position, direction, outer_angle_degrees, .. } => Some(SpotCone {
+                apex: *position,
+                axis: direction.normalize(),
+                cos_half: outer_angle_degrees.to_radians().cos(),
+            }),
+            _ => None,
+        }
+    }
+
+    /// Whether `p` is inside the (forward) cone.
+    pub fn contains(&self, p: Vec3) -> bool {
+        let v = p - self.apex;
+        v.dot(self.axis) >= self.cos_half * v.length()
+    }
+}
+
+/// The part of the ray `o + t·d`, t in [0, s], inside the cone: Some((t₀, t₁)) or None.
+/// The cone (half-angle < 90°) is convex, so the part is one interval: solve the quadratic
+/// (v·a)² = cos²·|v|² for its roots, split [0, s] there, and keep the pieces whose midpoints
+/// are inside. Mirrors `cone_interval` in common.wgsl.
+pub fn cone_interval(cone: &SpotCone, o: Vec3, d: Vec3, s: f32) -> Option<(f32, f32)> {
+    if s <= 0.0 {
+        return None;
+    }
+    let v = o - cone.apex;
+    let c2 = cone.cos_half * cone.cos_half;
+    let dv = d.dot(cone.axis);
+    let va = v.dot(cone.axis);
+    let qa = dv * dv - c2;
+    let qb = 2.0 * (dv * va - c2 * d.dot(v));
+    let qc = va * va - c2 * v.dot(v);
+    let mut cuts = [s, s];
+    if qa.abs() > 1e-7 {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let q = -0.5 * (qb + qb.signum() * disc.sqrt());
+            cuts[0] = q / qa;
+            cuts[1] = if q != 0.0 { qc / q } else { cuts[0] };
+        }
+    } else if qb != 0.0 {
+        cuts[0] = -qc / qb;
+    }
+    let lo = cuts[0].min(cuts[1]).clamp(0.0, s);
+    let hi = cuts[0].max(cuts[1]).clamp(0.0, s);
+    let bounds = [0.0, lo, hi, s];
+    let (mut t0, mut t1) = (s, 0.0f32);
+    for i in 0..3 {
+        let (a, b) = (bounds[i], bounds[i + 1]);
+        if b > a && cone.contains(o + d * (0.5 * (a + b))) {
+            t0 = t0.min(a);
+            t1 = t1.max(b);
+        }
+    }
+    if t1 > t0 { Some((t0, t1)) } else { None }
+}
+
+/// Wyman & Ramsey 2008, App. B, eq. 3–4: the chord Δ = d·sinφ / sin(β − φ/2) of a ray that
+/// enters the light frustum at distance `d` from the light, with cos β = `cos_beta` (the angle
+/// between the eye ray and the light's viewing direction) and φ/2 the cone's half-angle.
+/// Returns (d·sinφ, sin(β − φ/2)) so the caller can apply a remedy to the denominator.
+/// Mirrors `appendix_b_chord` in common.wgsl.
+pub fn appendix_b_chord(d: f32, cos_beta: f32, cos_half: f32) -> (f32, f32) {
+    let sin_half = (1.0 - cos_half * cos_half).max(0.0).sqrt();
+    let sin_phi = 2.0 * sin_half * cos_half; // sin φ = 2 sin(φ/2) cos(φ/2)
+    let sin_beta = (1.0 - cos_beta * cos_beta).max(0.0).sqrt(); // App. B: sin β = √(1 − cos²β)
+    (d * sin_phi, sin_beta * cos_half - cos_beta * sin_half) // eq. 4
+}
+
+/// App. B's second remedy: the denominator clamped to a floor `k` with smoothstep (a Bernstein
+/// interpolant), so the step size changes smoothly: `den` for den ≥ 2k, `k` for den ≤ 0.
+pub fn smooth_denominator(den: f32, k: f32) -> f32 {
+    let t = (den / (2.0 * k)).clamp(0.0, 1.0);
+    let w = t * t * (3.0 - 2.0 * t);
+    k + (den - k) * w
+}
+
+/// The interval [t₀, t₁] of the view ray from the eye `o` along `d` (unit) that a technique
+/// marches with its N steps, under `policy`; `s` is the distance to the surface or far plane.
+/// An empty interval (t₁ ≤ t₀) means the ray gets no light and is not marched.
+/// Mirrors `march_interval` in common.wgsl.
+pub fn march_interval(
+    cone: Option<&SpotCone>,
+    o: Vec3,
+    d: Vec3,
+    s: f32,
+    policy: SpotSteps,
+    denominator: f32,
+) -> (f32, f32) {
+    let Some(cone) = cone else { return (0.0, s) };
+    if policy == SpotSteps::Fixed {
+        return (0.0, s);
+    }
+    let Some((t0, t1)) = cone_interval(cone, o, d, s) else { return (0.0, 0.0) };
+    if policy == SpotSteps::ExactCone {
+        return (t0, t1);
+    }
+    // App. B: d is the distance from the light to where the eye ray enters the frustum (the
+    // eye itself when it is inside); β the angle between the eye ray and the light's axis.
+    let dist = (o + d * t0 - cone.apex).length();
+    let (num, den) = appendix_b_chord(dist, d.dot(cone.axis), cone.cos_half);
+    let den = if policy == SpotSteps::AppendixBConstant { denominator } else { smooth_denominator(den, denominator) };
+    (t0, (t0 + num / den).min(s))
+}
+
+/// Eq. 1 of Tóth & Umenhoffer 2009 over the interval `iv` = (t₀, t₁) of the view ray from the
+/// eye along `dir`, cut into `n` equal steps Δ: the sum over steps i = `first`, `first` +
+/// `stride`, … < n (brute-force: 0, 1; interleaved: the pixel's block offset, M²), each sampled
+/// at t₀ + (i + j)·Δ and weighted by the transmittance integrated exactly over the step (an
+/// improvement on eq. 1's exp(−τ(s − l))·Δl that is exact for a constant integrand).
+/// Mirrors `march_steps` in common.wgsl.
+pub fn march_steps(frame: &CpuFrame, dir: Vec3, iv: (f32, f32), n: u32, first: u32, stride: u32, j: f32) -> Vec3 {
+    let (a, b) = iv;
+    if b <= a {
+        return Vec3::ZERO;
+    }
+    let desc = frame.desc;
+    let o = desc.camera.position;
+    let delta = (b - a) / n as f32;
+    let st = desc.medium.extinction();
+    let seg = segment_transmittance(st, delta);
+    let mut sum = Vec3::ZERO;
+    let mut i = first;
+    while i < n {
+        let t0 = a + i as f32 * delta;
+        let t = a + (i as f32 + j) * delta;
+        let p = o + dir * t;
+        sum += inscatter_density(&desc.light, &desc.medium, frame.shadow_map, desc.shadow_bias, dir, p)
+            * (-st * t0).exp()
+            * seg;
+        i += stride;
+    }
+    sum
+}
+
+/// The cone of the frame's light under a policy: what `march_interval` needs per frame.
+pub fn frame_cone(desc: &FrameDesc) -> Option<SpotCone> {
+    SpotCone::of(&desc.light)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cone(half_deg: f32) -> SpotCone {
+        SpotCone { apex: Vec3::new(0.0, 10.0, 0.0), axis: Vec3::NEG_Y, cos_half: half_deg.to_radians().cos() }
+    }
+
+    /// The exact chord from the interval, for a ray far enough to leave the cone.
+    fn exact_chord(c: &SpotCone, o: Vec3, d: Vec3) -> Option<(f32, f32)> {
+        cone_interval(c, o, d, 1.0e4)
+    }
+
+    #[test]
+    fn appendix_b_equals_the_exact_chord_in_the_axial_plane() {
+        // Rays in the plane spanned by the axis and x, starting outside the cone, entering
+        // through one edge and leaving through the other: eq. 3 is exact there (App. B).
+        let mut checked = 0;
+        for half in [10.0f32, 24.0, 45.0, 70.0] {
+            let c = cone(half);
+            for h in [1.0f32, 3.0, 7.5] {
+                for tilt_deg in [-60.0f32, -30.0, -5.0, 0.0, 5.0, 20.0, 40.0] {
+                    // Start left of the cone at depth h below the apex, heading right and tilted.
+                    let tilt = tilt_deg.to_radians();
+                    let d = Vec3::new(tilt.cos(), -tilt.sin(), 0.0);
+                    let o = c.apex + Vec3::new(-h * 3.0, -h, 0.0);
+                    if c.contains(o) {
+                        continue;
+                    }
+                    let Some((t0, t1)) = exact_chord(&c, o, d) else { continue };
+                    if t1 >= 1.0e4 * 0.99 {
+                        continue; // never leaves: β ≤ φ/2, eq. 3 is infinite (the instability)
+                    }
+                    let dist = (o + d * t0 - c.apex).length();
+                    let (num, den) = appendix_b_chord(dist, d.dot(c.axis), c.cos_half);
+                    let chord = num / den;
+                    let exact = t1 - t0;
+                    assert!(
+                        (chord - exact).abs() <= 1e-3 * exact.max(1.0),
+                        "half {half}°, h {h}, tilt {tilt_deg}°: App. B Δ {chord} vs exact chord {exact}"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked >= 40, "only {checked} rays checked");
+    }
+
+    #[test]
+    fn appendix_b_is_unstable_as_beta_approaches_half_phi_and_the_remedies_bound_it() {
+        let c = cone(30.0);
+        let half = 30.0f32.to_radians();
+        // A ray entering at distance 5 that turns parallel to the far edge: β → φ/2.
+        for eps in [1e-1f32, 1e-2, 1e-3] {
+            let beta = half + eps;
+            let (num, den) = appendix_b_chord(5.0, beta.cos(), c.cos_half);
+            assert!(num / den > 5.0 * (2.0 * half).sin() / eps.sin() * 0.9);
+            let k = DEFAULT_SPOT_DENOMINATOR;
+            assert!(smooth_denominator(den, k) >= 0.9 * k);
+        }
+        // The smooth clamp is the identity above 2k and k at or below 0.
+        assert_eq!(smooth_denominator(0.8, 0.3), 0.8);
+        assert_eq!(smooth_denominator(-0.5, 0.3), 0.3);
+        assert_eq!(smooth_denominator(0.0, 0.3), 0.3);
+    }
+
+    #[test]
+    fn cone_interval_handles_inside_outside_and_misses() {
+        let c = cone(20.0);
+        // Eye inside the cone looking down the axis: from 0 to s.
+        let o = c.apex + Vec3::new(0.0, -1.0, 0.0);
+        assert_eq!(cone_interval(&c, o, Vec3::NEG_Y, 5.0), Some((0.0, 5.0)));
+        // Behind the apex looking away: miss (the backward nappe does not count).
+        assert_eq!(cone_interval(&c, c.apex + Vec3::Y, Vec3::Y, 50.0), None);
+        // Parallel to the axis outside the cone: miss.
+        assert_eq!(cone_interval(&c, c.apex + Vec3::new(100.0, 0.0, 0.0), Vec3::NEG_Y, 50.0), None);
+        // Through the axis horizontally at depth 4: the chord is 2·4·tan 20°, centred on the axis.
+        let o = c.apex + Vec3::new(-10.0, -4.0, 0.0);
+        let (t0, t1) = cone_interval(&c, o, Vec3::X, 100.0).unwrap();
+        let half = 4.0 * 20.0f32.to_radians().tan();
+        assert!((t0 - (10.0 - half)).abs() < 1e-4 && (t1 - (10.0 + half)).abs() < 1e-4, "{t0} {t1}");
+        // Clipped by s: never past the surface.
+        assert_eq!(cone_interval(&c, o, Vec3::X, 10.0).unwrap().1, 10.0);
+        // march_interval never exceeds [0, s] under any policy.
+        for p in SpotSteps::ALL {
+            let (a, b) = march_interval(Some(&c), o, Vec3::new(1.0, -0.2, 0.0).normalize(), 9.0, p, 0.05);
+            assert!(a >= 0.0 && b <= 9.0, "{p:?}: {a} {b}");
+        }
+        assert_eq!(march_interval(None, o, Vec3::X, 9.0, SpotSteps::ExactCone, 0.3), (0.0, 9.0));
+    }
+
+    #[test]
+    fn spot_steps_parse_by_their_names() {
+        for p in SpotSteps::ALL {
+            #[derive(Deserialize)]
+            struct T {
+                s: SpotSteps,
+            }
+            let t: T = toml::from_str(&format!("s = \"{}\"", p.name())).unwrap();
+            assert_eq!(t.s, p);
+            assert_eq!(SpotSteps::ALL[p.code() as usize], p);
+        }
+    }
+}

@@ -31,8 +31,74 @@ enum Command {
     Techniques,
     /// Compare two images (EXR or PNG): RMSE, PSNR on linear values, FLIP mean on tone-mapped.
     Diff(DiffArgs),
+    /// Benchmark: scene × size × technique × setting, per-pass times (median, spread), samples,
+    /// memory and quality vs reference → bench.json, bench.md, SVG plots. `--preset` runs a
+    /// paper's own experiment.
+    Bench(BenchArgs),
+    /// Render `reference` and each technique on the same inputs: a contact sheet (final,
+    /// in-scattering, FLIP error map, captions) and report.md / report.json.
+    Compare(CompareArgs),
     /// Print the GPU adapter that `--backend auto|gpu` would use (fails if there is none).
     Adapter,
+}
+
+#[derive(clap::Args)]
+struct CompareArgs {
+    /// Built-in scene name or path to a .toml scene file.
+    #[arg(default_value = builtin::DEFAULT_SCENE)]
+    scene: String,
+    /// Techniques, comma-separated, at the scene's (or default) settings (default: every GPU technique).
+    #[arg(long, value_delimiter = ',')]
+    techniques: Vec<String>,
+    /// Image size WIDTHxHEIGHT (default: the scene's).
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
+    /// Steps per pixel of the reference (even).
+    #[arg(long, default_value_t = 512)]
+    reference_steps: u32,
+    /// Timed frames per technique (median reported), after one warm-up frame.
+    #[arg(long, default_value_t = 3)]
+    repeat: u32,
+    /// Where to compute the techniques: auto (GPU if any, else CPU), gpu, cpu.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    backend: Backend,
+    /// Output directory (sheet.png, report.md, report.json).
+    #[arg(long, short, default_value = "compare")]
+    output: PathBuf,
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// A named experiment (see `--list-presets`); other flags override its choices.
+    #[arg(long)]
+    preset: Option<String>,
+    /// List the presets and exit.
+    #[arg(long)]
+    list_presets: bool,
+    /// Scenes, comma-separated (default: every built-in scene).
+    #[arg(long, value_delimiter = ',')]
+    scenes: Vec<String>,
+    /// Techniques, comma-separated, each swept over its main setting (default: every GPU technique).
+    #[arg(long, value_delimiter = ',')]
+    techniques: Vec<String>,
+    /// Sizes WIDTHxHEIGHT, comma-separated (default 320x180).
+    #[arg(long, value_delimiter = ',', value_parser = parse_size)]
+    sizes: Vec<(u32, u32)>,
+    /// Timed frames per configuration (default 5).
+    #[arg(long)]
+    repeat: Option<u32>,
+    /// Untimed warm-up frames before them (default 2).
+    #[arg(long)]
+    warmup: Option<u32>,
+    /// Steps per pixel of the quality reference; 0 skips quality (default 256).
+    #[arg(long)]
+    reference_steps: Option<u32>,
+    /// Where to compute: auto (GPU if any, else CPU), gpu, cpu.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    backend: Backend,
+    /// Output directory.
+    #[arg(long, short, default_value = "bench")]
+    output: PathBuf,
 }
 
 #[derive(clap::Args)]
@@ -195,6 +261,110 @@ fn cmd_diff(a: DiffArgs) -> Result<()> {
     Ok(())
 }
 
+fn progress_bar(total: u64) -> ProgressBar {
+    let bar = ProgressBar::new(total);
+    bar.set_style(
+        ProgressStyle::with_template("[{elapsed_precise}] [{bar:30}] {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar
+}
+
+fn cmd_compare(a: CompareArgs) -> Result<()> {
+    use crepuscular_cli::compare;
+    compare::check_output_dir(&a.output)?;
+    let techniques: Vec<String> = if a.techniques.is_empty() {
+        crepuscular::techniques::TECHNIQUES.iter().filter(|t| t.gpu).map(|t| t.name.to_string()).collect()
+    } else {
+        a.techniques.clone()
+    };
+    let notice = |m: &str| eprintln!("{m}");
+    let gpu = render::open_gpu(a.backend, &notice)?;
+    let on = gpu.as_ref().map(|g| g.describe()).unwrap_or_else(|| "CPU".into());
+    eprintln!("compare `{}`: reference + {} on {on}", a.scene, techniques.join(", "));
+    let bar = progress_bar(techniques.len() as u64 + 2);
+    let step = |m: &str| {
+        bar.inc(1);
+        bar.set_message(m.to_string());
+    };
+    let rows = |done: u64, total: u64| bar.set_message(format!("reference: row {done}/{total}"));
+    let args = compare::CompareArgs {
+        scene: a.scene.clone(),
+        techniques,
+        size: a.size,
+        reference_steps: a.reference_steps,
+        repeat: a.repeat,
+        output: a.output.clone(),
+    };
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    let written = compare::run(&args, gpu.as_ref(), &command, &step, &rows)?;
+    bar.finish_and_clear();
+    for p in written {
+        eprintln!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+fn cmd_bench(a: BenchArgs) -> Result<()> {
+    use crepuscular_cli::bench;
+    if a.list_presets {
+        for (name, what) in bench::PRESETS {
+            println!("{name:<20} {what}");
+        }
+        return Ok(());
+    }
+    let mut plan = match &a.preset {
+        Some(p) => bench::preset(p)?,
+        None => {
+            let scenes = builtin::builtin_names().iter().map(|(n, _)| n.to_string()).collect();
+            let techniques: Vec<String> = if a.techniques.is_empty() {
+                crepuscular::techniques::TECHNIQUES.iter().filter(|t| t.gpu).map(|t| t.name.to_string()).collect()
+            } else {
+                a.techniques.clone()
+            };
+            bench::default_plan(scenes, &techniques)?
+        }
+    };
+    if a.preset.is_some() && !a.techniques.is_empty() {
+        plan.variants.retain(|v| a.techniques.contains(&v.technique));
+    }
+    if !a.scenes.is_empty() {
+        plan.scenes = a.scenes.clone();
+    }
+    if !a.sizes.is_empty() {
+        plan.sizes = a.sizes.clone();
+    }
+    plan.repeat = a.repeat.unwrap_or(plan.repeat);
+    plan.warmup = a.warmup.unwrap_or(plan.warmup);
+    plan.reference_steps = a.reference_steps.unwrap_or(plan.reference_steps);
+    if plan.reference_steps != 0 && (plan.reference_steps % 2 != 0 || plan.reference_steps < 2) {
+        bail!("--reference-steps {}: must be 0 (no quality) or even and ≥ 2", plan.reference_steps);
+    }
+    let notice = |m: &str| eprintln!("{m}");
+    let gpu = render::open_gpu(a.backend, &notice)?;
+    let on = gpu.as_ref().map(|g| g.describe()).unwrap_or_else(|| "CPU".into());
+    let total = (plan.scenes.len() * plan.sizes.len() * (plan.variants.len() + 2)) as u64;
+    eprintln!(
+        "bench `{}` on {on}: {} configurations",
+        plan.name,
+        plan.scenes.len() * plan.sizes.len() * plan.variants.len()
+    );
+    let bar = progress_bar(total);
+    let step = |m: &str| {
+        bar.inc(1);
+        bar.set_message(m.to_string());
+    };
+    let rows = |done: u64, total: u64| bar.set_message(format!("reference rows {done}/{total}"));
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    let (report, _) = bench::run(&plan, gpu.as_ref(), &command, &step, &rows, false)?;
+    bar.finish_and_clear();
+    for p in bench::write(&report, &a.output)? {
+        eprintln!("wrote {}", p.display());
+    }
+    print!("{}", bench::markdown(&report));
+    Ok(())
+}
+
 fn run() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
@@ -218,6 +388,8 @@ fn run() -> Result<()> {
             Ok(())
         }
         Command::Diff(a) => cmd_diff(a),
+        Command::Bench(a) => cmd_bench(a),
+        Command::Compare(a) => cmd_compare(a),
         Command::Adapter => {
             let gpu = crepuscular::GpuContext::new()?;
             println!("{}", gpu.describe());

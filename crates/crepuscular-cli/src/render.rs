@@ -6,7 +6,9 @@ use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::GpuContext;
 use crepuscular::stats::{PassTime, TechniqueStats};
 use crepuscular::techniques::brute_force::{self, BruteForce, BruteForceSettings};
+use crepuscular::techniques::interleaved::{self, Interleaved, InterleavedSettings};
 use crepuscular::techniques::reference::{self, ReferenceSettings};
+use crepuscular::techniques::subsampled::{self, Subsampled, SubsampledSettings};
 use crepuscular::tonemap::composite;
 use crepuscular::{CpuFrame, GpuFrame, Image, ShadowProjection};
 use crepuscular_scene::{GpuHost, Scene, builtin, file, host, host_cpu};
@@ -44,8 +46,33 @@ pub fn load_scene(name_or_path: &str) -> Result<Scene> {
 pub enum TechniqueChoice {
     /// `brute-force`.
     BruteForce(BruteForceSettings),
+    /// `interleaved`.
+    Interleaved(InterleavedSettings),
+    /// `subsampled`.
+    Subsampled(SubsampledSettings),
     /// `reference`.
     Reference(ReferenceSettings),
+}
+
+/// A technique's GPU side, built once and rendered many times (bench, viewer).
+pub enum GpuRunner {
+    /// `brute-force`.
+    BruteForce(BruteForce),
+    /// `interleaved`.
+    Interleaved(Interleaved),
+    /// `subsampled`.
+    Subsampled(Subsampled),
+}
+
+impl GpuRunner {
+    /// Renders the in-scattering of `frame` into `output` (Rgba32Float storage, frame size).
+    pub fn render(&mut self, gpu: &GpuContext, frame: &GpuFrame, output: &wgpu::TextureView) -> Result<TechniqueStats> {
+        Ok(match self {
+            GpuRunner::BruteForce(t) => t.render(gpu, frame, output)?,
+            GpuRunner::Interleaved(t) => t.render(gpu, frame, output)?,
+            GpuRunner::Subsampled(t) => t.render(gpu, frame, output)?,
+        })
+    }
 }
 
 impl TechniqueChoice {
@@ -53,8 +80,30 @@ impl TechniqueChoice {
     pub fn name(&self) -> &'static str {
         match self {
             TechniqueChoice::BruteForce(_) => "brute-force",
+            TechniqueChoice::Interleaved(_) => "interleaved",
+            TechniqueChoice::Subsampled(_) => "subsampled",
             TechniqueChoice::Reference(_) => "reference",
         }
+    }
+
+    /// The GPU side of the technique (pipelines built here); None for the CPU-only reference.
+    pub fn gpu_runner(&self, gpu: &GpuContext) -> Result<Option<GpuRunner>> {
+        Ok(match self {
+            TechniqueChoice::BruteForce(s) => Some(GpuRunner::BruteForce(BruteForce::new(gpu, s.clone())?)),
+            TechniqueChoice::Interleaved(s) => Some(GpuRunner::Interleaved(Interleaved::new(gpu, s.clone())?)),
+            TechniqueChoice::Subsampled(s) => Some(GpuRunner::Subsampled(Subsampled::new(gpu, s.clone())?)),
+            TechniqueChoice::Reference(_) => None,
+        })
+    }
+
+    /// Runs the technique's CPU implementation on a frame.
+    pub fn run_cpu(&self, frame: &CpuFrame, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<(Image, TechniqueStats)> {
+        Ok(match self {
+            TechniqueChoice::BruteForce(s) => brute_force::cpu::march(frame, s)?,
+            TechniqueChoice::Interleaved(s) => interleaved::cpu::render(frame, s)?,
+            TechniqueChoice::Subsampled(s) => subsampled::cpu::render(frame, s)?,
+            TechniqueChoice::Reference(s) => reference::render(frame, s, progress)?,
+        })
     }
 
     /// Parses a technique's settings from the scene's `[render.<name>]` table and `key=value`
@@ -76,6 +125,16 @@ impl TechniqueChoice {
                     let s: BruteForceSettings = t.try_into().with_context(|| src.clone())?;
                     s.validate().with_context(|| src.clone())?;
                     TechniqueChoice::BruteForce(s)
+                }
+                "interleaved" => {
+                    let s: InterleavedSettings = t.try_into().with_context(|| src.clone())?;
+                    s.validate().with_context(|| src.clone())?;
+                    TechniqueChoice::Interleaved(s)
+                }
+                "subsampled" => {
+                    let s: SubsampledSettings = t.try_into().with_context(|| src.clone())?;
+                    s.validate().with_context(|| src.clone())?;
+                    TechniqueChoice::Subsampled(s)
                 }
                 "reference" => TechniqueChoice::Reference(t.try_into().with_context(|| src.clone())?),
                 other => {
@@ -164,13 +223,26 @@ pub fn frame_desc(scene: &Scene) -> FrameDesc {
     }
 }
 
-fn cpu_adapter() -> AdapterStats {
-    AdapterStats {
-        name: "cpu".into(),
-        backend: "cpu".into(),
-        device_type: "Cpu".into(),
-        software: true,
-        driver: format!("rayon, {} threads", rayon::current_num_threads()),
+/// The adapter a frame runs on: the GPU's name, backend and driver, or the CPU backend.
+pub fn adapter_stats(gpu: Option<&GpuContext>) -> AdapterStats {
+    match gpu {
+        Some(gpu) => {
+            let info = &gpu.info;
+            AdapterStats {
+                name: info.name.clone(),
+                backend: format!("{:?}", info.backend),
+                device_type: format!("{:?}", info.device_type),
+                software: gpu.software,
+                driver: format!("{} {}", info.driver, info.driver_info),
+            }
+        }
+        None => AdapterStats {
+            name: "cpu".into(),
+            backend: "cpu".into(),
+            device_type: "Cpu".into(),
+            software: true,
+            driver: format!("rayon, {} threads", rayon::current_num_threads()),
+        },
     }
 }
 
@@ -200,18 +272,11 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
         Some(gpu) => {
             let host = GpuHost::new(gpu, &scene.geometry)?;
             let tex = host.render(gpu, &desc, spot)?;
-            let info = &gpu.info;
-            let adapter = AdapterStats {
-                name: info.name.clone(),
-                backend: format!("{:?}", info.backend),
-                device_type: format!("{:?}", info.device_type),
-                software: gpu.software,
-                driver: format!("{} {}", info.driver, info.driver_info),
-            };
+            let adapter = adapter_stats(Some(gpu));
             let depth = gpu.read_texture_f32(&tex.depth, 0)?;
             let surface = gpu.read_image(&tex.surface)?;
-            let (inscatter, stats) = match &opts.technique {
-                TechniqueChoice::BruteForce(s) => {
+            let (inscatter, stats) = match opts.technique.gpu_runner(gpu)? {
+                Some(mut runner) => {
                     let out = gpu.create_output_texture(desc.width, desc.height);
                     let out_view = out.create_view(&Default::default());
                     let depth_view = tex.depth_view();
@@ -223,16 +288,15 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
                         shadow_map: &shadow_view,
                         spot_texture: spot.map(|_| &spot_view),
                     };
-                    let mut bf = BruteForce::new(gpu, s.clone())?;
-                    let stats = bf.render(gpu, &frame, &out_view)?;
+                    let stats = runner.render(gpu, &frame, &out_view)?;
                     (gpu.read_image(&out)?, stats)
                 }
-                TechniqueChoice::Reference(s) => {
-                    // The reference runs on the CPU over the very shadow map the GPU drew.
+                None => {
+                    // CPU-only techniques (the reference) run over the very shadow map the GPU drew.
                     let shadow_map = host::read_shadow_map(gpu, &tex, &desc)?;
                     let frame =
                         CpuFrame { desc: &desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
-                    reference::render(&frame, s, opts.progress)?
+                    opts.technique.run_cpu(&frame, opts.progress)?
                 }
             };
             (inscatter, surface, depth, tex.passes, stats, adapter)
@@ -240,11 +304,8 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
         None => {
             let h = host_cpu::render(&scene.geometry, &desc);
             let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
-            let (inscatter, stats) = match &opts.technique {
-                TechniqueChoice::BruteForce(s) => brute_force::cpu::march(&frame, s)?,
-                TechniqueChoice::Reference(s) => reference::render(&frame, s, opts.progress)?,
-            };
-            (inscatter, h.surface, h.depth, h.passes, stats, cpu_adapter())
+            let (inscatter, stats) = opts.technique.run_cpu(&frame, opts.progress)?;
+            (inscatter, h.surface, h.depth, h.passes, stats, adapter_stats(None))
         }
     };
     if !inscatter.all_finite() {

@@ -2,7 +2,9 @@
 //! `cpu.rs`, the CPU mirror with the same sample placement and function names.
 
 pub mod brute_force;
+pub mod interleaved;
 pub mod reference;
+pub mod subsampled;
 
 /// What the tool and the docs list about a technique.
 #[derive(Clone, Copy, Debug)]
@@ -25,6 +27,20 @@ pub const TECHNIQUES: &[TechniqueInfo] = &[
         name: "brute-force",
         summary: "per-pixel ray marching through the shadow map, N steps per pixel (GPU + CPU mirror)",
         paper: "Tóth & Umenhoffer 2009, §3–4, eq. 1",
+        gpu: true,
+        cpu: true,
+    },
+    TechniqueInfo {
+        name: "interleaved",
+        summary: "M×M interleaved sampling: each pixel marches N/M² of the N steps, a separable (optionally depth-aware) block sum adds them (GPU + CPU mirror)",
+        paper: "Tóth & Umenhoffer 2009, §4.1",
+        gpu: true,
+        cpu: true,
+    },
+    TechniqueInfo {
+        name: "subsampled",
+        summary: "ray marching on a reduced grid, joint-bilateral upsampling by depth, silhouette pixels re-marched at full resolution (GPU + CPU mirror)",
+        paper: "the baseline of Engelhardt & Dachsbacher 2010 §6 / Fig. 9",
         gpu: true,
         cpu: true,
     },

@@ -1,0 +1,193 @@
+//! CPU mirror of `subsampled`: the same sample placement and arithmetic (f32) as march.wgsl and
+//! upsample.wgsl, function for function.
+
+use super::{MIN_WEIGHT, SubsampledSettings, stats_extra};
+use crate::error::Error;
+use crate::frame::CpuFrame;
+use crate::image::Image;
+use crate::march::{SpotCone, frame_cone, march_interval, march_steps};
+use crate::shaders::pixel_jitter;
+use crate::stats::{PassTime, TechniqueStats};
+use glam::{Mat4, Vec3};
+use rayon::prelude::*;
+
+/// Mirrors `source_pixel` in march.wgsl: the full-resolution pixel (along one axis of `full`
+/// pixels) whose ray grid sample `i` of `grid` takes — the centre of its footprint,
+/// ⌊(i + ½)·full/grid⌋, in exact integer arithmetic.
+pub fn source_pixel(i: u32, full: u32, grid: u32) -> u32 {
+    ((2 * i + 1) * full) / (2 * grid)
+}
+
+/// Mirrors `march_ray` in march.wgsl and upsample.wgsl: `brute-force`'s march of pixel (x, y)
+/// (Tóth & Umenhoffer 2009, eq. 1, N steps over the spot-step interval).
+pub fn march_ray(
+    frame: &CpuFrame,
+    settings: &SubsampledSettings,
+    cone: Option<&SpotCone>,
+    x: u32,
+    y: u32,
+    dir: Vec3,
+    s: f32,
+) -> Vec3 {
+    let iv = march_interval(cone, frame.desc.camera.position, dir, s, settings.spot_steps, settings.spot_denominator);
+    let j = if settings.jitter { pixel_jitter(x, y, settings.frame_index) } else { 0.5 };
+    march_steps(frame, dir, iv, settings.steps, 0, 1, j)
+}
+
+/// Mirrors `struct Bracket` in upsample.wgsl: the grid samples i0 ≤ i1 whose source pixels
+/// bracket a pixel along one axis, and the bilinear weight `t` of i1.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bracket {
+    /// Grid sample at or before the pixel.
+    pub i0: u32,
+    /// Grid sample after it (= i0 at the borders).
+    pub i1: u32,
+    /// Bilinear weight of i1, in [0, 1).
+    pub t: f32,
+}
+
+/// Mirrors `bracket` in upsample.wgsl.
+pub fn bracket(x: u32, full: u32, grid: u32) -> Bracket {
+    // The sample whose footprint [i·full/grid, (i+1)·full/grid) holds x.
+    let est = ((2 * x + 1) * grid) / (2 * full);
+    let i0 = if source_pixel(est, full, grid) <= x {
+        est
+    } else if est == 0 {
+        return Bracket { i0: 0, i1: 0, t: 0.0 };
+    } else {
+        est - 1
+    };
+    let i1 = (i0 + 1).min(grid - 1);
+    let (p0, p1) = (source_pixel(i0, full, grid), source_pixel(i1, full, grid));
+    let t = if p1 > p0 { (x - p0) as f32 / (p1 - p0) as f32 } else { 0.0 };
+    Bracket { i0, i1, t }
+}
+
+/// Mirrors `depth_weight` in upsample.wgsl: the range kernel of the bilateral filter
+/// (Engelhardt & Dachsbacher 2010, §4.3, "a radial basis function of the depth difference") on
+/// r = |sᵢ − s|/s — 1 up to half the tolerance, then a smoothstep down to 0 at the tolerance.
+pub fn depth_weight(r: f32, tol: f32) -> f32 {
+    let t = ((r - 0.5 * tol) / (0.5 * tol)).clamp(0.0, 1.0);
+    1.0 - t * t * (3.0 - 2.0 * t)
+}
+
+/// Per-frame constants of the upsampling.
+struct Ctx<'a> {
+    frame: &'a CpuFrame<'a>,
+    settings: &'a SubsampledSettings,
+    cone: Option<SpotCone>,
+    inv: Mat4,
+    grid: &'a Image,
+}
+
+/// Mirrors `upsample_pixel` in upsample.wgsl: (radiance, re-marched).
+fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
+    let desc = c.frame.desc;
+    let dir = desc.pixel_ray(&c.inv, x, y);
+    let s = desc.view_distance(c.frame.depth[(y * desc.width + x) as usize], dir);
+    let (gw, gh) = (c.grid.width, c.grid.height);
+    let bx = bracket(x, desc.width, gw);
+    let by = bracket(y, desc.height, gh);
+    let taps = [c.grid.get(bx.i0, by.i0), c.grid.get(bx.i1, by.i0), c.grid.get(bx.i0, by.i1), c.grid.get(bx.i1, by.i1)];
+    let bilinear = [(1.0 - bx.t) * (1.0 - by.t), bx.t * (1.0 - by.t), (1.0 - bx.t) * by.t, bx.t * by.t];
+    let inv_s = 1.0 / s.max(1e-6);
+    let mut sum = Vec3::ZERO;
+    let mut wsum = 0.0f32;
+    let mut nearest = 0;
+    let mut nearest_diff = (taps[0][3] - s).abs();
+    for k in 0..4 {
+        let diff = (taps[k][3] - s).abs();
+        let w = bilinear[k] * depth_weight(diff * inv_s, c.settings.depth_tolerance);
+        sum += w * Vec3::new(taps[k][0], taps[k][1], taps[k][2]);
+        wsum += w;
+        if diff < nearest_diff {
+            nearest = k;
+            nearest_diff = diff;
+        }
+    }
+    if wsum >= MIN_WEIGHT {
+        (sum / wsum, false)
+    } else if c.settings.edge_remarch {
+        // No depth-compatible neighbour: march this pixel at full resolution.
+        (march_ray(c.frame, c.settings, c.cone.as_ref(), x, y, dir, s), true)
+    } else {
+        let t = taps[nearest];
+        (Vec3::new(t[0], t[1], t[2]), false)
+    }
+}
+
+/// Mirrors the `march` entry point of march.wgsl: the w×h grid (in-scattering in rgb, view
+/// distance s in alpha), each sample an exact `brute-force` sample of its source pixel
+/// (Engelhardt & Dachsbacher 2010, §6, Fig. 9: naïve subsampling).
+pub fn march(frame: &CpuFrame, settings: &SubsampledSettings) -> Result<Image, Error> {
+    settings.validate()?;
+    let desc = frame.desc;
+    let (gw, gh) = settings.grid_size(desc.width, desc.height);
+    let inv = desc.camera.view_projection(desc.aspect()).inverse();
+    let cone = frame_cone(desc);
+    let mut img = Image::new(gw, gh);
+    img.pixels.par_chunks_mut(gw as usize).enumerate().for_each(|(j, row)| {
+        let y = source_pixel(j as u32, desc.height, gh);
+        for (i, px) in row.iter_mut().enumerate() {
+            let x = source_pixel(i as u32, desc.width, gw);
+            let dir = desc.pixel_ray(&inv, x, y);
+            let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
+            let l = march_ray(frame, settings, cone.as_ref(), x, y, dir, s);
+            *px = [l.x, l.y, l.z, s];
+        }
+    });
+    Ok(img)
+}
+
+/// Mirrors the `upsample` entry point of upsample.wgsl: the joint bilateral upsampling of
+/// `grid` (from [`march`]) to the frame's size. Returns the in-scattering and the number of
+/// pixels re-marched at full resolution.
+pub fn upsample(frame: &CpuFrame, settings: &SubsampledSettings, grid: &Image) -> (Image, u64) {
+    let desc = frame.desc;
+    let c = Ctx {
+        frame,
+        settings,
+        cone: frame_cone(desc),
+        inv: desc.camera.view_projection(desc.aspect()).inverse(),
+        grid,
+    };
+    let mut img = Image::new(desc.width, desc.height);
+    let remarched: u64 = img
+        .pixels
+        .par_chunks_mut(desc.width as usize)
+        .enumerate()
+        .map(|(y, row)| {
+            let mut n = 0;
+            for (x, px) in row.iter_mut().enumerate() {
+                let (l, re) = upsample_pixel(&c, x as u32, y as u32);
+                *px = [l.x, l.y, l.z, 1.0];
+                n += re as u64;
+            }
+            n
+        })
+        .sum();
+    (img, remarched)
+}
+
+/// Both passes, timed by wall clock, with the same stats as the GPU side.
+pub fn render(frame: &CpuFrame, settings: &SubsampledSettings) -> Result<(Image, TechniqueStats), Error> {
+    let start = std::time::Instant::now();
+    let grid = march(frame, settings)?;
+    let march_ms = start.elapsed().as_secs_f64() * 1e3;
+    let start = std::time::Instant::now();
+    let (img, remarched) = upsample(frame, settings, &grid);
+    let upsample_ms = start.elapsed().as_secs_f64() * 1e3;
+    let stats = TechniqueStats {
+        technique: "subsampled".into(),
+        backend: "cpu".into(),
+        timing: "wall-clock".into(),
+        passes: vec![
+            PassTime { name: "march".into(), ms: march_ms },
+            PassTime { name: "upsample".into(), ms: upsample_ms },
+        ],
+        raymarched_samples: (grid.width as u64 * grid.height as u64 + remarched) * settings.steps as u64,
+        gpu_memory_bytes: 0,
+        extra: stats_extra(grid.width, grid.height, remarched),
+    };
+    Ok((img, stats))
+}

@@ -111,7 +111,7 @@ pub fn contact_sheet(report: &BenchReport, kept: &[Kept], exposure: f32) -> Resu
     let (margin, cap) = (12u32, 40u32);
     let sheet_w = margin + 3 * (tile_w + margin);
     let rows = kept.len() as u32;
-    let header = 44u32;
+    let header = 64u32;
     let footer = 48u32;
     let sheet_h = header + rows * (cap + tile_h + margin) + footer;
     let mut c = Canvas::new(sheet_w, sheet_h, [24, 24, 28]);
@@ -123,7 +123,7 @@ pub fn contact_sheet(report: &BenchReport, kept: &[Kept], exposure: f32) -> Resu
     for (i, title) in
         ["final (tone-mapped)", "in-scattering (tone-mapped)", "FLIP error vs reference"].iter().enumerate()
     {
-        c.text(margin + i as u32 * (tile_w + margin), header - 12, title, 1, grey);
+        c.text(margin + i as u32 * (tile_w + margin), header - 14, title, 1, grey);
     }
     let mut y = header;
     for k in kept {

@@ -183,3 +183,57 @@ fn example_scene_files_render() {
     }
     assert!(n > 0);
 }
+
+#[test]
+fn bench_writes_json_markdown_and_plots_with_the_device() {
+    let d = tmp("bench");
+    let out = bin()
+        .args(["bench", "--backend", "cpu", "--scenes", "cage,stained-glass", "--techniques", "brute-force,subsampled"])
+        .args(["--sizes", "48x27,64x36", "--repeat", "2", "--warmup", "1", "--reference-steps", "16", "--output"])
+        .arg(&d)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("bench.json")).unwrap()).unwrap();
+    assert_eq!(r["adapter"]["name"], "cpu");
+    // 2 scenes × 2 sizes × 2 techniques × 4 step counts.
+    let recs = r["records"].as_array().unwrap();
+    assert_eq!(recs.len(), 32);
+    for x in recs {
+        let t = x["total_ms"].as_array().unwrap();
+        let (med, min, max) = (t[0].as_f64().unwrap(), t[1].as_f64().unwrap(), t[2].as_f64().unwrap());
+        assert!(min <= med && med <= max && min > 0.0, "{x}");
+        assert!(x["psnr_db"].as_f64().is_some() && x["flip_mean"].as_f64().is_some(), "{x}");
+    }
+    let md = std::fs::read_to_string(d.join("bench.md")).unwrap();
+    assert!(md.contains("device: cpu"), "{md}");
+    for f in ["time_vs_quality_cage_48x27.svg", "time_per_scene.svg", "time_vs_resolution.svg"] {
+        let svg = std::fs::read_to_string(d.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert!(svg.starts_with("<svg") && svg.contains("cpu"), "{f}");
+    }
+    // Presets are listed, and an unknown one fails with the list.
+    let out = bin().args(["bench", "--list-presets"]).output().unwrap();
+    assert!(String::from_utf8_lossy(&out.stdout).contains("toth-interleaving"));
+    let out = bin().args(["bench", "--preset", "nope", "--backend", "cpu"]).output().unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("wyman-steps"));
+}
+
+#[test]
+fn compare_writes_a_contact_sheet_and_reports() {
+    let d = tmp("compare");
+    let out = bin()
+        .args(["compare", "stained-glass", "--backend", "cpu", "--size", "64x36", "--reference-steps", "32"])
+        .args(["--techniques", "brute-force,interleaved,subsampled", "--repeat", "1", "--output"])
+        .arg(&d)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let sheet = image::open(d.join("sheet.png")).unwrap();
+    // Four rows (reference + 3) of 64-pixel-wide tiles, three columns.
+    assert!(sheet.width() >= 3 * 64 && sheet.height() >= 4 * 36, "{}x{}", sheet.width(), sheet.height());
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("report.json")).unwrap()).unwrap();
+    assert_eq!(r["records"].as_array().unwrap().len(), 3);
+    let md = std::fs::read_to_string(d.join("report.md")).unwrap();
+    assert!(md.contains("interleaved") && md.contains("sheet.png"), "{md}");
+}

@@ -3,6 +3,7 @@
 
 pub mod brute_force;
 pub mod interleaved;
+pub mod pass;
 pub mod reference;
 pub mod subsampled;
 

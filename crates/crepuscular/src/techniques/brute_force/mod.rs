@@ -14,6 +14,7 @@ use crate::frame::GpuFrame;
 use crate::gpu::{GpuContext, PassTimer};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
 use crate::stats::TechniqueStats;
+use crate::techniques::pass;
 use serde::{Deserialize, Serialize};
 
 /// The pass shader (composed with common.wgsl).
@@ -107,85 +108,17 @@ pub struct BruteForce {
     white: wgpu::TextureView,
 }
 
-/// The bind-group layout every per-pixel pass over the frame uses: frame uniforms, pass
-/// uniforms, depth, shadow map, spot texture, output.
-pub fn frame_pass_layout(device: &wgpu::Device, label: &str) -> wgpu::BindGroupLayout {
-    let tex = |binding, dim| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: dim,
-            multisampled: false,
-        },
-        count: None,
-    };
-    let uniform = |binding| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    };
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some(label),
-        entries: &[
-            uniform(0),
-            uniform(1),
-            tex(2, wgpu::TextureViewDimension::D2),
-            tex(3, wgpu::TextureViewDimension::D2Array),
-            tex(4, wgpu::TextureViewDimension::D2),
-            wgpu::BindGroupLayoutEntry {
-                binding: 5,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::StorageTexture {
-                    access: wgpu::StorageTextureAccess::WriteOnly,
-                    format: wgpu::TextureFormat::Rgba32Float,
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                },
-                count: None,
-            },
-        ],
-    })
-}
-
 impl BruteForce {
     /// Builds the pipeline.
     pub fn new(gpu: &GpuContext, settings: BruteForceSettings) -> Result<Self, Error> {
         settings.validate()?;
         gpu.scoped("creating the brute-force pipeline", || {
             let device = &gpu.device;
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("brute_force/march.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(crate::shaders::compose(MARCH_WGSL).into()),
-            });
-            let layout = frame_pass_layout(device, "brute-force");
-            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("brute-force"),
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            });
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("brute-force march"),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some("march"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
-            let buf = |label, size| {
-                device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(label),
-                    size,
-                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                })
-            };
-            let frame_buffer = buf("frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64);
-            let params_buffer = buf("march params", std::mem::size_of::<MarchParams>() as u64);
+            let layout = pass::frame_pass_layout(device, "brute-force", &[]);
+            let pipeline = pass::compute_pipeline(device, "brute_force/march.wgsl", MARCH_WGSL, "march", &layout);
+            let frame_buffer =
+                pass::uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64);
+            let params_buffer = pass::uniform_buffer(device, "march params", std::mem::size_of::<MarchParams>() as u64);
             let white = gpu.upload_rgb_texture(None).create_view(&Default::default());
             Self { settings, pipeline, layout, frame_buffer, params_buffer, white }
         })
@@ -212,17 +145,13 @@ impl BruteForce {
             gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("brute-force"),
                 layout: &self.layout,
-                entries: &[
-                    wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(frame.depth) },
-                    wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(frame.shadow_map) },
-                    wgpu::BindGroupEntry {
-                        binding: 4,
-                        resource: wgpu::BindingResource::TextureView(frame.spot_texture.unwrap_or(&self.white)),
-                    },
-                    wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(output) },
-                ],
+                entries: &pass::frame_pass_bindings(
+                    &self.frame_buffer,
+                    &self.params_buffer,
+                    frame,
+                    &self.white,
+                    output,
+                ),
             })
         })?;
         let mut timer = PassTimer::new(gpu, 1);

@@ -47,6 +47,7 @@ use crate::gpu::{GpuContext, PassTimer};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
 use crate::model::Phase;
 use crate::stats::TechniqueStats;
+use crate::techniques::pass;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -344,70 +345,10 @@ pub struct Interleaved {
     targets: Option<Targets>,
 }
 
-fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-fn texture_entry(binding: u32, dim: wgpu::TextureViewDimension) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: dim,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
-fn storage_texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::StorageTexture {
-            access: wgpu::StorageTextureAccess::WriteOnly,
-            format: wgpu::TextureFormat::Rgba32Float,
-            view_dimension: wgpu::TextureViewDimension::D2,
-        },
-        count: None,
-    }
-}
-
-/// The march pass's layout: `brute_force::frame_pass_layout`'s six bindings (frame, params,
-/// depth, shadow map, spot texture, output) plus the phase table (binding 6, read-only storage).
+/// The march pass's layout: the frame-pass bindings 0–5 (frame, params, depth, shadow map,
+/// spot texture, output) plus the phase table (binding 6, read-only storage).
 fn march_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    use wgpu::TextureViewDimension as D;
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("interleaved march"),
-        entries: &[
-            uniform_entry(0),
-            uniform_entry(1),
-            texture_entry(2, D::D2),
-            texture_entry(3, D::D2Array),
-            texture_entry(4, D::D2),
-            storage_texture_entry(5),
-            wgpu::BindGroupLayoutEntry {
-                binding: 6,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: true },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            },
-        ],
-    })
+    pass::frame_pass_layout(device, "interleaved march", &[pass::storage_buffer_entry(6, true, None)])
 }
 
 impl Interleaved {
@@ -418,24 +359,9 @@ impl Interleaved {
             use wgpu::TextureViewDimension as D;
             let device = &gpu.device;
             let pipeline = |name: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
-                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some(name),
-                    source: wgpu::ShaderSource::Wgsl(crate::shaders::compose(src).into()),
-                });
-                let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some(name),
-                    bind_group_layouts: &[Some(layout)],
-                    immediate_size: 0,
-                });
-                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(name),
-                    layout: Some(&pipeline_layout),
-                    module: &module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    cache: None,
-                })
+                pass::compute_pipeline(device, name, src, entry, layout)
             };
+            use pass::{storage_texture_entry, texture_entry, uniform_entry};
             let march_layout = march_layout(device);
             let rows_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("interleaved sum_rows"),
@@ -455,16 +381,10 @@ impl Interleaved {
             let rows_pipeline = pipeline("interleaved/sum_rows.wgsl", SUM_ROWS_WGSL, "sum_rows", &rows_layout);
             let columns_pipeline =
                 pipeline("interleaved/sum_columns.wgsl", SUM_COLUMNS_WGSL, "sum_columns", &columns_layout);
-            let buf = |label, size| {
-                device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(label),
-                    size,
-                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                })
-            };
-            let frame_buffer = buf("frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64);
-            let params_buffer = buf("interleaved params", std::mem::size_of::<InterleavedParams>() as u64);
+            let frame_buffer =
+                pass::uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64);
+            let params_buffer =
+                pass::uniform_buffer(device, "interleaved params", std::mem::size_of::<InterleavedParams>() as u64);
             let no_lut = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("interleaved phase table (unused)"),
                 size: 16,
@@ -589,18 +509,19 @@ impl Interleaved {
             let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
             let frame_entry = || entry(0, self.frame_buffer.as_entire_binding());
             let params_entry = || entry(1, self.params_buffer.as_entire_binding());
+            let mut march_entries = pass::frame_pass_bindings(
+                &self.frame_buffer,
+                &self.params_buffer,
+                frame,
+                &self.white,
+                &targets.march_view,
+            )
+            .to_vec();
+            march_entries.push(entry(6, lut.as_entire_binding()));
             let march = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("interleaved march"),
                 layout: &self.march_layout,
-                entries: &[
-                    frame_entry(),
-                    params_entry(),
-                    entry(2, view(frame.depth)),
-                    entry(3, view(frame.shadow_map)),
-                    entry(4, view(frame.spot_texture.unwrap_or(&self.white))),
-                    entry(5, view(&targets.march_view)),
-                    entry(6, lut.as_entire_binding()),
-                ],
+                entries: &march_entries,
             });
             let rows = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("interleaved sum_rows"),

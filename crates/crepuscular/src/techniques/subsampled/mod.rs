@@ -27,6 +27,7 @@ use crate::frame::GpuFrame;
 use crate::gpu::{GpuContext, PassTimer, wait_idle};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
 use crate::stats::TechniqueStats;
+use crate::techniques::pass;
 use serde::{Deserialize, Serialize};
 
 /// The `march` pass shader (composed with common.wgsl).
@@ -209,61 +210,14 @@ pub struct Subsampled {
     grid: Option<Grid>,
 }
 
-/// The bind-group layout of the `upsample` pass: the frame-pass bindings 0–5 of
-/// [`super::brute_force::frame_pass_layout`] (output at 5), then the grid texture (6) and the
-/// re-march counter, a storage buffer (7).
+/// The bind-group layout of the `upsample` pass: the frame-pass bindings 0–5 (output at 5),
+/// then the grid texture (6) and the re-march counter, a storage buffer (7).
 fn upsample_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    let tex = |binding, dim| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: dim,
-            multisampled: false,
-        },
-        count: None,
-    };
-    let uniform = |binding| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    };
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("subsampled upsample"),
-        entries: &[
-            uniform(0),
-            uniform(1),
-            tex(2, wgpu::TextureViewDimension::D2),
-            tex(3, wgpu::TextureViewDimension::D2Array),
-            tex(4, wgpu::TextureViewDimension::D2),
-            wgpu::BindGroupLayoutEntry {
-                binding: 5,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::StorageTexture {
-                    access: wgpu::StorageTextureAccess::WriteOnly,
-                    format: wgpu::TextureFormat::Rgba32Float,
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                },
-                count: None,
-            },
-            tex(6, wgpu::TextureViewDimension::D2),
-            wgpu::BindGroupLayoutEntry {
-                binding: 7,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: false },
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(4),
-                },
-                count: None,
-            },
-        ],
-    })
+    pass::frame_pass_layout(
+        device,
+        "subsampled upsample",
+        &[pass::texture_entry(6, wgpu::TextureViewDimension::D2), pass::storage_buffer_entry(7, false, Some(4))],
+    )
 }
 
 impl Subsampled {
@@ -272,29 +226,12 @@ impl Subsampled {
         settings.validate()?;
         gpu.scoped("creating the subsampled pipelines", || {
             let device = &gpu.device;
-            let pipeline = |label: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
-                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some(label),
-                    source: wgpu::ShaderSource::Wgsl(crate::shaders::compose(src).into()),
-                });
-                let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some(label),
-                    bind_group_layouts: &[Some(layout)],
-                    immediate_size: 0,
-                });
-                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(label),
-                    layout: Some(&pipeline_layout),
-                    module: &module,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    cache: None,
-                })
-            };
-            let march_layout = super::brute_force::frame_pass_layout(device, "subsampled march");
+            let march_layout = pass::frame_pass_layout(device, "subsampled march", &[]);
             let upsample_layout = upsample_layout(device);
-            let march_pipeline = pipeline("subsampled/march.wgsl", MARCH_WGSL, "march", &march_layout);
-            let upsample_pipeline = pipeline("subsampled/upsample.wgsl", UPSAMPLE_WGSL, "upsample", &upsample_layout);
+            let march_pipeline =
+                pass::compute_pipeline(device, "subsampled/march.wgsl", MARCH_WGSL, "march", &march_layout);
+            let upsample_pipeline =
+                pass::compute_pipeline(device, "subsampled/upsample.wgsl", UPSAMPLE_WGSL, "upsample", &upsample_layout);
             let buf = |label, size, usage| {
                 device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some(label),
@@ -303,9 +240,10 @@ impl Subsampled {
                     mapped_at_creation: false,
                 })
             };
-            let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
-            let frame_buffer = buf("frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64, uniform);
-            let params_buffer = buf("subsampled params", std::mem::size_of::<SubsampledParams>() as u64, uniform);
+            let frame_buffer =
+                pass::uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64);
+            let params_buffer =
+                pass::uniform_buffer(device, "subsampled params", std::mem::size_of::<SubsampledParams>() as u64);
             let counter = buf(
                 "re-marched pixels",
                 4,
@@ -381,19 +319,9 @@ impl Subsampled {
         let params = SubsampledParams::new(&self.settings, (gw, gh));
         gpu.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&desc.uniforms()));
         gpu.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
-        let spot = frame.spot_texture.unwrap_or(&self.white);
         let (march_bind, upsample_bind) = gpu.scoped("binding the subsampled inputs", || {
-            let common = |out| {
-                let view = wgpu::BindingResource::TextureView;
-                [
-                    wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: view(frame.depth) },
-                    wgpu::BindGroupEntry { binding: 3, resource: view(frame.shadow_map) },
-                    wgpu::BindGroupEntry { binding: 4, resource: view(spot) },
-                    wgpu::BindGroupEntry { binding: 5, resource: view(out) },
-                ]
-            };
+            let common =
+                |out| pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, out);
             let march = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("subsampled march"),
                 layout: &self.march_layout,

@@ -1,0 +1,142 @@
+//! What every technique's compute passes share: bind-group layout entries, the frame-pass
+//! layout and its bindings (frame uniforms, pass uniforms, depth, shadow map, spot texture,
+//! output), pipeline creation from a pass shader, and uniform buffers.
+
+use crate::frame::GpuFrame;
+
+/// A uniform buffer at `binding`, visible to compute.
+pub fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// An unfilterable float texture (read with `textureLoad`) at `binding`.
+pub fn texture_entry(binding: u32, dim: wgpu::TextureViewDimension) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: dim,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+/// A write-only `Rgba32Float` 2D storage texture at `binding`.
+pub fn storage_texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format: wgpu::TextureFormat::Rgba32Float,
+            view_dimension: wgpu::TextureViewDimension::D2,
+        },
+        count: None,
+    }
+}
+
+/// A storage buffer at `binding` of at least `min_size` bytes (None: any).
+pub fn storage_buffer_entry(binding: u32, read_only: bool, min_size: Option<u64>) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: min_size.and_then(wgpu::BufferSize::new),
+        },
+        count: None,
+    }
+}
+
+/// Bindings 0–5 of every per-pixel pass over the frame: frame uniforms, pass uniforms, depth,
+/// shadow map (array), spot texture, `Rgba32Float` output.
+pub fn frame_pass_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
+    use wgpu::TextureViewDimension as D;
+    [
+        uniform_entry(0),
+        uniform_entry(1),
+        texture_entry(2, D::D2),
+        texture_entry(3, D::D2Array),
+        texture_entry(4, D::D2),
+        storage_texture_entry(5),
+    ]
+}
+
+/// The frame-pass layout ([`frame_pass_entries`]) followed by a pass's own `extra` bindings.
+pub fn frame_pass_layout(
+    device: &wgpu::Device,
+    label: &str,
+    extra: &[wgpu::BindGroupLayoutEntry],
+) -> wgpu::BindGroupLayout {
+    let mut entries = frame_pass_entries().to_vec();
+    entries.extend_from_slice(extra);
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
+}
+
+/// The resources of [`frame_pass_entries`]: `white` stands in for a missing spot texture.
+pub fn frame_pass_bindings<'a>(
+    frame_uniforms: &'a wgpu::Buffer,
+    params: &'a wgpu::Buffer,
+    frame: &GpuFrame<'a>,
+    white: &'a wgpu::TextureView,
+    output: &'a wgpu::TextureView,
+) -> [wgpu::BindGroupEntry<'a>; 6] {
+    let view = wgpu::BindingResource::TextureView;
+    [
+        wgpu::BindGroupEntry { binding: 0, resource: frame_uniforms.as_entire_binding() },
+        wgpu::BindGroupEntry { binding: 1, resource: params.as_entire_binding() },
+        wgpu::BindGroupEntry { binding: 2, resource: view(frame.depth) },
+        wgpu::BindGroupEntry { binding: 3, resource: view(frame.shadow_map) },
+        wgpu::BindGroupEntry { binding: 4, resource: view(frame.spot_texture.unwrap_or(white)) },
+        wgpu::BindGroupEntry { binding: 5, resource: view(output) },
+    ]
+}
+
+/// A compute pipeline from a pass shader (composed with common.wgsl), with one bind group.
+pub fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    pass_wgsl: &str,
+    entry: &str,
+    layout: &wgpu::BindGroupLayout,
+) -> wgpu::ComputePipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(crate::shaders::compose(pass_wgsl).into()),
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+/// A uniform buffer of `size` bytes, written with `queue.write_buffer`.
+pub fn uniform_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}

@@ -9,7 +9,7 @@ use crepuscular::gpu::{GpuContext, UploadedFrame, test_gpu};
 use crepuscular::march::SpotSteps;
 use crepuscular::stats::TechniqueStats;
 use crepuscular::techniques::brute_force::{self, BruteForce, BruteForceSettings};
-use crepuscular::techniques::interleaved::{self, Interleaved, InterleavedParams, InterleavedSettings, PhaseLut, cpu};
+use crepuscular::techniques::interleaved::{Interleaved, InterleavedSettings, PhaseLut, cpu};
 use crepuscular::techniques::reference::{self, ReferenceSettings};
 use crepuscular::tonemap::{ToneMap, composite};
 use crepuscular::{Bounds, Camera, CpuFrame, GpuFrame, Image, Light, Medium, Phase, ShadowMap, ShadowProjection};
@@ -17,7 +17,6 @@ use crepuscular_cli::metrics::compare;
 use crepuscular_cli::render::frame_desc;
 use crepuscular_scene::{GpuHost, builtin, host, host_cpu};
 use glam::{DVec3, Vec3};
-use std::mem::offset_of;
 
 // ---- Helpers -----------------------------------------------------------------------------
 
@@ -83,57 +82,7 @@ fn max_rel(a: &Image, b: &Image, channels: std::ops::Range<usize>, floor: f32) -
         .fold(0.0f32, f32::max)
 }
 
-// ---- (1) Shaders and uniform layout --------------------------------------------------------
-
-fn parse(name: &str, src: &str) -> naga::Module {
-    let module = naga::front::wgsl::parse_str(src).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
-    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{name}: {e:?}"));
-    module
-}
-
-fn struct_members(module: &naga::Module, name: &str) -> (Vec<(String, u32)>, u32) {
-    for (_, ty) in module.types.iter() {
-        if ty.name.as_deref() == Some(name)
-            && let naga::TypeInner::Struct { members, span } = &ty.inner
-        {
-            return (members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset)).collect(), *span);
-        }
-    }
-    panic!("struct {name} not found");
-}
-
-#[test]
-fn every_interleaved_shader_validates_and_params_match_the_wgsl_layout() {
-    let rust = [
-        ("block", offset_of!(InterleavedParams, block)),
-        ("steps", offset_of!(InterleavedParams, steps)),
-        ("spot_steps", offset_of!(InterleavedParams, spot_steps)),
-        ("spot_denominator", offset_of!(InterleavedParams, spot_denominator)),
-        ("jitter", offset_of!(InterleavedParams, jitter)),
-        ("frame_index", offset_of!(InterleavedParams, frame_index)),
-        ("depth_aware", offset_of!(InterleavedParams, depth_aware)),
-        ("depth_tolerance", offset_of!(InterleavedParams, depth_tolerance)),
-        ("phase_lut", offset_of!(InterleavedParams, phase_lut)),
-        ("phase_lut_size", offset_of!(InterleavedParams, phase_lut_size)),
-    ];
-    let size = std::mem::size_of::<InterleavedParams>();
-    assert_eq!(size % 16, 0);
-    for (name, src) in interleaved::SHADERS {
-        let module = parse(name, &crepuscular::shaders::compose(src));
-        let entry = name.rsplit('/').next().unwrap();
-        assert!(module.entry_points.iter().any(|e| e.name == entry), "{name}: no entry point {entry}");
-        let (members, span) = struct_members(&module, "Params");
-        let named: Vec<_> = members.iter().filter(|(n, _)| !n.starts_with("_pad")).collect();
-        assert_eq!(named.len(), rust.len(), "{name}: Params fields {members:?}");
-        for ((wn, wo), (rn, ro)) in named.iter().zip(rust) {
-            assert_eq!(wn, rn, "{name}");
-            assert_eq!(*wo as usize, ro, "{name}: offset of {rn}");
-        }
-        assert_eq!(span as usize, size, "{name}: Params size");
-    }
-}
+// (1) Shader validation and the Params layout: tests/shaders.rs.
 
 // ---- (2) GPU vs CPU mirror, pass by pass ---------------------------------------------------
 

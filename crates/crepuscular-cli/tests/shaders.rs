@@ -67,24 +67,29 @@ fn frame_uniforms_match_the_wgsl_layout() {
     assert_eq!(span as usize, std::mem::size_of::<FrameUniforms>());
 }
 
-/// Checks a pass's `Params` uniform block against its Rust twin: member names, offsets, size.
-pub fn check_params(wgsl: &str, rust: &[(&str, usize)], size: usize) {
-    let module = parse("params", &crepuscular::shaders::compose(wgsl));
+/// Checks a pass's `Params` uniform block against its Rust twin: member names, offsets, size
+/// (a multiple of 16 bytes); and that the shader has the entry point `entry`.
+pub fn check_params(name: &str, wgsl: &str, entry: &str, rust: &[(&str, usize)], size: usize) {
+    let module = parse(name, &crepuscular::shaders::compose(wgsl));
+    assert!(module.entry_points.iter().any(|e| e.name == entry), "{name}: no entry point {entry}");
     let (members, span) = struct_members(&module, "Params");
     let named: Vec<_> = members.iter().filter(|(n, _)| !n.starts_with("_pad")).collect();
-    assert_eq!(named.len(), rust.len(), "Params field count: {members:?}");
+    assert_eq!(named.len(), rust.len(), "{name}: Params field count: {members:?}");
     for ((wn, wo), (rn, ro)) in named.iter().zip(rust) {
-        assert_eq!(wn, rn);
-        assert_eq!(*wo as usize, *ro, "offset of {rn}");
+        assert_eq!(wn, rn, "{name}");
+        assert_eq!(*wo as usize, *ro, "{name}: offset of {rn}");
     }
-    assert_eq!(span as usize, size);
+    assert_eq!(span as usize, size, "{name}: Params size");
+    assert_eq!(size % 16, 0, "{name}: Params size");
 }
 
 #[test]
 fn pass_params_match_the_wgsl_layout() {
     use crepuscular::techniques::brute_force::{MARCH_WGSL, MarchParams};
     check_params(
+        "brute_force/march",
         MARCH_WGSL,
+        "march",
         &[
             ("steps", offset_of!(MarchParams, steps)),
             ("jitter", offset_of!(MarchParams, jitter)),
@@ -94,4 +99,49 @@ fn pass_params_match_the_wgsl_layout() {
         ],
         std::mem::size_of::<MarchParams>(),
     );
+}
+
+#[test]
+fn interleaved_params_match_the_wgsl_layout_in_every_pass() {
+    use crepuscular::techniques::interleaved::{InterleavedParams, SHADERS};
+    let rust = [
+        ("block", offset_of!(InterleavedParams, block)),
+        ("steps", offset_of!(InterleavedParams, steps)),
+        ("spot_steps", offset_of!(InterleavedParams, spot_steps)),
+        ("spot_denominator", offset_of!(InterleavedParams, spot_denominator)),
+        ("jitter", offset_of!(InterleavedParams, jitter)),
+        ("frame_index", offset_of!(InterleavedParams, frame_index)),
+        ("depth_aware", offset_of!(InterleavedParams, depth_aware)),
+        ("depth_tolerance", offset_of!(InterleavedParams, depth_tolerance)),
+        ("phase_lut", offset_of!(InterleavedParams, phase_lut)),
+        ("phase_lut_size", offset_of!(InterleavedParams, phase_lut_size)),
+    ];
+    for (name, src) in SHADERS {
+        let entry = name.rsplit('/').next().unwrap();
+        check_params(name, src, entry, &rust, std::mem::size_of::<InterleavedParams>());
+    }
+}
+
+#[test]
+fn subsampled_params_match_the_wgsl_layout_in_every_pass() {
+    use crepuscular::techniques::subsampled::{MARCH_WGSL, MIN_WEIGHT, SubsampledParams, UPSAMPLE_WGSL};
+    let rust = [
+        ("steps", offset_of!(SubsampledParams, steps)),
+        ("jitter", offset_of!(SubsampledParams, jitter)),
+        ("frame_index", offset_of!(SubsampledParams, frame_index)),
+        ("spot_steps", offset_of!(SubsampledParams, spot_steps)),
+        ("spot_denominator", offset_of!(SubsampledParams, spot_denominator)),
+        ("grid_width", offset_of!(SubsampledParams, grid_width)),
+        ("grid_height", offset_of!(SubsampledParams, grid_height)),
+        ("depth_tolerance", offset_of!(SubsampledParams, depth_tolerance)),
+        ("edge_remarch", offset_of!(SubsampledParams, edge_remarch)),
+    ];
+    for (name, wgsl, entry) in
+        [("subsampled/march", MARCH_WGSL, "march"), ("subsampled/upsample", UPSAMPLE_WGSL, "upsample")]
+    {
+        check_params(name, wgsl, entry, &rust, std::mem::size_of::<SubsampledParams>());
+    }
+    // The upsampling's threshold is the same constant on both sides.
+    let c = format!("const MIN_WEIGHT: f32 = {MIN_WEIGHT:e};");
+    assert!(UPSAMPLE_WGSL.contains(&c), "upsample.wgsl lacks `{c}`");
 }

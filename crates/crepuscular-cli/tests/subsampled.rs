@@ -21,58 +21,7 @@ fn small(name: &str, shadow: u32) -> crepuscular_scene::Scene {
     s
 }
 
-// ---- (1) shaders ----
-
-fn parse(name: &str, src: &str) -> naga::Module {
-    let module = naga::front::wgsl::parse_str(src).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(src)));
-    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{name}: {e:?}"));
-    module
-}
-
-fn struct_members(module: &naga::Module, name: &str) -> (Vec<(String, u32)>, u32) {
-    for (_, ty) in module.types.iter() {
-        if ty.name.as_deref() == Some(name)
-            && let naga::TypeInner::Struct { members, span } = &ty.inner
-        {
-            return (members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset)).collect(), *span);
-        }
-    }
-    panic!("struct {name} not found");
-}
-
-#[test]
-fn subsampled_shaders_validate_and_params_match_the_wgsl_layout() {
-    use crepuscular::techniques::subsampled::{MARCH_WGSL, SubsampledParams, UPSAMPLE_WGSL};
-    use std::mem::offset_of;
-    let rust = [
-        ("steps", offset_of!(SubsampledParams, steps)),
-        ("jitter", offset_of!(SubsampledParams, jitter)),
-        ("frame_index", offset_of!(SubsampledParams, frame_index)),
-        ("spot_steps", offset_of!(SubsampledParams, spot_steps)),
-        ("spot_denominator", offset_of!(SubsampledParams, spot_denominator)),
-        ("grid_width", offset_of!(SubsampledParams, grid_width)),
-        ("grid_height", offset_of!(SubsampledParams, grid_height)),
-        ("depth_tolerance", offset_of!(SubsampledParams, depth_tolerance)),
-        ("edge_remarch", offset_of!(SubsampledParams, edge_remarch)),
-    ];
-    for (name, wgsl) in [("subsampled/march", MARCH_WGSL), ("subsampled/upsample", UPSAMPLE_WGSL)] {
-        let module = parse(name, &crepuscular::shaders::compose(wgsl));
-        let (members, span) = struct_members(&module, "Params");
-        let named: Vec<_> = members.iter().filter(|(n, _)| !n.starts_with("_pad")).collect();
-        assert_eq!(named.len(), rust.len(), "{name}: Params field count: {members:?}");
-        for ((wn, wo), (rn, ro)) in named.iter().zip(rust) {
-            assert_eq!(wn, rn, "{name}");
-            assert_eq!(*wo as usize, ro, "{name}: offset of {rn}");
-        }
-        assert_eq!(span as usize, std::mem::size_of::<SubsampledParams>(), "{name}: Params size");
-        assert_eq!(span % 16, 0);
-    }
-    // The upsampling's threshold is the same constant on both sides.
-    let c = format!("const MIN_WEIGHT: f32 = {:e};", subsampled::MIN_WEIGHT);
-    assert!(UPSAMPLE_WGSL.contains(&c), "upsample.wgsl lacks `{c}`");
-}
+// (1) Shader validation and the Params layout: tests/shaders.rs.
 
 // ---- (2) GPU vs CPU mirror, pass by pass ----
 

@@ -224,6 +224,39 @@ pub fn march_steps(frame: &CpuFrame, dir: Vec3, iv: (f32, f32), n: u32, first: u
     sum
 }
 
+/// How a technique marches one pixel's own ray with all N steps (brute-force; subsampled's grid
+/// samples and re-marched pixels): the settings [`march_pixel`] needs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelMarch {
+    /// N steps.
+    pub steps: u32,
+    /// Per-pixel jitter instead of step midpoints.
+    pub jitter: bool,
+    /// Jitter seed.
+    pub frame_index: u32,
+    /// The spot-step policy.
+    pub spot_steps: SpotSteps,
+    /// Its App. B denominator.
+    pub spot_denominator: f32,
+}
+
+/// Eq. 1 of Tóth & Umenhoffer 2009 for pixel (x, y), ray `dir`, surface distance `s`: N steps
+/// over the spot-step policy's interval, sampled at step midpoints or at the pixel's jitter.
+/// Mirrors `march_pixel` in common.wgsl.
+pub fn march_pixel(
+    frame: &CpuFrame,
+    cone: Option<&SpotCone>,
+    m: &PixelMarch,
+    x: u32,
+    y: u32,
+    dir: Vec3,
+    s: f32,
+) -> Vec3 {
+    let iv = march_interval(cone, frame.desc.camera.position, dir, s, m.spot_steps, m.spot_denominator);
+    let j = if m.jitter { crate::shaders::pixel_jitter(x, y, m.frame_index) } else { 0.5 };
+    march_steps(frame, dir, iv, m.steps, 0, 1, j)
+}
+
 /// The cone of the frame's light under a policy: what `march_interval` needs per frame.
 pub fn frame_cone(desc: &FrameDesc) -> Option<SpotCone> {
     SpotCone::of(&desc.light)

@@ -415,3 +415,26 @@ fn march_steps(
     }
     return sum;
 }
+
+// march.rs march_pixel: eq. 1 for pixel px's own ray (brute-force; subsampled), N steps over the
+// spot-step policy's interval, at step midpoints or at the pixel's jitter.
+fn march_pixel(
+    f: Frame,
+    shadow_map: texture_2d_array<f32>,
+    spot_tex: texture_2d<f32>,
+    px: vec2<u32>,
+    dir: vec3<f32>,
+    s: f32,
+    steps: u32,
+    jitter: u32,
+    frame_index: u32,
+    spot_steps: u32,
+    spot_denominator: f32,
+) -> vec3<f32> {
+    let iv = march_interval(f, f.camera_pos.xyz, dir, s, spot_steps, spot_denominator);
+    var j = 0.5;
+    if jitter == 1u {
+        j = pixel_jitter(px, frame_index);
+    }
+    return march_steps(f, shadow_map, spot_tex, dir, iv, steps, 0u, 1u, j);
+}

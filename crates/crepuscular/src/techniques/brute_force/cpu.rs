@@ -5,8 +5,7 @@ use super::BruteForceSettings;
 use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
-use crate::march::{SpotCone, frame_cone, march_interval, march_steps};
-use crate::shaders::pixel_jitter;
+use crate::march::{PixelMarch, SpotCone, frame_cone, march_pixel};
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -21,9 +20,7 @@ pub fn march_ray(
     dir: Vec3,
     s: f32,
 ) -> Vec3 {
-    let iv = march_interval(cone, frame.desc.camera.position, dir, s, settings.spot_steps, settings.spot_denominator);
-    let j = if settings.jitter { pixel_jitter(x, y, settings.frame_index) } else { 0.5 };
-    march_steps(frame, dir, iv, settings.steps, 0, 1, j)
+    march_pixel(frame, cone, &PixelMarch::from(settings), x, y, dir, s)
 }
 
 /// Mirrors the `march` entry point over the whole image.

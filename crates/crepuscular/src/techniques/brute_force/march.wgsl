@@ -20,14 +20,12 @@ struct Params {
 @group(0) @binding(5) var out_tex: texture_storage_2d<rgba32float, write>;
 
 // Eq. 1 over the interval the spot-step policy picks ([0, s] for any light under "fixed"),
-// N steps, all evaluated by this pixel (march_steps in common.wgsl).
+// N steps, all evaluated by this pixel (march_pixel in common.wgsl).
 fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec3<f32> {
-    let iv = march_interval(frame, frame.camera_pos.xyz, dir, s, params.spot_steps, params.spot_denominator);
-    var j = 0.5;
-    if params.jitter == 1u {
-        j = pixel_jitter(px, params.frame_index);
-    }
-    return march_steps(frame, shadow_map, spot_tex, dir, iv, params.steps, 0u, 1u, j);
+    let p = params;
+    return march_pixel(
+        frame, shadow_map, spot_tex, px, dir, s, p.steps, p.jitter, p.frame_index, p.spot_steps, p.spot_denominator,
+    );
 }
 
 @compute @workgroup_size(8, 8)

@@ -66,6 +66,18 @@ impl BruteForceSettings {
     }
 }
 
+impl From<&BruteForceSettings> for crate::march::PixelMarch {
+    fn from(s: &BruteForceSettings) -> Self {
+        Self {
+            steps: s.steps,
+            jitter: s.jitter,
+            frame_index: s.frame_index,
+            spot_steps: s.spot_steps,
+            spot_denominator: s.spot_denominator,
+        }
+    }
+}
+
 /// The uniform block of the march pass (`struct Params` in march.wgsl).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]

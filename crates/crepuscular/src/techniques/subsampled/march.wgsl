@@ -36,12 +36,10 @@ fn source_pixel(i: u32, full: u32, grid: u32) -> u32 {
 
 // Brute-force's march of pixel px (eq. 1 over the spot-step policy's interval, N steps).
 fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec3<f32> {
-    let iv = march_interval(frame, frame.camera_pos.xyz, dir, s, params.spot_steps, params.spot_denominator);
-    var j = 0.5;
-    if params.jitter == 1u {
-        j = pixel_jitter(px, params.frame_index);
-    }
-    return march_steps(frame, shadow_map, spot_tex, dir, iv, params.steps, 0u, 1u, j);
+    let p = params;
+    return march_pixel(
+        frame, shadow_map, spot_tex, px, dir, s, p.steps, p.jitter, p.frame_index, p.spot_steps, p.spot_denominator,
+    );
 }
 
 @compute @workgroup_size(8, 8)

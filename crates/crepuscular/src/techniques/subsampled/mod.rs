@@ -88,6 +88,18 @@ pub struct SubsampledSettings {
     pub spot_denominator: f32,
 }
 
+impl From<&SubsampledSettings> for crate::march::PixelMarch {
+    fn from(s: &SubsampledSettings) -> Self {
+        Self {
+            steps: s.steps,
+            jitter: s.jitter,
+            frame_index: s.frame_index,
+            spot_steps: s.spot_steps,
+            spot_denominator: s.spot_denominator,
+        }
+    }
+}
+
 impl Default for SubsampledSettings {
     fn default() -> Self {
         Self {

@@ -45,12 +45,10 @@ fn source_pixel(i: u32, full: u32, grid: u32) -> u32 {
 
 // march.wgsl march_ray: brute-force's march of pixel px.
 fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec3<f32> {
-    let iv = march_interval(frame, frame.camera_pos.xyz, dir, s, params.spot_steps, params.spot_denominator);
-    var j = 0.5;
-    if params.jitter == 1u {
-        j = pixel_jitter(px, params.frame_index);
-    }
-    return march_steps(frame, shadow_map, spot_tex, dir, iv, params.steps, 0u, 1u, j);
+    let p = params;
+    return march_pixel(
+        frame, shadow_map, spot_tex, px, dir, s, p.steps, p.jitter, p.frame_index, p.spot_steps, p.spot_denominator,
+    );
 }
 
 // The grid samples i0 ≤ i1 whose source pixels bracket pixel x along one axis, and the

@@ -44,9 +44,19 @@ impl Camera {
     pub fn forward(&self) -> Vec3 {
         (self.look_at - self.position).normalize()
     }
+    /// The up vector the view matrix uses: `up`, or — when `up` is (nearly) parallel to the view
+    /// direction (looking straight up or down), zero or not finite — the world axis least
+    /// aligned with the view direction, so the matrices never hold NaN.
+    pub fn effective_up(&self) -> Vec3 {
+        let f = self.forward();
+        if self.up.is_finite() && f.cross(self.up.normalize_or_zero()).length() > 1e-4 {
+            return self.up;
+        }
+        if f.x.abs() < 0.9 { Vec3::X.cross(f).normalize() } else { Vec3::Z.cross(f).normalize() }
+    }
     /// World → view matrix.
     pub fn view(&self) -> Mat4 {
-        Mat4::look_at_rh(self.position, self.look_at, self.up)
+        Mat4::look_at_rh(self.position, self.look_at, self.effective_up())
     }
     /// View → clip matrix for an image of the given aspect (width / height); depth in [0, 1].
     pub fn projection(&self, aspect: f32) -> Mat4 {
@@ -59,7 +69,7 @@ impl Camera {
     /// The eight world-space corners of the frustum slice between view depths `d0` and `d1`.
     pub fn frustum_corners(&self, aspect: f32, d0: f32, d1: f32) -> [Vec3; 8] {
         let f = self.forward();
-        let r = f.cross(self.up).normalize();
+        let r = f.cross(self.effective_up()).normalize();
         let u = r.cross(f);
         let ty = (self.fov_y_degrees.to_radians() * 0.5).tan();
         let tx = ty * aspect;

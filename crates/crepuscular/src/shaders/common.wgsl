@@ -309,7 +309,7 @@ fn smooth_denominator(den: f32, k: f32) -> f32 {
 
 // march.rs march_interval: the interval of the view ray a technique marches with its N steps.
 // policy: 0 fixed, 1 exact-cone, 2 appendix-b-constant, 3 appendix-b-smoothstep.
-fn march_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
+fn policy_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
     if f.ints.z != 1u || policy == 0u {
         return vec2<f32>(0.0, s);
     }
@@ -324,6 +324,50 @@ fn march_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, den
         den = smooth_denominator(ab.y, denominator);
     }
     return vec2<f32>(c.x, min(c.x + ab.x / den, s));
+}
+
+// march.rs REACH_OPTICAL_DEPTH and light_reach: the radius around a local light beyond which
+// its light-path transmittance is below 1e-6 in every channel; 0 = unlimited.
+const REACH_OPTICAL_DEPTH: f32 = 13.815511;
+
+fn light_reach(f: Frame) -> f32 {
+    let st = extinction(f);
+    let sigma = min(st.x, min(st.y, st.z));
+    if f.ints.z == 0u || sigma <= 0.0 {
+        return 0.0;
+    }
+    return REACH_OPTICAL_DEPTH / sigma;
+}
+
+// march.rs clip_to_sphere.
+fn clip_to_sphere(iv: vec2<f32>, o: vec3<f32>, d: vec3<f32>, c: vec3<f32>, r: f32) -> vec2<f32> {
+    let v = o - c;
+    let b = dot(d, v);
+    let disc = b * b - (dot(v, v) - r * r);
+    if disc < 0.0 {
+        return vec2<f32>(iv.x, iv.x);
+    }
+    let q = sqrt(disc);
+    return vec2<f32>(max(iv.x, -b - q), min(iv.y, -b + q));
+}
+
+// march.rs march_interval: the policy's interval, cut to a local light's reach.
+fn march_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
+    let iv = policy_interval(f, o, d, s, policy, denominator);
+    let r = light_reach(f);
+    if r > 0.0 && iv.y > iv.x {
+        return clip_to_sphere(iv, o, d, f.light_pos.xyz, r);
+    }
+    return iv;
+}
+
+// march.rs step_offset: the j-quantile of the transmittance over a step of length delta.
+fn step_offset(sigma_mean: f32, delta: f32, j: f32) -> f32 {
+    let x = sigma_mean * delta;
+    if x < 1e-2 {
+        return j * delta * (1.0 + 0.5 * x * (1.0 - j));
+    }
+    return -log(1.0 - j * (1.0 - exp(-x))) / sigma_mean;
 }
 
 // A 32-bit integer hash (PCG, Jarzynski & Olano 2020), mirrored by `pcg_hash` in Rust.
@@ -406,10 +450,11 @@ fn march_steps(
     let delta = (iv.y - iv.x) / f32(n);
     let st = extinction(f);
     let seg = segment_transmittance(st, delta);
+    let off = step_offset((st.x + st.y + st.z) / 3.0, delta, j);
     var sum = vec3<f32>(0.0);
     for (var i = first; i < n; i += stride) {
         let t0 = iv.x + f32(i) * delta;
-        let t = iv.x + (f32(i) + j) * delta;
+        let t = t0 + off;
         let p = f.camera_pos.xyz + dir * t;
         sum += inscatter_density(f, shadow_map, spot_tex, dir, p) * exp(-st * t0) * seg;
     }

@@ -6,7 +6,7 @@ use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
 use crate::integrand::lit_incident;
-use crate::march::{SpotCone, frame_cone, march_interval, march_steps};
+use crate::march::{SpotCone, frame_cone, light_reach, march_interval, march_steps, mean_extinction, step_offset};
 use crate::shaders::pixel_jitter;
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
@@ -54,11 +54,12 @@ pub fn march_steps_lut(
     let delta = (b - a) / n as f32;
     let st = desc.medium.extinction();
     let seg = crate::model::segment_transmittance(st, delta);
+    let off = step_offset(mean_extinction(desc), delta, j);
     let mut sum = Vec3::ZERO;
     let mut i = first;
     while i < n {
         let t0 = a + i as f32 * delta;
-        let t = a + (i as f32 + j) * delta;
+        let t = t0 + off;
         let p = o + dir * t;
         let (l_in, wl) = lit_incident(&desc.light, &desc.medium, frame.shadow_map, desc.shadow_bias, p);
         if l_in != Vec3::ZERO {
@@ -84,7 +85,15 @@ pub fn march_ray(
     dir: Vec3,
     dist: f32,
 ) -> Vec3 {
-    let iv = march_interval(cone, frame.desc.camera.position, dir, dist, s.spot_steps, s.spot_denominator);
+    let iv = march_interval(
+        cone,
+        light_reach(frame.desc),
+        frame.desc.camera.position,
+        dir,
+        dist,
+        s.spot_steps,
+        s.spot_denominator,
+    );
     let j = if s.jitter { pixel_jitter(x / s.block, y / s.block, s.frame_index) } else { 0.5 };
     let stride = s.block * s.block;
     let k = block_offset(s, x, y);

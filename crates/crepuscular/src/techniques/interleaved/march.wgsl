@@ -55,10 +55,11 @@ fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u3
     let delta = (iv.y - iv.x) / f32(n);
     let st = extinction(frame);
     let seg = segment_transmittance(st, delta);
+    let off = step_offset((st.x + st.y + st.z) / 3.0, delta, j);
     var sum = vec3<f32>(0.0);
     for (var i = first; i < n; i += stride) {
         let t0 = iv.x + f32(i) * delta;
-        let t = iv.x + (f32(i) + j) * delta;
+        let t = t0 + off;
         let p = frame.camera_pos.xyz + dir * t;
         let li = lit_incident(frame, shadow_map, spot_tex, p);
         if any(li.radiance != vec3<f32>(0.0)) {

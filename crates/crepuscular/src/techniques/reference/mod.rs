@@ -158,6 +158,11 @@ pub fn render(
     let (near, far) = (desc.camera.near as f64, desc.camera.far as f64);
     let n = settings.steps;
     let cone = crate::march::frame_cone(desc);
+    let reach = crate::march::light_reach(desc).map(|(c, r)| (c.as_dvec3(), r as f64));
+    let sigma_mean = {
+        let st = desc.medium.extinction().as_dvec3();
+        (st.x + st.y + st.z) / 3.0
+    };
     let done = AtomicU64::new(0);
     let w = desc.width as usize;
     // Per row: (pixels, sum of per-pixel relative half-vs-full change, count, max change).
@@ -186,17 +191,43 @@ pub fn render(
                         }
                     },
                 };
-                let delta = (t_hi - t_lo) / n as f64;
+                // A local light's reach (march.rs light_reach): beyond it the light has crossed
+                // more than 13.8 optical depths in every channel.
+                let (t_lo, t_hi) = match reach {
+                    Some((c, r)) if t_hi > t_lo => {
+                        let v = eye - c;
+                        let b = dir.dot(v);
+                        let disc = b * b - (v.dot(v) - r * r);
+                        if disc < 0.0 { (0.0, 0.0) } else { (t_lo.max(-b - disc.sqrt()), t_hi.min(-b + disc.sqrt())) }
+                    }
+                    _ => (t_lo, t_hi),
+                };
+                let len = (t_hi - t_lo).max(0.0);
+                // Strata in transmittance: t = t_lo − ln(1 − ξ·(1 − e^(−σ̄·len)))/σ̄ with pdf
+                // σ̄·e^(−σ̄(t − t_lo))/(1 − e^(−σ̄·len)) (σ̄ the mean extinction of the three
+                // channels), so a dense medium's first few centimetres get the samples they
+                // need; uniform strata where σ̄·len is tiny.
+                let importance = sigma_mean * len > 1e-3;
+                let norm = if importance { -(-sigma_mean * len).exp_m1() } else { 0.0 };
                 let (mut full, mut even) = (DVec3::ZERO, DVec3::ZERO);
                 let mut rng = pcg_hash(x ^ pcg_hash(y ^ pcg_hash(settings.seed)));
                 for k in 0..n {
                     rng = pcg_hash(rng);
                     let u = (rng >> 8) as f64 / 16777216.0;
-                    let t = t_lo + (k as f64 + u) * delta;
+                    let xi = (k as f64 + u) / n as f64;
+                    let (t, w) = if importance {
+                        let dt = -(-xi * norm).ln_1p() / sigma_mean;
+                        (t_lo + dt, norm / (sigma_mean * (-sigma_mean * dt).exp() * n as f64))
+                    } else {
+                        (t_lo + xi * len, len / n as f64)
+                    };
+                    if len <= 0.0 {
+                        break;
+                    }
                     let f = integrand.density(dir, eye + dir * t) * (-integrand.sigma_t * t).exp();
-                    full += f * delta;
+                    full += f * w;
                     if k % 2 == 0 {
-                        even += f * 2.0 * delta;
+                        even += f * 2.0 * w;
                     }
                 }
                 let mag = full.max_element();

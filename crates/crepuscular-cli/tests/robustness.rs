@@ -294,3 +294,80 @@ fn every_technique_survives_every_hard_view_gpu() {
     let Some(gpu) = test_gpu("every_technique_survives_every_hard_view_gpu") else { return };
     sweep(Some(&gpu), "gpu");
 }
+
+#[test]
+fn gpu_errors_outside_error_scopes_are_errors_not_panics() {
+    let Some(gpu) = test_gpu("gpu_errors_outside_error_scopes_are_errors_not_panics") else { return };
+    gpu.wait().expect("a fresh device has no fault");
+    // MAP_READ with STORAGE is invalid in WebGPU: wgpu's default handler would panic here.
+    let _bad = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("deliberately invalid"),
+        size: 16,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::STORAGE,
+        mapped_at_creation: false,
+    });
+    let e = gpu.wait().expect_err("the validation error must surface");
+    assert!(e.to_string().starts_with("GPU error"), "{e}");
+    gpu.wait().expect("reported once, then cleared");
+}
+
+fn bin() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_crepuscular"))
+}
+
+fn scratch(tag: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("crepuscular-robustness-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn a_failing_run_leaves_the_good_files_alone_and_no_temporaries() {
+    let dir = scratch("nothing-lost");
+    let png = dir.join("out.png");
+    let stats = dir.join("out.json");
+    let ok = bin()
+        .args(["render", "colonnade", "--backend", "cpu", "--size", "32x18", "-o"])
+        .arg(&png)
+        .arg("--stats")
+        .arg(&stats)
+        .output()
+        .unwrap();
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let (good_png, good_stats) = (std::fs::read(&png).unwrap(), std::fs::read(&stats).unwrap());
+    // Fails after parsing the scene (a bad setting), and with a size no device can hold.
+    for bad in [vec!["--set", "steps=0"], vec!["--set", "steps=nan"]] {
+        let out = bin()
+            .args(["render", "colonnade", "--backend", "cpu", "--size", "32x18", "-o"])
+            .arg(&png)
+            .arg("--stats")
+            .arg(&stats)
+            .args(&bad)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{bad:?} must fail");
+        assert!(!err.contains("panicked"), "{bad:?}: {err}");
+        assert_eq!(std::fs::read(&png).unwrap(), good_png, "{bad:?} touched the PNG");
+        assert_eq!(std::fs::read(&stats).unwrap(), good_stats, "{bad:?} touched the stats");
+    }
+    let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(names.len(), 2, "temporary files left behind: {names:?}");
+}
+
+#[test]
+fn a_size_beyond_the_adapter_is_refused_with_the_limit_before_allocating() {
+    let Some(_gpu) = test_gpu("a_size_beyond_the_adapter_is_refused_with_the_limit_before_allocating") else { return };
+    let dir = scratch("too-big");
+    let out = bin()
+        .args(["render", "colonnade", "--backend", "gpu", "--size", "16384x16384", "-o"])
+        .arg(dir.join("big.png"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("exceeds the adapter limit"), "{err}");
+    assert!(!err.contains("panicked") && !err.contains("Out of Memory"), "{err}");
+    assert!(!dir.join("big.png").exists());
+}

@@ -22,6 +22,13 @@ use std::path::Path;
 /// count (a guard against runaway memory use).
 pub const MAX_MESH_TRIANGLES: usize = 5_000_000;
 
+/// Largest mesh file (and glTF buffer file) read, bytes: 1 GiB. Larger is an error naming the
+/// file and its size, before anything is read.
+pub const MAX_MESH_FILE_BYTES: u64 = 1 << 30;
+
+/// Longest glTF `data:` buffer URI accepted, bytes of URI text (64 MiB, ≈ 48 MiB of data).
+pub const MAX_DATA_URI_BYTES: usize = 64 << 20;
+
 /// Albedo used when neither the scene object nor the mesh's material gives one: linear grey 0.7.
 pub const DEFAULT_ALBEDO: Vec3 = Vec3::splat(0.7);
 
@@ -422,6 +429,7 @@ pub fn load_mesh(path: &Path, transform: &Transform, albedo: Option<Vec3>) -> Re
 }
 
 fn load_obj(path: &Path, transform: &Transform, albedo: Option<Vec3>) -> Result<Geometry, SceneError> {
+    check_file_size(path, path)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let file = std::fs::File::open(path).map_err(|e| mesh_err(path, e))?;
     let mut reader = std::io::BufReader::new(file);
@@ -497,19 +505,49 @@ fn percent_decode(s: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-/// Rejects buffer URIs that would read outside the glTF file's directory.
+/// Rejects buffer URIs that would read outside the glTF file's directory (absolute paths, `..`,
+/// schemes, symbolic links leading out), external buffers over [`MAX_MESH_FILE_BYTES`] and
+/// `data:` URIs over [`MAX_DATA_URI_BYTES`].
 fn check_gltf_uri(path: &Path, uri: &str) -> Result<(), SceneError> {
     if uri.starts_with("data:") {
+        if uri.len() > MAX_DATA_URI_BYTES {
+            return Err(mesh_err(
+                path,
+                format!("a data: buffer uri of {} bytes, more than the limit of {MAX_DATA_URI_BYTES}", uri.len()),
+            ));
+        }
         return Ok(());
     }
     let bad = !is_safe_relative(uri) || !is_safe_relative(&percent_decode(uri));
     if bad {
         return Err(mesh_err(path, format!("buffer uri {uri:?} must be a relative path inside the mesh's directory")));
     }
-    Ok(())
+    let base = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let target = base.join(percent_decode(uri));
+    if let (Ok(b), Ok(t)) = (base.canonicalize(), target.canonicalize())
+        && !t.starts_with(&b)
+    {
+        return Err(mesh_err(
+            path,
+            format!("buffer uri {uri:?} leads outside the mesh's directory (a symbolic link?)"),
+        ));
+    }
+    check_file_size(path, &target)
+}
+
+/// [`MAX_MESH_FILE_BYTES`] for `file` (a missing file is left to the reader's own error).
+fn check_file_size(path: &Path, file: &Path) -> Result<(), SceneError> {
+    match std::fs::metadata(file) {
+        Ok(m) if m.len() > MAX_MESH_FILE_BYTES => Err(mesh_err(
+            path,
+            format!("{} is {} bytes, more than the limit of {MAX_MESH_FILE_BYTES}", file.display(), m.len()),
+        )),
+        _ => Ok(()),
+    }
 }
 
 fn load_gltf(path: &Path, transform: &Transform, albedo: Option<Vec3>) -> Result<Geometry, SceneError> {
+    check_file_size(path, path)?;
     let bytes = std::fs::read(path).map_err(|e| mesh_err(path, e))?;
     let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| mesh_err(path, e))?;
     drop(bytes);

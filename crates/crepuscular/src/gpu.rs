@@ -19,6 +19,10 @@ pub struct GpuContext {
     pub software: bool,
     /// True when passes are timed with timestamp queries.
     pub timestamps: bool,
+    /// The first error wgpu reported outside any error scope, or the device-lost reason: set
+    /// by the handlers [`GpuContext::from_adapter`] installs (wgpu's default handler panics),
+    /// turned into an [`Error::Gpu`] by [`GpuContext::wait`].
+    fault: std::sync::Arc<std::sync::Mutex<Option<String>>>,
 }
 
 impl std::fmt::Debug for GpuContext {
@@ -27,12 +31,25 @@ impl std::fmt::Debug for GpuContext {
     }
 }
 
-/// Blocks until the queue is idle.
+/// How long [`wait_idle`] waits for the GPU before it reports an error instead of hanging:
+/// `CREPUSCULAR_GPU_TIMEOUT_S` seconds if set, else 600 s (a 1080p brute-force frame at 256
+/// steps takes ~30 s on llvmpipe with 2 cores).
+pub fn gpu_timeout() -> std::time::Duration {
+    let secs = std::env::var("CREPUSCULAR_GPU_TIMEOUT_S").ok().and_then(|v| v.parse::<f64>().ok());
+    std::time::Duration::from_secs_f64(secs.filter(|s| s.is_finite() && *s > 0.0).unwrap_or(600.0))
+}
+
+/// Blocks until the queue is idle; an error (not a hang) after [`gpu_timeout`] or when wgpu
+/// detects a lost device.
 pub fn wait_idle(device: &wgpu::Device) -> Result<(), Error> {
-    device
-        .poll(wgpu::PollType::Wait { submission_index: None, timeout: None })
-        .map(|_| ())
-        .map_err(|e| Error::Gpu { context: "waiting for the GPU".into(), message: e.to_string() })
+    let timeout = gpu_timeout();
+    device.poll(wgpu::PollType::Wait { submission_index: None, timeout: Some(timeout) }).map(|_| ()).map_err(|e| {
+        let message = match e {
+            wgpu::PollError::Timeout => format!("the GPU did not finish within {:.0} s", timeout.as_secs_f64()),
+            e => e.to_string(),
+        };
+        Error::Gpu { context: "waiting for the GPU".into(), message }
+    })
 }
 
 impl GpuContext {
@@ -79,7 +96,31 @@ impl GpuContext {
         }))
         .map_err(|e| Error::Device(e.to_string()))?;
         let timestamps = !software && features.contains(wgpu::Features::TIMESTAMP_QUERY);
-        Ok(Self { adapter, device, queue, info, software, timestamps })
+        let fault = std::sync::Arc::new(std::sync::Mutex::new(None::<String>));
+        let record = |slot: &std::sync::Arc<std::sync::Mutex<Option<String>>>, message: String| {
+            if let Ok(mut f) = slot.lock()
+                && f.is_none()
+            {
+                *f = Some(message);
+            }
+        };
+        let (on_error, on_lost) = (fault.clone(), fault.clone());
+        device.on_uncaptured_error(std::sync::Arc::new(move |e: wgpu::Error| record(&on_error, e.to_string())));
+        device.set_device_lost_callback(move |reason, message| {
+            record(&on_lost, format!("device lost ({reason:?}): {message}"))
+        });
+        Ok(Self { adapter, device, queue, info, software, timestamps, fault })
+    }
+
+    /// Waits for the GPU ([`wait_idle`]), then reports a lost device or an error wgpu raised
+    /// outside an error scope since the last call, as [`Error::Gpu`].
+    pub fn wait(&self) -> Result<(), Error> {
+        let waited = wait_idle(&self.device);
+        let fault = self.fault.lock().ok().and_then(|mut f| f.take());
+        match fault {
+            Some(message) => Err(Error::Gpu { context: "the last GPU work".into(), message }),
+            None => waited,
+        }
     }
 
     /// One line naming the adapter, backend and driver.
@@ -95,12 +136,24 @@ impl GpuContext {
         )
     }
 
-    /// Checks a 2D texture size against the device limit, before any allocation.
+    /// Checks a 2D texture size against the device limits (largest dimension; bytes of one
+    /// Rgba32Float texture of that size against the largest buffer), before any allocation.
     pub fn check_texture_size(&self, what: &str, width: u32, height: u32) -> Result<(), Error> {
         let limit = self.device.limits().max_texture_dimension_2d;
         let big = width.max(height);
         if big > limit || width == 0 || height == 0 {
             return Err(Error::Limit { what: what.into(), value: big as u64, limit: limit as u64 });
+        }
+        // Every full-size texture here may be an Rgba32Float read back through one buffer
+        // (rows padded to 256 bytes): refuse what no buffer of this device can hold.
+        let bytes = (width as u64 * 16).next_multiple_of(256) * height as u64;
+        let max_buffer = self.device.limits().max_buffer_size;
+        if bytes > max_buffer {
+            return Err(Error::Limit {
+                what: format!("{what} {width}×{height}: bytes of one Rgba32Float texture"),
+                value: bytes,
+                limit: max_buffer,
+            });
         }
         Ok(())
     }
@@ -154,7 +207,7 @@ impl GpuContext {
         self.queue.submit([enc.finish()]);
         let slice = buffer.slice(..);
         slice.map_async(wgpu::MapMode::Read, |_| {});
-        wait_idle(&self.device)?;
+        self.wait()?;
         let data = slice
             .get_mapped_range()
             .map_err(|e| Error::Gpu { context: "reading back a texture".into(), message: e.to_string() })?;
@@ -335,7 +388,7 @@ impl PassTimer {
             gpu.queue.submit([enc.finish()]);
         })?;
         if self.query_set.is_none() {
-            wait_idle(&gpu.device)?;
+            gpu.wait()?;
         }
         self.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
         self.names.push(name.to_string());
@@ -366,7 +419,7 @@ impl PassTimer {
         gpu.queue.submit([enc.finish()]);
         let slice = read.slice(..);
         slice.map_async(wgpu::MapMode::Read, |_| {});
-        wait_idle(&gpu.device)?;
+        gpu.wait()?;
         let period = gpu.queue.get_timestamp_period() as f64;
         let ticks: Vec<u64> = bytemuck::cast_slice(
             &slice

@@ -9,6 +9,7 @@
 //! the median and the min–max spread over the timed frames. Timings are only comparable within
 //! one run on one device: the device is recorded in every output.
 
+use crate::animate::{AnimatedTechnique, Flicker, FlickerMeter, MotionPath, PathRenderer, frame_time};
 use crate::metrics::compare;
 use crate::render::{AdapterStats, TechniqueChoice, adapter_stats, frame_desc, load_scene};
 use anyhow::{Context, Result, bail};
@@ -228,6 +229,9 @@ pub struct BenchRecord {
     pub flip_mean: Option<f64>,
     /// The technique's own extra numbers (last frame).
     pub extra: BTreeMap<String, f64>,
+    /// Temporal stability vs reference along the scene's `animate` path (see
+    /// [`BenchReport::flicker_frames`]); `None` where not measured.
+    pub flicker: Option<Flicker>,
 }
 
 /// The frame without scattering: the host renderer's passes (shadow map, depth and surface).
@@ -262,6 +266,11 @@ pub struct BenchReport {
     pub host: Vec<HostRecord>,
     /// The matrix.
     pub records: Vec<BenchRecord>,
+    /// Frames of the flicker measurement (0: not measured): frames 1/24 of the scene's
+    /// `animate` loop apart, at [`BenchReport::flicker_size`], for the rows of the smallest size.
+    pub flicker_frames: u32,
+    /// Size the flicker was measured at.
+    pub flicker_size: Option<[u32; 2]>,
 }
 
 fn median_min_max(v: &[f64]) -> [f64; 3] {
@@ -509,6 +518,7 @@ pub fn run(
                     psnr_db: psnr,
                     flip_mean: flip,
                     extra: stats.extra,
+                    flicker: None,
                 });
             }
         }
@@ -526,8 +536,99 @@ pub fn run(
         command: command.into(),
         host: host_records,
         records,
+        flicker_frames: 0,
+        flicker_size: None,
     };
     Ok((report, kept))
+}
+
+/// Frames of the flicker measurement when `--flicker-frames` is not given: 3 frame pairs.
+pub const DEFAULT_FLICKER_FRAMES: u32 = 4;
+/// Widest image the flicker is measured at; a larger smallest bench size is scaled down to it.
+pub const FLICKER_MAX_WIDTH: u32 = 320;
+
+/// The size flicker is measured at: the plan's smallest size (by pixels), scaled down to at most
+/// [`FLICKER_MAX_WIDTH`] wide (aspect kept); also the size whose rows get the flicker column.
+pub fn flicker_sizes(plan: &BenchPlan) -> Option<((u32, u32), (u32, u32))> {
+    let &(w, h) = plan.sizes.iter().min_by_key(|(w, h)| *w as u64 * *h as u64)?;
+    let m = if w > FLICKER_MAX_WIDTH {
+        (FLICKER_MAX_WIDTH, ((h as u64 * FLICKER_MAX_WIDTH as u64 + w as u64 / 2) / w as u64).max(1) as u32)
+    } else {
+        (w, h)
+    };
+    Some(((w, h), m))
+}
+
+/// Measures flicker (see [`crate::animate::Flicker`]) of every row of the plan's smallest size:
+/// per scene, `frames` host frames along the scene's `animate` path, 1/24 of its loop apart
+/// (t = 0 is the benched frame), each rendered by `reference` (the plan's reference steps, seed
+/// 1) and by every row's configuration, with `frame_index` advanced per frame. Costs `frames`
+/// host frames and references per scene plus `frames` frames per row. `frames` = 0 does
+/// nothing; 1 is an error, as is a plan without a reference.
+pub fn measure_flicker(
+    report: &mut BenchReport,
+    gpu: Option<&GpuContext>,
+    frames: u32,
+    progress: &dyn Fn(&str),
+    reference_progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<()> {
+    if frames == 0 {
+        return Ok(());
+    }
+    check_flicker_frames(frames, report.plan.reference_steps)?;
+    let Some((rows_size, size)) = flicker_sizes(&report.plan) else { return Ok(()) };
+    for scene_arg in &report.plan.scenes {
+        let mut scene = load_scene(scene_arg)?;
+        (scene.render.width, scene.render.height) = size;
+        let mut rows = Vec::new();
+        for (i, x) in report.records.iter().enumerate() {
+            if x.scene == scene.name && x.size == [rows_size.0, rows_size.1] {
+                let v =
+                    report.plan.variants.iter().find(|v| v.label() == x.label).context("bench row without variant")?;
+                rows.push((i, AnimatedTechnique::new(&v.technique, &scene, &v.overrides)?, FlickerMeter::new()));
+            }
+        }
+        if rows.is_empty() {
+            continue;
+        }
+        let r = [format!("steps={}", report.plan.reference_steps), "seed=1".to_string()];
+        let mut reference = AnimatedTechnique::new("reference", &scene, &r)?;
+        let path = MotionPath::for_scene(scene_arg, &scene);
+        let name = scene.name.clone();
+        let mut renderer = PathRenderer::new(scene, path, gpu)?;
+        for f in 0..frames {
+            progress(&format!(
+                "{name} {}×{}: flicker frame {}/{frames} (reference + {} rows)",
+                size.0,
+                size.1,
+                f + 1,
+                rows.len()
+            ));
+            let mut frame = renderer.frame(frame_time(f, frames, false))?;
+            let (ri, _) = reference.render(gpu, &mut frame, 0, reference_progress)?;
+            for (_, t, meter) in &mut rows {
+                let (img, _) = t.render(gpu, &mut frame, f, &|_, _| {})?;
+                meter.push(&img, &ri)?;
+            }
+        }
+        for (i, _, meter) in rows {
+            report.records[i].flicker = Some(meter.finish()?);
+        }
+    }
+    report.flicker_frames = frames;
+    report.flicker_size = Some([size.0, size.1]);
+    Ok(())
+}
+
+/// Checks `--flicker-frames` against the plan before any work.
+pub fn check_flicker_frames(frames: u32, reference_steps: u32) -> Result<()> {
+    if frames == 1 || frames > 1000 {
+        bail!("--flicker-frames {frames}: must be 0 (no flicker) or in 2..=1000");
+    }
+    if frames > 0 && reference_steps == 0 {
+        bail!("--flicker-frames {frames}: flicker is measured against the reference; it needs --reference-steps > 0");
+    }
+    Ok(())
 }
 
 fn fmt_opt(v: Option<f64>, digits: usize) -> String {
@@ -565,6 +666,12 @@ pub fn markdown(r: &BenchReport) -> String {
             r.plan.reference_steps
         );
     }
+    if let (true, Some([fw, fh])) = (r.flicker_frames > 0, r.flicker_size) {
+        s += &format!(
+            "- flicker: {} frames 1/24 of the scene's `animate` loop apart at {fw}×{fh}; the mean over pixels and frame pairs of |e(t+1) − e(t)|, e = luminance of (technique − reference) in-scattering, as a percentage of the reference's mean luminance (rows of the smallest size only)\n",
+            r.flicker_frames
+        );
+    }
     s += "\n## Frame without scattering (host passes)\n\n| scene | size | total ms | passes |\n|---|---|---|---|\n";
     for h in &r.host {
         s += &format!(
@@ -578,11 +685,17 @@ pub fn markdown(r: &BenchReport) -> String {
             h.passes.iter().map(|p| format!("{} {:.2}", p.name, p.median_ms)).collect::<Vec<_>>().join(", ")
         );
     }
-    s += "\n## Techniques\n\n| scene | size | configuration | technique ms | frame ms (host + technique) | passes (median ms) | ray-marched samples | GPU memory | PSNR dB | FLIP |\n|---|---|---|---|---|---|---|---|---|---|\n";
+    let fl = r.flicker_frames > 0;
+    s += "\n## Techniques\n\n| scene | size | configuration | technique ms | frame ms (host + technique) | passes (median ms) | ray-marched samples | GPU memory | PSNR dB | FLIP |";
+    s += if fl {
+        " flicker % |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
+    } else {
+        "\n|---|---|---|---|---|---|---|---|---|---|\n"
+    };
     for x in &r.records {
         let host = r.host.iter().find(|h| h.scene == x.scene && h.size == x.size).map(|h| h.total_ms[0]).unwrap_or(0.0);
         s += &format!(
-            "| {} | {}×{} | {} | {:.2} ({:.2}–{:.2}) | {:.2} | {} | {} | {:.1} KiB | {} | {} |\n",
+            "| {} | {}×{} | {} | {:.2} ({:.2}–{:.2}) | {:.2} | {} | {} | {:.1} KiB | {} | {} |{}\n",
             x.scene,
             x.size[0],
             x.size[1],
@@ -596,6 +709,7 @@ pub fn markdown(r: &BenchReport) -> String {
             x.gpu_memory_bytes as f64 / 1024.0,
             fmt_opt(x.psnr_db, 2),
             fmt_opt(x.flip_mean, 4),
+            if fl { format!(" {} |", fmt_opt(x.flicker.map(|f| 100.0 * f.relative), 3)) } else { String::new() },
         );
     }
     s
@@ -614,12 +728,40 @@ const COLORS: [plotters::style::RGBColor; 8] = [
 
 type Curves = Vec<(String, Vec<(f64, f64)>)>;
 
-fn line_plot(path: &Path, title: &str, x_desc: &str, y_desc: &str, log_x: bool, curves: &Curves) -> Result<()> {
+/// Size of every plot, pixels (SVG user units and PNG pixels).
+const PLOT_SIZE: (u32, u32) = (900, 560);
+
+/// Writes a plot as SVG at `path` and as PNG beside it (same stem). Nothing is written when no
+/// curve has a finite point.
+fn line_plot(path: &Path, title: &str, x_desc: &str, y_desc: &str, log_x: bool, curves: &Curves) -> Result<bool> {
+    let mut svg = String::new();
+    {
+        let root = plotters::prelude::SVGBackend::with_string(&mut svg, PLOT_SIZE);
+        if !draw_plot(root, title, x_desc, y_desc, log_x, curves)? {
+            return Ok(false);
+        }
+    }
+    crate::output::write_atomic(path, svg.as_bytes())?;
+    let mut png = pixel_plot::RgbBackend::new(PLOT_SIZE);
+    draw_plot(&mut png, title, x_desc, y_desc, log_x, curves)?;
+    crate::output::write_png_rgb8(&path.with_extension("png"), PLOT_SIZE.0, PLOT_SIZE.1, &png.rgb)?;
+    Ok(true)
+}
+
+/// Draws the plot on any plotters backend; false when there is nothing to draw.
+fn draw_plot<DB: plotters::prelude::DrawingBackend>(
+    backend: DB,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    log_x: bool,
+    curves: &Curves,
+) -> Result<bool> {
     use plotters::prelude::*;
     let pts: Vec<(f64, f64)> =
         curves.iter().flat_map(|c| c.1.iter().copied()).filter(|p| p.0.is_finite() && p.1.is_finite()).collect();
     if pts.is_empty() {
-        return Ok(());
+        return Ok(false);
     }
     let (mut x0, mut x1) = pts.iter().fold((f64::MAX, f64::MIN), |a, p| (a.0.min(p.0), a.1.max(p.0)));
     let (mut y0, mut y1) = pts.iter().fold((f64::MAX, f64::MIN), |a, p| (a.0.min(p.1), a.1.max(p.1)));
@@ -632,45 +774,169 @@ fn line_plot(path: &Path, title: &str, x_desc: &str, y_desc: &str, log_x: bool, 
     }
     let pad = ((y1 - y0) * 0.08).max(1e-3);
     (y0, y1) = (y0 - pad, y1 + pad);
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (900, 560)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
-        let mut b = ChartBuilder::on(&root);
-        b.caption(title, ("sans-serif", 16)).margin(12).x_label_area_size(44).y_label_area_size(64);
-        macro_rules! draw {
-            ($chart:expr) => {{
-                let mut chart = $chart;
-                chart.configure_mesh().x_desc(x_desc).y_desc(y_desc).draw().map_err(|e| anyhow::anyhow!("{e:?}"))?;
-                for (i, (name, c)) in curves.iter().enumerate() {
-                    let col = COLORS[i % COLORS.len()];
-                    let mut c = c.clone();
-                    c.sort_by(|a, b| a.0.total_cmp(&b.0));
-                    chart
-                        .draw_series(LineSeries::new(c.clone(), col.stroke_width(2)))
-                        .map_err(|e| anyhow::anyhow!("{e:?}"))?
-                        .label(name.as_str())
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], col.stroke_width(2)));
-                    chart
-                        .draw_series(c.iter().map(|&p| Circle::new(p, 3, col.filled())))
-                        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-                }
+    let root = backend.into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let mut b = ChartBuilder::on(&root);
+    b.caption(title, ("sans-serif", 16)).margin(12).x_label_area_size(44).y_label_area_size(64);
+    macro_rules! draw {
+        ($chart:expr) => {{
+            let mut chart = $chart;
+            chart.configure_mesh().x_desc(x_desc).y_desc(y_desc).draw().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+            for (i, (name, c)) in curves.iter().enumerate() {
+                let col = COLORS[i % COLORS.len()];
+                let mut c = c.clone();
+                c.sort_by(|a, b| a.0.total_cmp(&b.0));
                 chart
-                    .configure_series_labels()
-                    .background_style(WHITE.mix(0.9))
-                    .border_style(BLACK)
-                    .draw()
+                    .draw_series(LineSeries::new(c.clone(), col.stroke_width(2)))
+                    .map_err(|e| anyhow::anyhow!("{e:?}"))?
+                    .label(name.as_str())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], col.stroke_width(2)));
+                chart
+                    .draw_series(c.iter().map(|&p| Circle::new(p, 3, col.filled())))
                     .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-            }};
-        }
-        if log_x {
-            draw!(b.build_cartesian_2d((x0..x1).log_scale(), y0..y1).map_err(|e| anyhow::anyhow!("{e:?}"))?);
-        } else {
-            draw!(b.build_cartesian_2d(x0..x1, y0..y1).map_err(|e| anyhow::anyhow!("{e:?}"))?);
-        }
-        root.present().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+            }
+            chart
+                .configure_series_labels()
+                // 17 px: plotters sizes the legend box from its estimate of the font (≈ 0.46 em
+                // per character), which at this size matches the PNG's 8-pixel glyphs.
+                .label_font(("sans-serif", 17))
+                .background_style(WHITE.mix(0.9))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        }};
     }
-    crate::output::write_atomic(path, svg.as_bytes())
+    if log_x {
+        draw!(b.build_cartesian_2d((x0..x1).log_scale(), y0..y1).map_err(|e| anyhow::anyhow!("{e:?}"))?);
+    } else {
+        draw!(b.build_cartesian_2d(x0..x1, y0..y1).map_err(|e| anyhow::anyhow!("{e:?}"))?);
+    }
+    root.present().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    Ok(true)
+}
+
+/// A plotters backend that draws into an 8-bit RGB buffer with the 8×8 bitmap font of the
+/// contact sheet (`font8x8`, public domain), so PNG plots need no TrueType font: plotters'
+/// own bitmap backend needs one (`ttf` or `ab_glyph` plus a font file), and enabling those
+/// features would make the SVG plots depend on a font being found too.
+mod pixel_plot {
+    use plotters_backend::text_anchor::{HPos, VPos};
+    use plotters_backend::{BackendColor, BackendCoord, BackendTextStyle, DrawingBackend, DrawingErrorKind};
+
+    /// The buffer, white-initialised; `rgb` is tightly packed, row-major from the top left.
+    pub struct RgbBackend {
+        pub size: (u32, u32),
+        pub rgb: Vec<u8>,
+    }
+
+    impl RgbBackend {
+        pub fn new(size: (u32, u32)) -> Self {
+            RgbBackend { size, rgb: vec![255; size.0 as usize * size.1 as usize * 3] }
+        }
+    }
+
+    /// Font pixels per glyph pixel for a plotters font size (px): 12–17 px → 1, 18+ → 2.
+    fn scale(size: f64) -> i32 {
+        ((size / 12.0).floor() as i32).clamp(1, 4)
+    }
+
+    #[derive(Debug)]
+    pub struct Never;
+    impl std::fmt::Display for Never {
+        fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("unreachable")
+        }
+    }
+    impl std::error::Error for Never {}
+
+    impl DrawingBackend for &mut RgbBackend {
+        type ErrorType = Never;
+
+        fn get_size(&self) -> (u32, u32) {
+            self.size
+        }
+
+        fn ensure_prepared(&mut self) -> Result<(), DrawingErrorKind<Never>> {
+            Ok(())
+        }
+
+        fn present(&mut self) -> Result<(), DrawingErrorKind<Never>> {
+            Ok(())
+        }
+
+        fn draw_pixel(&mut self, (x, y): BackendCoord, c: BackendColor) -> Result<(), DrawingErrorKind<Never>> {
+            let (w, h) = self.size;
+            if x < 0 || y < 0 || x >= w as i32 || y >= h as i32 || c.alpha <= 0.0 {
+                return Ok(());
+            }
+            let i = (y as usize * w as usize + x as usize) * 3;
+            let a = c.alpha.min(1.0);
+            for (k, v) in [c.rgb.0, c.rgb.1, c.rgb.2].into_iter().enumerate() {
+                let old = self.rgb[i + k] as f64;
+                self.rgb[i + k] = (old + (v as f64 - old) * a).round() as u8;
+            }
+            Ok(())
+        }
+
+        fn estimate_text_size<S: BackendTextStyle>(
+            &self,
+            text: &str,
+            style: &S,
+        ) -> Result<(u32, u32), DrawingErrorKind<Never>> {
+            let s = scale(style.size()) as u32;
+            Ok((text.chars().count() as u32 * 8 * s, 8 * s))
+        }
+
+        fn draw_text<S: BackendTextStyle>(
+            &mut self,
+            text: &str,
+            style: &S,
+            pos: BackendCoord,
+        ) -> Result<(), DrawingErrorKind<Never>> {
+            use font8x8::UnicodeFonts;
+            let color = style.color();
+            let s = scale(style.size());
+            let (w, h) = (text.chars().count() as i32 * 8 * s, 8 * s);
+            let dx = match style.anchor().h_pos {
+                HPos::Left => 0,
+                HPos::Right => -w,
+                HPos::Center => -w / 2,
+            };
+            let dy = match style.anchor().v_pos {
+                VPos::Top => 0,
+                VPos::Center => -h / 2,
+                VPos::Bottom => -h,
+            };
+            let trans = style.transform();
+            for (n, ch) in text.chars().enumerate() {
+                let ch = match ch {
+                    '—' | '–' | '−' => '-',
+                    c => c,
+                };
+                let glyph = font8x8::BASIC_FONTS
+                    .get(ch)
+                    .or_else(|| font8x8::LATIN_FONTS.get(ch))
+                    .or_else(|| font8x8::GREEK_FONTS.get(ch))
+                    .or_else(|| font8x8::BASIC_FONTS.get('?'))
+                    .unwrap_or([0; 8]);
+                for (row, bits) in glyph.iter().enumerate() {
+                    for col in 0..8 {
+                        if bits >> col & 1 == 1 {
+                            for sy in 0..s {
+                                for sx in 0..s {
+                                    let x = n as i32 * 8 * s + col * s + sx + dx;
+                                    let y = row as i32 * s + sy + dy;
+                                    let (x, y) = trans.transform(x, y);
+                                    self.draw_pixel((pos.0 + x, pos.1 + y), color)?;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            Ok(())
+        }
+    }
 }
 
 /// Writes bench.json, bench.md and the plots into `dir`; returns the paths written.
@@ -700,15 +966,17 @@ pub fn write(r: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
                 let name: String =
                     scene.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
                 let p = dir.join(format!("time_vs_quality_{name}_{w}x{h}.svg"));
-                line_plot(
+                if line_plot(
                     &p,
                     &format!("time vs quality — {name} {w}×{h} — {dev}"),
                     "technique time per frame, ms (median)",
                     "PSNR vs reference, dB",
                     true,
                     &curves,
-                )?;
-                written.push(p);
+                )? {
+                    written.push(p.with_extension("png"));
+                    written.push(p);
+                }
             }
         }
     }
@@ -724,15 +992,17 @@ pub fn write(r: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
             }
         }
         let p = dir.join("time_per_scene.svg");
-        line_plot(
+        if line_plot(
             &p,
             &format!("time per scene ({}) — {}×{} — {dev}", r.plan.scenes.join(", "), size.0, size.1),
             "scene (index in the list above)",
             "technique time per frame, ms (median)",
             false,
             &curves,
-        )?;
-        written.push(p);
+        )? {
+            written.push(p.with_extension("png"));
+            written.push(p);
+        }
     }
     // Time vs resolution.
     if r.plan.sizes.len() > 1 {
@@ -745,15 +1015,17 @@ pub fn write(r: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
             }
         }
         let p = dir.join("time_vs_resolution.svg");
-        line_plot(
+        if line_plot(
             &p,
             &format!("time vs resolution — {} — {dev}", r.records.first().map(|x| x.scene.as_str()).unwrap_or("")),
             "megapixels",
             "technique time per frame, ms (median)",
             false,
             &curves,
-        )?;
-        written.push(p);
+        )? {
+            written.push(p.with_extension("png"));
+            written.push(p);
+        }
     }
     Ok(written)
 }

@@ -2,6 +2,7 @@
 //! renderer → technique → composite), metrics and atomic file output, so that tests and other
 //! front ends share exactly what the binary does.
 
+pub mod animate;
 pub mod bench;
 pub mod compare;
 pub mod metrics;

@@ -40,6 +40,49 @@ enum Command {
     Compare(CompareArgs),
     /// Print the GPU adapter that `--backend auto|gpu` would use (fails if there is none).
     Adapter,
+    /// Move the camera and the light along the scene's looping path, render every frame with a
+    /// technique and write an animated GIF; `--flicker` measures temporal stability vs reference.
+    Animate(AnimateArgs),
+}
+
+#[derive(clap::Args)]
+struct AnimateArgs {
+    /// Built-in scene name or path to a .toml scene file (files get a generic path).
+    #[arg(default_value = builtin::DEFAULT_SCENE)]
+    scene: String,
+    /// Technique (see `crepuscular techniques`).
+    #[arg(long, short, default_value = "brute-force")]
+    technique: String,
+    /// Frames: one loop of the path, frame i at t = i/frames; 1..=3600. Cost: linear.
+    #[arg(long, default_value_t = crepuscular_cli::animate::DEFAULT_FRAMES)]
+    frames: u32,
+    /// Frame size WIDTHxHEIGHT, at most 4096 per side. Cost: linear in pixels.
+    #[arg(long, value_parser = parse_size, default_value = "320x180")]
+    size: (u32, u32),
+    /// Where to compute: auto (GPU if any, else CPU), gpu, cpu.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    backend: Backend,
+    /// A technique setting, `key=value` (TOML value), e.g. `--set steps=128`; repeatable.
+    /// `frame_index` (where the technique has it) is advanced by one per frame from its value.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Shadow-map texels per side (overrides the scene's shadow_map_size).
+    #[arg(long)]
+    shadow_map_size: Option<u32>,
+    /// GIF frame rate, frames per second, 1..=100 (GIF delays are in 1/100 s). No render cost.
+    #[arg(long, default_value_t = crepuscular_cli::animate::DEFAULT_FPS)]
+    fps: u32,
+    /// Also render `reference` on every frame and print the flicker: the mean frame-to-frame
+    /// change of the luminance error vs reference. Cost: one CPU reference per frame.
+    #[arg(long)]
+    flicker: bool,
+    /// Steps per pixel of the `--flicker` reference (even, ≥ 2). Cost: linear, on the CPU
+    /// (≈ 120 ms per frame at 160x90 and 256 steps on 2 cores).
+    #[arg(long, default_value_t = crepuscular_cli::animate::DEFAULT_REFERENCE_STEPS)]
+    reference_steps: u32,
+    /// The animated GIF (loops forever).
+    #[arg(long, short, default_value = "crepuscular.gif")]
+    output: PathBuf,
 }
 
 #[derive(clap::Args)]
@@ -93,6 +136,12 @@ struct BenchArgs {
     /// Steps per pixel of the quality reference; 0 skips quality (default 256).
     #[arg(long)]
     reference_steps: Option<u32>,
+    /// Frames of the flicker measurement (temporal stability vs reference along the scene's
+    /// `animate` path, frames 1/24 of its loop apart, at the smallest size capped to 320 wide,
+    /// rows of that size only); 0 disables it (default 4; 0 when --reference-steps is 0). Cost:
+    /// per scene that many references and host frames, per row that many frames.
+    #[arg(long)]
+    flicker_frames: Option<u32>,
     /// Where to compute: auto (GPU if any, else CPU), gpu, cpu.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
@@ -340,10 +389,17 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
     if plan.reference_steps != 0 && (plan.reference_steps % 2 != 0 || plan.reference_steps < 2) {
         bail!("--reference-steps {}: must be 0 (no quality) or even and ≥ 2", plan.reference_steps);
     }
+    let flicker_frames = match a.flicker_frames {
+        Some(n) => n,
+        None if plan.reference_steps == 0 => 0,
+        None => bench::DEFAULT_FLICKER_FRAMES,
+    };
+    bench::check_flicker_frames(flicker_frames, plan.reference_steps)?;
     let notice = |m: &str| eprintln!("{m}");
     let gpu = render::open_gpu(a.backend, &notice)?;
     let on = gpu.as_ref().map(|g| g.describe()).unwrap_or_else(|| "CPU".into());
-    let total = (plan.scenes.len() * plan.sizes.len() * (plan.variants.len() + 2)) as u64;
+    let total = (plan.scenes.len() * plan.sizes.len() * (plan.variants.len() + 2)) as u64
+        + (plan.scenes.len() as u64 * flicker_frames as u64);
     eprintln!(
         "bench `{}` on {on}: {} configurations",
         plan.name,
@@ -356,12 +412,76 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
     };
     let rows = |done: u64, total: u64| bar.set_message(format!("reference rows {done}/{total}"));
     let command = std::env::args().collect::<Vec<_>>().join(" ");
-    let (report, _) = bench::run(&plan, gpu.as_ref(), &command, &step, &rows, false)?;
+    let (mut report, _) = bench::run(&plan, gpu.as_ref(), &command, &step, &rows, false)?;
+    bench::measure_flicker(&mut report, gpu.as_ref(), flicker_frames, &step, &rows)?;
     bar.finish_and_clear();
     for p in bench::write(&report, &a.output)? {
         eprintln!("wrote {}", p.display());
     }
     print!("{}", bench::markdown(&report));
+    Ok(())
+}
+
+fn cmd_animate(a: AnimateArgs) -> Result<()> {
+    use crepuscular_cli::animate::{self, AnimateOptions};
+    let opts = AnimateOptions {
+        scene: a.scene.clone(),
+        technique: a.technique.clone(),
+        overrides: a.set.clone(),
+        frames: a.frames,
+        size: a.size,
+        shadow_map_size: a.shadow_map_size,
+        fps: a.fps,
+        flicker: a.flicker,
+        reference_steps: a.reference_steps,
+        output: a.output.clone(),
+    };
+    animate::check(&opts)?;
+    let notice = |m: &str| eprintln!("{m}");
+    let gpu = render::open_gpu(a.backend, &notice)?;
+    let on = gpu.as_ref().map(|g| g.describe()).unwrap_or_else(|| "CPU".into());
+    eprintln!(
+        "animating `{}` with {}{}: {} frames at {}x{} on {on}",
+        a.scene,
+        a.technique,
+        if a.flicker { " and reference" } else { "" },
+        a.frames,
+        a.size.0,
+        a.size.1
+    );
+    let bar = progress_bar(a.frames as u64);
+    let step = |done: u32, _total: u32, m: &str| {
+        bar.set_position(done as u64);
+        bar.set_message(m.to_string());
+    };
+    let rows = |done: u64, total: u64| bar.set_message(format!("reference rows {done}/{total}"));
+    let report = animate::run(&opts, gpu.as_ref(), &step, &rows)?;
+    bar.finish_and_clear();
+    let mut ms = report.technique_ms.clone();
+    ms.sort_by(f64::total_cmp);
+    eprintln!(
+        "wrote {} ({} frames, {} fps, {:.1} KiB); {}: median {:.1} ms per frame{}",
+        a.output.display(),
+        report.frames,
+        a.fps,
+        report.bytes as f64 / 1024.0,
+        a.technique,
+        ms.get(ms.len() / 2).copied().unwrap_or(0.0),
+        if report.frame_index_advanced { ", frame_index advanced per frame" } else { "" }
+    );
+    if let Some(f) = report.flicker {
+        println!(
+            "flicker    {:.6e} (mean |Δe| per pixel and frame pair, e = luminance of technique − reference in-scattering)",
+            f.mean_abs_change
+        );
+        println!(
+            "           {:.4} % of the reference's mean luminance {:.6e}, over {} frame pairs",
+            100.0 * f.relative,
+            f.mean_reference,
+            f.frames - 1
+        );
+        println!("           (the reference itself changes by {:.6e} per pixel and frame pair)", f.reference_change);
+    }
     Ok(())
 }
 
@@ -390,6 +510,7 @@ fn run() -> Result<()> {
         Command::Diff(a) => cmd_diff(a),
         Command::Bench(a) => cmd_bench(a),
         Command::Compare(a) => cmd_compare(a),
+        Command::Animate(a) => cmd_animate(a),
         Command::Adapter => {
             let gpu = crepuscular::GpuContext::new()?;
             println!("{}", gpu.describe());

@@ -1,0 +1,728 @@
+//! `crepuscular animate`: the camera and the light move along a built-in, looping path; every
+//! frame is rendered with a technique and the tone-mapped frames become an animated GIF. With
+//! `--flicker`, `reference` is rendered on the same host frames and the temporal stability of
+//! the technique's error is measured ([`FlickerMeter`]); `crepuscular bench --flicker-frames`
+//! uses the same machinery.
+//!
+//! The path is a function of t (one loop per unit of t, so frame i of N sits at t = i/N and the
+//! GIF loops without a jump): the camera orbits its `look_at` point about the vertical axis and
+//! dollies towards it, the light sweeps (directional: travel direction; spot: aim; point:
+//! position). t = 0 is the scene exactly as `render` draws it.
+
+use crate::render::{GpuRunner, TechniqueChoice, frame_desc, load_scene};
+use anyhow::{Context, Result, bail};
+use crepuscular::frame::{FrameDesc, surface_transmittance};
+use crepuscular::gpu::GpuContext;
+use crepuscular::stats::TechniqueStats;
+use crepuscular::tonemap::{ToneMap, composite};
+use crepuscular::{Camera, CpuFrame, GpuFrame, Image, Light, ShadowMap};
+use crepuscular_scene::{Geometry, GpuHost, HostTextures, Scene, builtin, host, host_cpu};
+use glam::{Quat, Vec3};
+use serde::Serialize;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Frames of an animation when `--frames` is not given: one loop of the path.
+pub const DEFAULT_FRAMES: u32 = 24;
+/// Most frames `animate` renders.
+pub const MAX_FRAMES: u32 = 3600;
+/// Frame size when `--size` is not given (animations are previews: small and quick).
+pub const DEFAULT_SIZE: (u32, u32) = (320, 180);
+/// Largest width or height of an animation frame, pixels.
+pub const MAX_SIDE: u32 = 4096;
+/// Frames per second of the GIF when `--fps` is not given.
+pub const DEFAULT_FPS: u32 = 12;
+/// Steps per pixel of the reference `--flicker` renders when `--reference-steps` is not given.
+pub const DEFAULT_REFERENCE_STEPS: u32 = 256;
+/// GIF colour quantisation speed (NeuQuant sampling factor, 1 = best and slowest … 30).
+const GIF_SPEED: i32 = 10;
+
+/// A deterministic, looping motion of the camera and the light, a function of t with period 1
+/// (φ = 2πt). Every term vanishes at t = 0, where the scene is exactly as defined.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MotionPath {
+    /// Camera orbit about the vertical axis through `look_at`: yaw = A·sin φ, A in degrees.
+    pub orbit_degrees: f32,
+    /// Camera dolly towards `look_at`: the eye–target distance is scaled by
+    /// 1 − D·(1 − cos φ)/2, so D (in [0, 1)) is the largest fraction removed, at t = ½.
+    pub dolly: f32,
+    /// Light sweep about the vertical axis: A·sin φ, A in degrees. Directional light: its
+    /// travel direction; spot: its aim (the position stays); point light: unused.
+    pub light_yaw_degrees: f32,
+    /// Light tilt about the horizontal axis perpendicular to its direction: A·sin 2φ, A in
+    /// degrees (directional and spot lights).
+    pub light_pitch_degrees: f32,
+    /// Point light displacement, metres: (x·sin φ, y·sin 2φ, z·(1 − cos φ)/2).
+    pub point_offset: [f32; 3],
+}
+
+impl MotionPath {
+    /// The path of a built-in scene (by the name it was loaded with), else [`MotionPath::generic`].
+    pub fn for_scene(name_or_path: &str, scene: &Scene) -> Self {
+        let p = |orbit_degrees, dolly, light_yaw_degrees, light_pitch_degrees, point_offset| MotionPath {
+            orbit_degrees,
+            dolly,
+            light_yaw_degrees,
+            light_pitch_degrees,
+            point_offset,
+        };
+        if builtin::builtin(name_or_path).is_none() {
+            return Self::generic(scene);
+        }
+        match name_or_path {
+            // The sun slides along the colonnade: shafts sweep between the columns.
+            "colonnade" => p(6.0, 0.10, 5.0, 1.5, [0.0; 3]),
+            // Through the canopy: the shaft pattern changes everywhere at once.
+            "forest" => p(5.0, 0.10, 6.0, 2.0, [0.0; 3]),
+            // The spot's aim sweeps: the stained-glass slab walks across the floor.
+            "stained-glass" => p(8.0, 0.08, 2.5, 2.0, [0.0; 3]),
+            // The light wanders inside the lantern (bars at ±1.6 m): every beam swings.
+            "cage" => p(12.0, 0.08, 0.0, 0.0, [0.5, 0.35, 0.5]),
+            // A grazing sun over the ridge: ±1° of elevation moves the notch's shafts a lot.
+            "terrain" => p(4.0, 0.06, 5.0, 1.0, [0.0; 3]),
+            _ => Self::generic(scene),
+        }
+    }
+
+    /// The path of any scene: an 8° orbit and 5 % dolly, the light swept by 6° (tilted by 2°), a
+    /// point light moved by 5 % of its distance to the camera's `look_at` (0.05–1 m) per axis.
+    pub fn generic(scene: &Scene) -> Self {
+        let offset = match &scene.light {
+            Light::Point { position, .. } => (0.05 * position.distance(scene.camera.look_at)).clamp(0.05, 1.0),
+            _ => 0.0,
+        };
+        MotionPath {
+            orbit_degrees: 8.0,
+            dolly: 0.05,
+            light_yaw_degrees: 6.0,
+            light_pitch_degrees: 2.0,
+            point_offset: [offset; 3],
+        }
+    }
+
+    /// The camera and the light at `t` (period 1), from the scene's own.
+    /// Whole t (the start of a loop) gives the scene's own camera and light, bit for bit.
+    pub fn pose(&self, camera: &Camera, light: &Light, t: f64) -> (Camera, Light) {
+        if t.fract() == 0.0 {
+            return (camera.clone(), light.clone());
+        }
+        let phi = std::f64::consts::TAU * t;
+        let (s1, c1, s2) = (phi.sin() as f32, phi.cos() as f32, (2.0 * phi).sin() as f32);
+        let mut cam = camera.clone();
+        let v = camera.position - camera.look_at;
+        let yaw = Quat::from_rotation_y(self.orbit_degrees.to_radians() * s1);
+        let scale = 1.0 - self.dolly * (1.0 - c1) * 0.5;
+        cam.position = camera.look_at + yaw * v * scale;
+        let sweep = |d: Vec3| -> Vec3 {
+            let d = Quat::from_rotation_y(self.light_yaw_degrees.to_radians() * s1) * d;
+            let axis = d.cross(Vec3::Y);
+            let d = if axis.length() > 1e-4 {
+                Quat::from_axis_angle(axis.normalize(), self.light_pitch_degrees.to_radians() * s2) * d
+            } else {
+                d
+            };
+            d.normalize()
+        };
+        let mut l = light.clone();
+        match &mut l {
+            Light::Directional { direction, .. } | Light::Spot { direction, .. } => *direction = sweep(*direction),
+            Light::Point { position, .. } => {
+                let [x, y, z] = self.point_offset;
+                *position += Vec3::new(x * s1, y * s2, z * (1.0 - c1) * 0.5);
+            }
+        }
+        (cam, l)
+    }
+}
+
+/// t of frame `i` of `frames`. With `spread` (what `animate` does) the frames cover exactly one
+/// loop, t = i/frames, so the GIF loops without a jump. Without it (what `bench` does) frames are
+/// 1/[`DEFAULT_FRAMES`] of the loop apart whatever their count, t = i/24, so the motion between
+/// frames — and with it the flicker measure — does not depend on how many frames are measured,
+/// and equals that of a default `animate` run.
+pub fn frame_time(i: u32, frames: u32, spread: bool) -> f64 {
+    if spread { i as f64 / frames.max(1) as f64 } else { i as f64 / DEFAULT_FRAMES as f64 }
+}
+
+/// The host frame at one point of the path: depth, surface, shadow map (read back to the CPU
+/// only when a CPU technique needs it).
+pub struct HostFrame {
+    /// Path parameter.
+    pub t: f64,
+    /// The frame description (posed camera and light).
+    pub desc: FrameDesc,
+    /// Camera depth, [0, 1].
+    pub depth: Vec<f32>,
+    /// Surface radiance.
+    pub surface: Image,
+    /// Transmittance to the visible surface, per pixel (for compositing).
+    pub transmittance: Vec<[f32; 3]>,
+    shadow_map: Option<ShadowMap>,
+    textures: Option<HostTextures>,
+}
+
+impl HostFrame {
+    /// The CPU shadow map (read back from the GPU on first use).
+    fn shadow_map(&mut self, gpu: Option<&GpuContext>) -> Result<&ShadowMap> {
+        if self.shadow_map.is_none() {
+            let (Some(g), Some(t)) = (gpu, &self.textures) else { bail!("no shadow map (internal error)") };
+            self.shadow_map = Some(host::read_shadow_map(g, t, &self.desc)?);
+        }
+        self.shadow_map.as_ref().context("no shadow map")
+    }
+
+    /// The final image from this frame's surface and an in-scattering image.
+    pub fn final_radiance(&self, inscatter: &Image) -> Image {
+        composite(&self.surface, inscatter, &self.transmittance)
+    }
+}
+
+/// Renders host frames of one scene along its path (GPU pipelines built once).
+pub struct PathRenderer<'g> {
+    gpu: Option<&'g GpuContext>,
+    host: Option<GpuHost>,
+    scene: Scene,
+    camera: Camera,
+    light: Light,
+    /// The path.
+    pub path: MotionPath,
+}
+
+impl<'g> PathRenderer<'g> {
+    /// `scene` at its render size, moving along `path`.
+    pub fn new(scene: Scene, path: MotionPath, gpu: Option<&'g GpuContext>) -> Result<Self> {
+        let host = match gpu {
+            Some(g) => {
+                g.check_texture_size("image size", scene.render.width, scene.render.height)?;
+                Some(GpuHost::new(g, &scene.geometry)?)
+            }
+            None => None,
+        };
+        Ok(PathRenderer { gpu, host, camera: scene.camera.clone(), light: scene.light.clone(), scene, path })
+    }
+
+    /// The scene (at t = 0).
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The host frame at `t`.
+    pub fn frame(&mut self, t: f64) -> Result<HostFrame> {
+        let (camera, light) = self.path.pose(&self.camera, &self.light, t);
+        self.scene.camera = camera;
+        self.scene.light = light;
+        let desc = frame_desc(&self.scene);
+        let spot = match &self.scene.light {
+            Light::Spot { texture, .. } => texture.as_deref(),
+            _ => None,
+        };
+        let (depth, surface, shadow_map, textures) = match (self.gpu, &self.host) {
+            (Some(g), Some(h)) => {
+                let tex = h.render(g, &desc, spot)?;
+                let depth = g.read_texture_f32(&tex.depth, 0)?;
+                let surface = g.read_image(&tex.surface)?;
+                (depth, surface, None, Some(tex))
+            }
+            _ => {
+                let h = host_cpu::render(&self.scene.geometry, &desc);
+                (h.depth, h.surface, Some(h.shadow_map), None)
+            }
+        };
+        let transmittance = surface_transmittance(&desc, &depth);
+        Ok(HostFrame { t, desc, depth, surface, transmittance, shadow_map, textures })
+    }
+}
+
+/// A technique rendered frame after frame: the settings of frame i are the scene's and the
+/// overrides', with `frame_index` advanced by i where the technique has that setting (temporal
+/// jitter). The GPU pipelines are built once.
+pub struct AnimatedTechnique {
+    name: String,
+    overrides: Vec<String>,
+    /// The scene's settings tables (no geometry), to parse each frame's settings.
+    stub: Scene,
+    frame_index: Option<u32>,
+    gpu: Option<(serde_json::Value, GpuRunner, wgpu::Texture)>,
+    /// Settings of frame 0.
+    pub first: TechniqueChoice,
+}
+
+/// The `frame_index` setting of a parsed technique, if it has one.
+fn frame_index_of(choice: &TechniqueChoice) -> Option<u32> {
+    let v = serde_json::to_value(choice).ok()?;
+    v.get("frame_index")?.as_u64().map(|x| x as u32)
+}
+
+/// Puts `choice`'s settings into a built runner of the same technique; false if it cannot.
+fn set_runner_settings(runner: &mut GpuRunner, choice: &TechniqueChoice) -> bool {
+    match (runner, choice) {
+        (GpuRunner::BruteForce(r), TechniqueChoice::BruteForce(s)) => r.settings = s.clone(),
+        (GpuRunner::Interleaved(r), TechniqueChoice::Interleaved(s)) => r.settings = s.clone(),
+        (GpuRunner::Subsampled(r), TechniqueChoice::Subsampled(s)) => r.settings = s.clone(),
+        _ => return false,
+    }
+    true
+}
+
+impl AnimatedTechnique {
+    /// Parses the technique's settings (scene table + `key=value` overrides); errors name them.
+    pub fn new(name: &str, scene: &Scene, overrides: &[String]) -> Result<Self> {
+        let first = TechniqueChoice::parse(name, scene, overrides)?;
+        let stub = Scene {
+            name: scene.name.clone(),
+            description: String::new(),
+            camera: scene.camera.clone(),
+            medium: scene.medium.clone(),
+            light: scene.light.clone(),
+            geometry: Geometry::default(),
+            render: scene.render.clone(),
+        };
+        Ok(AnimatedTechnique {
+            name: name.into(),
+            overrides: overrides.to_vec(),
+            frame_index: frame_index_of(&first),
+            stub,
+            gpu: None,
+            first,
+        })
+    }
+
+    /// The technique's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Whether frames advance the technique's `frame_index` setting.
+    pub fn has_frame_index(&self) -> bool {
+        self.frame_index.is_some()
+    }
+
+    /// Settings of frame `i`.
+    pub fn settings(&self, i: u32) -> Result<TechniqueChoice> {
+        match self.frame_index {
+            None => Ok(self.first.clone()),
+            Some(base) => {
+                let mut o = self.overrides.clone();
+                o.push(format!("frame_index={}", base.wrapping_add(i)));
+                TechniqueChoice::parse(&self.name, &self.stub, &o)
+            }
+        }
+    }
+
+    /// Renders frame `i` (the in-scattering) on `frame`: on the GPU when there is one and the
+    /// technique runs there (over the GPU's textures), else on the CPU (over the GPU's shadow
+    /// map and depth when the frame came from the GPU).
+    pub fn render(
+        &mut self,
+        gpu: Option<&GpuContext>,
+        frame: &mut HostFrame,
+        i: u32,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(Image, TechniqueStats)> {
+        let choice = self.settings(i)?;
+        let (img, stats) = match (gpu, &frame.textures) {
+            (Some(g), Some(tex)) if crepuscular::techniques::find(&self.name).is_some_and(|t| t.gpu) => {
+                let key = serde_json::to_value(&choice)?;
+                let (w, h) = (frame.desc.width, frame.desc.height);
+                let rebuild = match &mut self.gpu {
+                    Some((k, _, out)) if out.width() != w || out.height() != h => {
+                        *k = serde_json::Value::Null;
+                        true
+                    }
+                    Some((k, _, _)) if *k == key => false,
+                    Some((k, runner, _)) => {
+                        let done = set_runner_settings(runner, &choice);
+                        if done {
+                            *k = key.clone();
+                        }
+                        !done
+                    }
+                    None => true,
+                };
+                if rebuild {
+                    let runner = choice.gpu_runner(g)?.context("no GPU implementation")?;
+                    self.gpu = Some((key, runner, g.create_output_texture(w, h)));
+                }
+                let (_, runner, out) = self.gpu.as_mut().context("no GPU runner")?;
+                let out_view = out.create_view(&Default::default());
+                let (dv, sv) = (tex.depth_view(), tex.shadow_view());
+                let spot_view = tex.spot_texture.create_view(&Default::default());
+                let has_spot_texture = matches!(&frame.desc.light, Light::Spot { texture: Some(_), .. });
+                let gf = GpuFrame {
+                    desc: &frame.desc,
+                    depth: &dv,
+                    shadow_map: &sv,
+                    spot_texture: has_spot_texture.then_some(&spot_view),
+                };
+                let stats = runner.render(g, &gf, &out_view)?;
+                (g.read_image(out)?, stats)
+            }
+            _ => {
+                frame.shadow_map(gpu)?;
+                let sm = frame.shadow_map.as_ref().context("no shadow map")?;
+                let cf =
+                    CpuFrame { desc: &frame.desc, depth: &frame.depth, shadow_map: sm, surface: Some(&frame.surface) };
+                choice.run_cpu(&cf, progress)?
+            }
+        };
+        if !img.all_finite() {
+            bail!("{}: the technique produced non-finite values (NaN/Inf) — a bug, please report it", self.name);
+        }
+        Ok((img, stats))
+    }
+}
+
+/// The temporal stability of a technique's error along a path.
+///
+/// With e_t = Y(technique_t) − Y(reference_t) per pixel, Y the linear Rec. 709 luminance
+/// (0.2126 R + 0.7152 G + 0.0722 B) of the **in-scattering** (the final images differ by
+/// exactly the same amount, since both add the same T·L_surface), flicker is the mean over
+/// pixels and consecutive frame pairs of |e_{t+1} − e_t|. An error that stays put as the view
+/// moves (a bias that moves with the scene) counts little; error that changes from frame to
+/// frame — jitter noise, banding that crawls, shafts that pop in and out — counts fully.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Flicker {
+    /// Mean |e_{t+1} − e_t| over pixels and frame pairs, in linear luminance (radiance units).
+    pub mean_abs_change: f64,
+    /// Mean Y of the reference over every pixel of every frame.
+    pub mean_reference: f64,
+    /// `mean_abs_change / mean_reference`: dimensionless, comparable across scenes (0 when both
+    /// are 0). This is the number `bench` reports (as a percentage).
+    pub relative: f64,
+    /// For scale: the reference's own mean |Y(reference_{t+1}) − Y(reference_t)| — how much the
+    /// picture itself changes between the frames (the motion).
+    pub reference_change: f64,
+    /// Frames measured (pairs = frames − 1).
+    pub frames: u32,
+}
+
+/// Accumulates [`Flicker`] one frame at a time (only the previous error image is kept).
+#[derive(Debug, Default)]
+pub struct FlickerMeter {
+    prev: Option<(Vec<f64>, Vec<f64>)>,
+    size: (u32, u32),
+    sum_reference_change: f64,
+    sum_change: f64,
+    changes: u64,
+    sum_reference: f64,
+    reference_pixels: u64,
+    frames: u32,
+}
+
+fn luminance(p: &[f32; 4]) -> f64 {
+    0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64
+}
+
+impl FlickerMeter {
+    /// A meter with no frames.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds the next frame: the technique's and the reference's in-scattering of the same host
+    /// frame. Errors if the sizes differ from each other or from the previous frames'.
+    pub fn push(&mut self, technique: &Image, reference: &Image) -> Result<()> {
+        let size = (technique.width, technique.height);
+        if size != (reference.width, reference.height) {
+            bail!(
+                "flicker: technique frame is {}x{} but reference frame is {}x{}",
+                size.0,
+                size.1,
+                reference.width,
+                reference.height
+            );
+        }
+        let n = size.0 as usize * size.1 as usize;
+        if technique.pixels.len() != n || reference.pixels.len() != n || n == 0 {
+            bail!("flicker: frame {} claims {}x{} but holds a different number of pixels", self.frames, size.0, size.1);
+        }
+        if self.frames > 0 && size != self.size {
+            bail!(
+                "flicker: frame {} is {}x{}, earlier frames are {}x{}",
+                self.frames,
+                size.0,
+                size.1,
+                self.size.0,
+                self.size.1
+            );
+        }
+        let y_ref: Vec<f64> = reference.pixels.iter().map(luminance).collect();
+        let err: Vec<f64> = technique.pixels.iter().zip(&y_ref).map(|(t, r)| luminance(t) - r).collect();
+        if let Some((prev_err, prev_ref)) = &self.prev {
+            self.sum_change += err.iter().zip(prev_err).map(|(a, b)| (a - b).abs()).sum::<f64>();
+            self.sum_reference_change += y_ref.iter().zip(prev_ref).map(|(a, b)| (a - b).abs()).sum::<f64>();
+            self.changes += n as u64;
+        }
+        self.sum_reference += y_ref.iter().sum::<f64>();
+        self.reference_pixels += n as u64;
+        self.prev = Some((err, y_ref));
+        self.size = size;
+        self.frames += 1;
+        Ok(())
+    }
+
+    /// The measure so far; errors with fewer than two frames. Non-finite pixels give NaN.
+    pub fn finish(&self) -> Result<Flicker> {
+        if self.frames < 2 {
+            bail!("flicker needs at least 2 frames, got {}", self.frames);
+        }
+        let mean_abs_change = self.sum_change / self.changes as f64;
+        let mean_reference = self.sum_reference / self.reference_pixels as f64;
+        let relative = if mean_abs_change == 0.0 { 0.0 } else { mean_abs_change / mean_reference };
+        let reference_change = self.sum_reference_change / self.changes as f64;
+        Ok(Flicker { mean_abs_change, mean_reference, relative, reference_change, frames: self.frames })
+    }
+}
+
+/// [`Flicker`] of a technique's frames against the reference's frames of the same path.
+pub fn flicker(technique: &[Image], reference: &[Image]) -> Result<Flicker> {
+    if technique.len() != reference.len() {
+        bail!("flicker: {} technique frames but {} reference frames", technique.len(), reference.len());
+    }
+    let mut m = FlickerMeter::new();
+    for (t, r) in technique.iter().zip(reference) {
+        m.push(t, r)?;
+    }
+    m.finish()
+}
+
+/// What `crepuscular animate` does.
+#[derive(Clone, Debug)]
+pub struct AnimateOptions {
+    /// Built-in scene name or scene file.
+    pub scene: String,
+    /// Technique name.
+    pub technique: String,
+    /// `key=value` technique settings.
+    pub overrides: Vec<String>,
+    /// Frames, 1..=[`MAX_FRAMES`].
+    pub frames: u32,
+    /// Frame size, each side 1..=[`MAX_SIDE`].
+    pub size: (u32, u32),
+    /// Shadow-map size override.
+    pub shadow_map_size: Option<u32>,
+    /// GIF frame rate, 1..=100.
+    pub fps: u32,
+    /// Also render `reference` and measure [`Flicker`].
+    pub flicker: bool,
+    /// Steps per pixel of that reference (even, ≥ 2).
+    pub reference_steps: u32,
+    /// The GIF.
+    pub output: PathBuf,
+}
+
+impl AnimateOptions {
+    /// Checks every value before any work; errors name the option and value.
+    pub fn validate(&self) -> Result<()> {
+        if !(1..=MAX_FRAMES).contains(&self.frames) {
+            bail!("--frames {}: must be in 1..={MAX_FRAMES}", self.frames);
+        }
+        let (w, h) = self.size;
+        if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
+            bail!("--size {w}x{h}: animation frames must be 1..={MAX_SIDE} pixels per side");
+        }
+        if !(1..=100).contains(&self.fps) {
+            bail!("--fps {}: must be in 1..=100", self.fps);
+        }
+        if let Some(s) = self.shadow_map_size
+            && (s == 0 || s > 16384)
+        {
+            bail!("--shadow-map-size {s}: must be in 1..=16384");
+        }
+        if self.flicker {
+            if self.frames < 2 {
+                bail!("--flicker needs --frames ≥ 2 (it measures change between frames), got {}", self.frames);
+            }
+            if self.reference_steps < 2 || self.reference_steps % 2 != 0 || self.reference_steps > 1 << 20 {
+                bail!("--reference-steps {}: must be even and in 2..=1048576", self.reference_steps);
+            }
+        }
+        let parent = match self.output.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        if !parent.is_dir() {
+            bail!("{}: the directory {} does not exist", self.output.display(), parent.display());
+        }
+        if self.output.file_name().is_none() {
+            bail!("{}: not a file path", self.output.display());
+        }
+        Ok(())
+    }
+}
+
+/// Everything [`run`] checks before it renders: the options, the scene and the technique
+/// settings (so that a bad value fails before a GPU is opened).
+pub fn check(opts: &AnimateOptions) -> Result<()> {
+    opts.validate()?;
+    let mut scene = load_scene(&opts.scene)?;
+    (scene.render.width, scene.render.height) = opts.size;
+    AnimatedTechnique::new(&opts.technique, &scene, &opts.overrides)?;
+    Ok(())
+}
+
+/// What an animation run produced.
+#[derive(Clone, Debug, Serialize)]
+pub struct AnimateReport {
+    /// Scene name.
+    pub scene: String,
+    /// Technique and frame 0's settings.
+    pub settings: TechniqueChoice,
+    /// Whether frames advanced `frame_index`.
+    pub frame_index_advanced: bool,
+    /// The path.
+    pub path: MotionPath,
+    /// Frames written.
+    pub frames: u32,
+    /// The technique's time per frame, ms, in frame order.
+    pub technique_ms: Vec<f64>,
+    /// Flicker vs reference (with `--flicker`).
+    pub flicker: Option<Flicker>,
+    /// Bytes of the GIF.
+    pub bytes: u64,
+}
+
+/// A writer that remembers the first error (the GIF encoder writes its trailer on drop, where
+/// errors would otherwise be lost).
+struct Tracked<W: Write> {
+    inner: W,
+    error: Option<String>,
+    bytes: u64,
+}
+
+impl<W: Write> Write for Tracked<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        match self.inner.write(buf) {
+            Ok(n) => {
+                self.bytes += n as u64;
+                Ok(n)
+            }
+            Err(e) => {
+                self.error.get_or_insert_with(|| e.to_string());
+                Err(e)
+            }
+        }
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush().inspect_err(|e| {
+            self.error.get_or_insert_with(|| e.to_string());
+        })
+    }
+}
+
+/// Renders the animation and writes the GIF atomically (nothing is left at `output` on error).
+/// `progress(frames_done, frames_total, what)` is called as frames finish; `rows` receives the
+/// reference's row progress.
+pub fn run(
+    opts: &AnimateOptions,
+    gpu: Option<&GpuContext>,
+    progress: &dyn Fn(u32, u32, &str),
+    rows: &(dyn Fn(u64, u64) + Sync),
+) -> Result<AnimateReport> {
+    opts.validate()?;
+    let mut scene = load_scene(&opts.scene)?;
+    (scene.render.width, scene.render.height) = opts.size;
+    if let Some(s) = opts.shadow_map_size {
+        scene.render.shadow.size = s;
+    }
+    let mut technique = AnimatedTechnique::new(&opts.technique, &scene, &opts.overrides)?;
+    let mut reference = if opts.flicker {
+        let r = format!("steps={}", opts.reference_steps);
+        // Seed fixed: the reference's own noise changes only as the rays move.
+        Some(AnimatedTechnique::new("reference", &scene, &[r, "seed=1".into()])?)
+    } else {
+        None
+    };
+    let path = MotionPath::for_scene(&opts.scene, &scene);
+    let tone = ToneMap::new(scene.render.exposure);
+    let scene_name = scene.name.clone();
+    let mut renderer = PathRenderer::new(scene, path.clone(), gpu)?;
+    let (w, h) = opts.size;
+    let delay = image::Delay::from_numer_denom_ms(1000, opts.fps);
+    let mut meter = FlickerMeter::new();
+    let mut technique_ms = Vec::new();
+    let mut bytes = 0;
+    crate::output::write_atomic_with(&opts.output, |file| {
+        let mut sink = Tracked { inner: std::io::BufWriter::new(file), error: None, bytes: 0 };
+        {
+            let mut enc = image::codecs::gif::GifEncoder::new_with_speed(&mut sink, GIF_SPEED);
+            enc.set_repeat(image::codecs::gif::Repeat::Infinite).context("GIF")?;
+            for i in 0..opts.frames {
+                let t = frame_time(i, opts.frames, true);
+                progress(i, opts.frames, &format!("frame {}/{}: {}", i + 1, opts.frames, technique.name()));
+                let mut frame = renderer.frame(t)?;
+                let (img, stats) = technique.render(gpu, &mut frame, i, rows)?;
+                technique_ms.push(stats.total_ms());
+                if let Some(r) = &mut reference {
+                    progress(i, opts.frames, &format!("frame {}/{}: reference", i + 1, opts.frames));
+                    let (ri, _) = r.render(gpu, &mut frame, 0, rows)?;
+                    meter.push(&img, &ri)?;
+                }
+                let rgb = tone.to_rgb8(&frame.final_radiance(&img));
+                let rgba: Vec<u8> = rgb.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]).collect();
+                let buf = image::RgbaImage::from_raw(w, h, rgba).context("frame buffer size")?;
+                enc.encode_frame(image::Frame::from_parts(buf, 0, 0, delay))
+                    .with_context(|| format!("cannot encode GIF frame {i}"))?;
+            }
+            progress(opts.frames, opts.frames, "done");
+        }
+        if let Some(e) = &sink.error {
+            bail!("{e}");
+        }
+        sink.flush()?;
+        bytes = sink.bytes;
+        Ok(())
+    })?;
+    let flicker = if opts.flicker { Some(meter.finish()?) } else { None };
+    Ok(AnimateReport {
+        scene: scene_name,
+        frame_index_advanced: technique.has_frame_index(),
+        settings: technique.first,
+        path,
+        frames: opts.frames,
+        technique_ms,
+        flicker,
+        bytes,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The light's direction (directional, spot) or position (point).
+    fn light_vector(l: &Light) -> Vec3 {
+        match l {
+            Light::Directional { direction, .. } | Light::Spot { direction, .. } => *direction,
+            Light::Point { position, .. } => *position,
+        }
+    }
+
+    #[test]
+    fn the_path_starts_and_ends_at_the_scene_and_moves_in_between() {
+        for name in ["colonnade", "forest", "stained-glass", "cage", "terrain"] {
+            let s = builtin::builtin(name).unwrap();
+            let p = MotionPath::for_scene(name, &s);
+            assert_ne!(p, MotionPath::generic(&s), "{name} has its own path");
+            let (c, l) = p.pose(&s.camera, &s.light, 0.0);
+            assert_eq!((c, l), (s.camera.clone(), s.light.clone()), "{name}: t = 0 is the scene");
+            let (c, l) = p.pose(&s.camera, &s.light, 0.999999);
+            assert!(c.position.distance(s.camera.position) < 1e-3, "{name}: t → 1 loops back");
+            assert!(light_vector(&l).distance(light_vector(&s.light)) < 1e-3, "{name}");
+            let (c, l) = p.pose(&s.camera, &s.light, 0.25);
+            assert!(c.position.distance(s.camera.position) > 0.1, "{name}: the camera does not move");
+            assert_eq!(c.look_at, s.camera.look_at);
+            assert!(light_vector(&l).distance(light_vector(&s.light)) > 0.02, "{name}: the light does not move");
+        }
+        // A scene from a file (any name that is not built in) gets the generic path.
+        let s = builtin::builtin("cage").unwrap();
+        assert_eq!(MotionPath::for_scene("my-cage.toml", &s), MotionPath::generic(&s));
+    }
+
+    #[test]
+    fn frame_times_loop_or_step_by_a_24th() {
+        assert_eq!(frame_time(0, 8, true), 0.0);
+        assert_eq!(frame_time(4, 8, true), 0.5);
+        assert_eq!(frame_time(3, 4, false), 3.0 / 24.0);
+    }
+}

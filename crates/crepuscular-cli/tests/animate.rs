@@ -1,0 +1,327 @@
+//! `crepuscular animate` and the flicker measure: the GIF has the requested frames and size and
+//! shows motion, on the CPU backend and on the GPU when there is one; flicker is 0 for the
+//! reference against itself and for an error that does not change, exactly 2δ for an error that
+//! alternates by ±δ, and larger with per-frame jitter than without; `bench` reports it; bad
+//! input fails with one line and no panic.
+
+use crepuscular::Image;
+use crepuscular::gpu::test_gpu;
+use crepuscular_cli::animate::{AnimatedTechnique, FlickerMeter, MotionPath, PathRenderer, flicker, frame_time};
+use image::AnimationDecoder;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_crepuscular"))
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("crepuscular-animate-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The frames of a GIF as RGBA buffers.
+fn gif_frames(path: &Path) -> Vec<image::RgbaImage> {
+    let f = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let dec = image::codecs::gif::GifDecoder::new(f).unwrap();
+    dec.into_frames().collect_frames().unwrap().into_iter().map(|f| f.into_buffer()).collect()
+}
+
+fn entries(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> =
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    v.sort();
+    v
+}
+
+/// Runs `animate` and checks the GIF: `frames` frames of 64×36 that are not all the same.
+fn animate_and_check(backend: &str, dir: &Path) {
+    let gif = dir.join(format!("{backend}.gif"));
+    let out = bin()
+        .args(["animate", "cage", "--backend", backend, "--frames", "5", "--size", "64x36"])
+        .args(["--shadow-map-size", "256", "--set", "steps=16", "--output"])
+        .arg(&gif)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("wrote") && err.contains("5 frames"), "{err}");
+    let frames = gif_frames(&gif);
+    assert_eq!(frames.len(), 5);
+    for f in &frames {
+        assert_eq!(f.dimensions(), (64, 36));
+        assert!(f.pixels().any(|p| p.0[0] > 40), "a frame is black");
+    }
+    assert!(frames.windows(2).all(|w| w[0] != w[1]), "consecutive frames are identical: nothing moves");
+}
+
+#[test]
+fn animate_writes_a_gif_with_the_frames_on_the_cpu() {
+    let d = tmp("cpu");
+    animate_and_check("cpu", &d);
+    // Only the GIF: no temporary file left behind.
+    assert_eq!(entries(&d), vec!["cpu.gif".to_string()]);
+}
+
+#[test]
+fn animate_writes_a_gif_with_the_frames_on_the_gpu() {
+    if test_gpu("animate_writes_a_gif_with_the_frames_on_the_gpu").is_none() {
+        return;
+    }
+    let d = tmp("gpu");
+    animate_and_check("gpu", &d);
+    assert_eq!(entries(&d), vec!["gpu.gif".to_string()]);
+}
+
+fn grey(w: u32, h: u32, v: f32) -> Image {
+    Image { width: w, height: h, pixels: vec![[v, v, v, 1.0]; (w * h) as usize] }
+}
+
+/// A smooth test image that differs per frame `k` (as a moving reference would).
+fn moving(w: u32, h: u32, k: u32) -> Image {
+    let mut img = Image::new(w, h);
+    for (i, p) in img.pixels.iter_mut().enumerate() {
+        let (x, y) = ((i as u32 % w) as f32, (i as u32 / w) as f32);
+        let v = 0.5 + 0.4 * ((x + 3.0 * k as f32) * 0.3).sin() * (y * 0.2).cos();
+        *p = [v, 0.8 * v, 0.6 * v, 1.0];
+    }
+    img
+}
+
+#[test]
+fn flicker_is_zero_for_the_reference_itself_and_for_a_constant_error() {
+    let reference: Vec<Image> = (0..4).map(|k| moving(16, 9, k)).collect();
+    let f = flicker(&reference, &reference).unwrap();
+    assert_eq!(f.mean_abs_change, 0.0);
+    assert_eq!(f.relative, 0.0);
+    assert_eq!(f.frames, 4);
+    assert!(f.mean_reference > 0.1 && f.reference_change > 0.0, "{f:?}");
+    // The same error on every frame (a bias) does not flicker.
+    let biased: Vec<Image> = reference
+        .iter()
+        .map(|r| Image {
+            pixels: r.pixels.iter().map(|p| [p[0] + 0.25, p[1] + 0.25, p[2] + 0.25, 1.0]).collect(),
+            ..*r
+        })
+        .collect();
+    assert!(flicker(&biased, &reference).unwrap().mean_abs_change < 1e-7);
+}
+
+#[test]
+fn flicker_of_an_alternating_error_is_twice_its_size() {
+    let reference: Vec<Image> = (0..5).map(|k| moving(16, 9, k)).collect();
+    let delta = 0.01f32;
+    let perturbed: Vec<Image> = reference
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            let d = if k % 2 == 0 { delta } else { -delta };
+            Image { pixels: r.pixels.iter().map(|p| [p[0] + d, p[1] + d, p[2] + d, 1.0]).collect(), ..*r }
+        })
+        .collect();
+    let f = flicker(&perturbed, &reference).unwrap();
+    // Luminance weights sum to 1: a grey ±δ is a luminance ±δ; consecutive errors differ by 2δ.
+    assert!((f.mean_abs_change - 2.0 * delta as f64).abs() < 1e-6, "{f:?}");
+    assert!((f.relative - f.mean_abs_change / f.mean_reference).abs() < 1e-12);
+    // One pixel changing in one frame: the mean is over pixels and frame pairs.
+    let mut one = reference.clone();
+    one[2].pixels[7] = [2.0, 2.0, 2.0, 1.0];
+    let f = flicker(&one, &reference).unwrap();
+    let y = |p: [f32; 4]| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64;
+    let e = 2.0 - y(reference[2].pixels[7]);
+    // Frame 2's error enters two pairs (1→2 and 2→3), each over 16·9 pixels, 4 pairs in all.
+    assert!((f.mean_abs_change - 2.0 * e / (4.0 * 144.0)).abs() < 1e-6, "{f:?}");
+}
+
+#[test]
+fn flicker_rejects_what_it_cannot_measure() {
+    let a = grey(8, 4, 0.5);
+    assert!(flicker(&[a.clone()], &[a.clone()]).is_err(), "one frame has no pair");
+    assert!(flicker(&[a.clone(), a.clone()], &[a.clone()]).is_err(), "frame counts differ");
+    assert!(flicker(&[a.clone(), grey(4, 8, 0.5)], &[a.clone(), grey(4, 8, 0.5)]).is_err(), "size changes");
+    let mut m = FlickerMeter::new();
+    let msg = m.push(&a, &grey(4, 8, 0.5)).unwrap_err().to_string();
+    assert!(msg.contains("8x4") && msg.contains("4x8"), "{msg}");
+    let nan = Image { pixels: vec![[f32::NAN, 0.0, 0.0, 1.0]; 32], ..a.clone() };
+    assert!(flicker(&[a.clone(), nan], &[a.clone(), a]).unwrap().mean_abs_change.is_nan());
+}
+
+/// Flicker of brute-force along a scene's path at 64×36 on the CPU backend.
+fn measured_flicker(scene: &str, overrides: &[&str], frames: u32) -> f64 {
+    let mut s = crepuscular_cli::render::load_scene(scene).unwrap();
+    (s.render.width, s.render.height) = (64, 36);
+    s.render.shadow.size = 256;
+    let overrides: Vec<String> = overrides.iter().map(|o| o.to_string()).collect();
+    let mut t = AnimatedTechnique::new("brute-force", &s, &overrides).unwrap();
+    assert!(t.has_frame_index());
+    let mut r = AnimatedTechnique::new("reference", &s, &["steps=64".into()]).unwrap();
+    assert!(!r.has_frame_index());
+    let mut path = PathRenderer::new(s.clone(), MotionPath::for_scene(scene, &s), None).unwrap();
+    let mut m = FlickerMeter::new();
+    for i in 0..frames {
+        let mut f = path.frame(frame_time(i, frames, false)).unwrap();
+        let (ti, _) = t.render(None, &mut f, i, &|_, _| {}).unwrap();
+        let (ri, _) = r.render(None, &mut f, 0, &|_, _| {}).unwrap();
+        m.push(&ti, &ri).unwrap();
+    }
+    m.finish().unwrap().relative
+}
+
+#[test]
+fn frames_advance_frame_index_from_its_setting() {
+    let s = crepuscular_cli::render::load_scene("cage").unwrap();
+    for name in ["brute-force", "interleaved", "subsampled"] {
+        let t = AnimatedTechnique::new(name, &s, &["frame_index=5".into(), "jitter=true".into()]).unwrap();
+        assert!(t.has_frame_index(), "{name}");
+        for i in [0u32, 3] {
+            let v = serde_json::to_value(t.settings(i).unwrap()).unwrap();
+            assert_eq!(v["frame_index"], 5 + i, "{name}");
+            assert_eq!(v["jitter"], true, "{name}");
+        }
+    }
+    let r = AnimatedTechnique::new("reference", &s, &["steps=8".into()]).unwrap();
+    assert!(!r.has_frame_index());
+    assert_eq!(serde_json::to_value(r.settings(7).unwrap()).unwrap()["steps"], 8);
+    assert!(AnimatedTechnique::new("nope", &s, &[]).is_err());
+}
+
+#[test]
+fn frame_zero_is_what_render_draws() {
+    let mut s = crepuscular_cli::render::load_scene("stained-glass").unwrap();
+    (s.render.width, s.render.height) = (48, 27);
+    s.render.shadow.size = 256;
+    let set = ["steps=12".to_string(), "jitter=true".to_string(), "frame_index=3".to_string()];
+    let mut t = AnimatedTechnique::new("subsampled", &s, &set).unwrap();
+    let mut path = PathRenderer::new(s.clone(), MotionPath::for_scene("stained-glass", &s), None).unwrap();
+    let mut f = path.frame(0.0).unwrap();
+    let (img, _) = t.render(None, &mut f, 0, &|_, _| {}).unwrap();
+    let technique = crepuscular_cli::render::TechniqueChoice::parse("subsampled", &s, &set).unwrap();
+    let opts = crepuscular_cli::render::RenderOptions { technique, progress: &|_, _| {} };
+    let out = crepuscular_cli::render::render(&s, None, &opts).unwrap();
+    assert_eq!(img, out.inscatter);
+    assert_eq!(f.final_radiance(&img), out.final_radiance);
+    // The next frame moves (and re-seeds the jitter).
+    let mut f1 = path.frame(frame_time(1, 24, true)).unwrap();
+    assert_ne!(t.render(None, &mut f1, 1, &|_, _| {}).unwrap().0, img);
+}
+
+#[test]
+fn per_frame_jitter_flickers_more_and_more_steps_flicker_less() {
+    let still = measured_flicker("colonnade", &["steps=4"], 3);
+    let jittered = measured_flicker("colonnade", &["steps=4", "jitter=true"], 3);
+    let fine = measured_flicker("colonnade", &["steps=64"], 3);
+    eprintln!("flicker: 4 steps {still:.4}, 4 steps jittered {jittered:.4}, 64 steps {fine:.4}");
+    assert!(jittered > 1.3 * still, "jitter advanced per frame must flicker more: {jittered} vs {still}");
+    assert!(fine < 0.5 * still, "64 steps must flicker less than 4: {fine} vs {still}");
+    assert!(fine > 0.0);
+}
+
+#[test]
+fn animate_flicker_of_the_reference_against_itself_is_zero_and_of_a_technique_is_not() {
+    let d = tmp("flicker");
+    let run = |technique: &str, steps: &str| {
+        let out = bin()
+            .args(["animate", "stained-glass", "--backend", "cpu", "--frames", "3", "--size", "48x27"])
+            .args(["--shadow-map-size", "256", "--flicker", "--reference-steps", "16", "-t", technique])
+            .args(["--set", steps, "--output"])
+            .arg(d.join(format!("{technique}.gif")))
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        let line = text.lines().find(|l| l.starts_with("flicker")).unwrap_or_else(|| panic!("{text}")).to_string();
+        line.split_whitespace().nth(1).unwrap().parse::<f64>().unwrap()
+    };
+    assert_eq!(run("reference", "steps=16"), 0.0);
+    assert!(run("brute-force", "steps=4") > 0.0);
+}
+
+#[test]
+fn bench_reports_flicker_for_the_smallest_size() {
+    let d = tmp("bench");
+    let out = bin()
+        .args(["bench", "--backend", "cpu", "--scenes", "cage", "--techniques", "brute-force"])
+        .args(["--sizes", "64x36,32x18", "--repeat", "1", "--warmup", "0", "--reference-steps", "16"])
+        .args(["--flicker-frames", "3", "--output"])
+        .arg(&d)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("bench.json")).unwrap()).unwrap();
+    assert_eq!(r["flicker_frames"], 3);
+    assert_eq!(r["flicker_size"], serde_json::json!([32, 18]));
+    let recs = r["records"].as_array().unwrap();
+    assert_eq!(recs.len(), 8);
+    for x in recs {
+        if x["size"] == serde_json::json!([32, 18]) {
+            let f = x["flicker"]["relative"].as_f64().unwrap_or_else(|| panic!("{x}"));
+            assert!(f > 0.0 && f.is_finite(), "{x}");
+            assert_eq!(x["flicker"]["frames"], 3);
+        } else {
+            assert!(x["flicker"].is_null(), "{x}");
+        }
+    }
+    // Every plot also as PNG (pixel font, no TrueType font needed).
+    for f in ["time_vs_quality_cage_32x18.png", "time_vs_resolution.png"] {
+        let png = image::open(d.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert_eq!((png.width(), png.height()), (900, 560), "{f}");
+        assert!(d.join(f).with_extension("svg").exists(), "{f}");
+    }
+    let md = std::fs::read_to_string(d.join("bench.md")).unwrap();
+    assert!(md.contains("flicker %") && md.contains("flicker: 3 frames"), "{md}");
+    // 1 frame has no pair; flicker without a reference has nothing to measure against.
+    for args in
+        [["--flicker-frames", "1", "--reference-steps", "16"], ["--flicker-frames", "2", "--reference-steps", "0"]]
+    {
+        let out = bin().args(["bench", "--backend", "cpu", "--scenes", "cage"]).args(args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains("--flicker-frames") && !err.contains("panicked"), "{err}");
+    }
+}
+
+#[test]
+fn bad_animate_input_fails_with_one_line_and_leaves_the_output_alone() {
+    let d = tmp("bad");
+    let keep = d.join("keep.gif");
+    std::fs::write(&keep, b"precious").unwrap();
+    for (args, needle) in [
+        (vec!["--size", "32x18", "--frames", "0"], "--frames"),
+        (vec!["--size", "32x18", "--technique", "nope"], "unknown technique"),
+        (vec!["--size", "5000x100"], "--size"),
+        (vec!["--size", "0x10"], "size"),
+        (vec!["--size", "32x18", "--frames", "1", "--flicker"], "--flicker"),
+        (vec!["--size", "32x18", "--flicker", "--reference-steps", "3"], "--reference-steps"),
+        (vec!["--size", "32x18", "--set", "steps=0"], "steps"),
+        (vec!["--size", "32x18", "--fps", "0"], "--fps"),
+    ] {
+        let out = bin()
+            .args(["animate", "cage", "--backend", "cpu"])
+            .args(&args)
+            .arg("--output")
+            .arg(&keep)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} must fail");
+        assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+        // (clap's own errors add a blank line and a hint to try --help.)
+        let lines: Vec<_> = err
+            .lines()
+            .filter(|l| {
+                !l.contains("XDG_RUNTIME_DIR") && !l.trim().is_empty() && !l.starts_with("For more information")
+            })
+            .collect();
+        assert_eq!(lines.len(), 1, "{args:?}: {err}");
+        assert!(lines[0].contains(needle), "{args:?}: {err}");
+    }
+    let out = bin()
+        .args(["animate", "cage", "--backend", "cpu", "--size", "32x18", "--output"])
+        .arg(d.join("no-such-dir").join("a.gif"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("no-such-dir"));
+    assert_eq!(std::fs::read(&keep).unwrap(), b"precious");
+    assert_eq!(entries(&d), vec!["keep.gif".to_string()]);
+}

@@ -259,6 +259,7 @@ fn set_runner_settings(runner: &mut GpuRunner, choice: &TechniqueChoice) -> bool
         (GpuRunner::BruteForce(r), TechniqueChoice::BruteForce(s)) => r.settings = s.clone(),
         (GpuRunner::Interleaved(r), TechniqueChoice::Interleaved(s)) => r.settings = s.clone(),
         (GpuRunner::Subsampled(r), TechniqueChoice::Subsampled(s)) => r.settings = s.clone(),
+        (GpuRunner::Epipolar(r), TechniqueChoice::Epipolar(s)) => r.settings = s.clone(),
         _ => return false,
     }
     true

@@ -183,6 +183,12 @@ struct RenderArgs {
     /// Exposure multiplier before the tone curve (overrides the scene's).
     #[arg(long)]
     exposure: Option<f32>,
+    /// Also write a debug view of the technique (`epipolar`: `classification`, the sample
+    /// classification of Engelhardt & Dachsbacher 2010 Fig. 9 bottom; `radiance`, the lines ×
+    /// samples radiance texture scaled up) as `<output stem>.<view>.png`, tone-mapped like the
+    /// image. Costs one more run of the technique.
+    #[arg(long, value_enum, value_name = "VIEW")]
+    debug: Option<render::DebugView>,
 }
 
 #[derive(clap::Args)]
@@ -236,6 +242,15 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
         scene.render.exposure = e;
     }
     let technique = TechniqueChoice::parse(&a.technique, &scene, &a.set)?;
+    if let Some(view) = a.debug
+        && !matches!(technique, TechniqueChoice::Epipolar(_))
+    {
+        bail!(
+            "--debug {}: debug views exist for the technique `epipolar` only (this is `{}`)",
+            view.name(),
+            technique.name()
+        );
+    }
     let notice = |m: &str| eprintln!("{m}");
     let gpu = render::open_gpu(a.backend, &notice)?;
     let on = match &gpu {
@@ -262,6 +277,7 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
         }
         bar.set_position(done);
     };
+    let debug_technique = a.debug.map(|_| technique.clone());
     let out = render::render(&scene, gpu.as_ref(), &RenderOptions { technique, progress: &progress })?;
     bar.finish_and_clear();
     let tone = ToneMap::new(scene.render.exposure);
@@ -285,6 +301,12 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
     if let Some(p) = &a.stats {
         output::write_json(p, &out.stats)?;
         eprintln!("wrote {}", p.display());
+    }
+    if let (Some(view), Some(technique)) = (a.debug, &debug_technique) {
+        let img = render::debug_view(&scene, gpu.as_ref(), technique, view, &out.final_radiance)?;
+        let p = a.output.with_extension(format!("{}.png", view.name()));
+        output::write_png_rgb8(&p, img.width, img.height, &tone.to_rgb8(&img))?;
+        eprintln!("wrote {} ({} view, {}×{})", p.display(), view.name(), img.width, img.height);
     }
     Ok(())
 }

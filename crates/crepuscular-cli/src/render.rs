@@ -6,6 +6,7 @@ use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::GpuContext;
 use crepuscular::stats::{PassTime, TechniqueStats};
 use crepuscular::techniques::brute_force::{self, BruteForce, BruteForceSettings};
+use crepuscular::techniques::epipolar::{self, Epipolar, EpipolarSettings};
 use crepuscular::techniques::interleaved::{self, Interleaved, InterleavedSettings};
 use crepuscular::techniques::reference::{self, ReferenceSettings};
 use crepuscular::techniques::subsampled::{self, Subsampled, SubsampledSettings};
@@ -50,6 +51,8 @@ pub enum TechniqueChoice {
     Interleaved(InterleavedSettings),
     /// `subsampled`.
     Subsampled(SubsampledSettings),
+    /// `epipolar`.
+    Epipolar(EpipolarSettings),
     /// `reference`.
     Reference(ReferenceSettings),
 }
@@ -62,6 +65,8 @@ pub enum GpuRunner {
     Interleaved(Interleaved),
     /// `subsampled`.
     Subsampled(Subsampled),
+    /// `epipolar`.
+    Epipolar(Epipolar),
 }
 
 impl GpuRunner {
@@ -71,6 +76,7 @@ impl GpuRunner {
             GpuRunner::BruteForce(t) => t.render(gpu, frame, output)?,
             GpuRunner::Interleaved(t) => t.render(gpu, frame, output)?,
             GpuRunner::Subsampled(t) => t.render(gpu, frame, output)?,
+            GpuRunner::Epipolar(t) => t.render(gpu, frame, output)?,
         })
     }
 }
@@ -82,6 +88,7 @@ impl TechniqueChoice {
             TechniqueChoice::BruteForce(_) => "brute-force",
             TechniqueChoice::Interleaved(_) => "interleaved",
             TechniqueChoice::Subsampled(_) => "subsampled",
+            TechniqueChoice::Epipolar(_) => "epipolar",
             TechniqueChoice::Reference(_) => "reference",
         }
     }
@@ -92,6 +99,7 @@ impl TechniqueChoice {
             TechniqueChoice::BruteForce(s) => Some(GpuRunner::BruteForce(BruteForce::new(gpu, s.clone())?)),
             TechniqueChoice::Interleaved(s) => Some(GpuRunner::Interleaved(Interleaved::new(gpu, s.clone())?)),
             TechniqueChoice::Subsampled(s) => Some(GpuRunner::Subsampled(Subsampled::new(gpu, s.clone())?)),
+            TechniqueChoice::Epipolar(s) => Some(GpuRunner::Epipolar(Epipolar::new(gpu, s.clone())?)),
             TechniqueChoice::Reference(_) => None,
         })
     }
@@ -102,6 +110,7 @@ impl TechniqueChoice {
             TechniqueChoice::BruteForce(s) => brute_force::cpu::march(frame, s)?,
             TechniqueChoice::Interleaved(s) => interleaved::cpu::render(frame, s)?,
             TechniqueChoice::Subsampled(s) => subsampled::cpu::render(frame, s)?,
+            TechniqueChoice::Epipolar(s) => epipolar::cpu::render(frame, s)?,
             TechniqueChoice::Reference(s) => reference::render(frame, s, progress)?,
         })
     }
@@ -135,6 +144,11 @@ impl TechniqueChoice {
                     let s: SubsampledSettings = t.try_into().with_context(|| src.clone())?;
                     s.validate().with_context(|| src.clone())?;
                     TechniqueChoice::Subsampled(s)
+                }
+                "epipolar" => {
+                    let s: EpipolarSettings = t.try_into().with_context(|| src.clone())?;
+                    s.validate().with_context(|| src.clone())?;
+                    TechniqueChoice::Epipolar(s)
                 }
                 "reference" => TechniqueChoice::Reference(t.try_into().with_context(|| src.clone())?),
                 other => {
@@ -327,4 +341,80 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
         technique,
     };
     Ok(RenderOutput { inscatter, surface, final_radiance, depth, stats })
+}
+
+/// A debug view of `render --debug`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum DebugView {
+    /// `epipolar`: Engelhardt & Dachsbacher 2010, Fig. 9 bottom — every valid epipolar line's
+    /// texels drawn faint over the final image, the initial ray-march samples in red and the
+    /// samples the refinement placed at depth discontinuities in green.
+    Classification,
+    /// `epipolar`: the radiance texture (one row per epipolar line, one column per sample
+    /// along it; culled lines black), scaled up to at least 1024 pixels wide.
+    Radiance,
+}
+
+impl DebugView {
+    /// Name, as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            DebugView::Classification => "classification",
+            DebugView::Radiance => "radiance",
+        }
+    }
+}
+
+/// Renders `view` for the frame `render` drew (`final_radiance` is that frame's final image,
+/// the background of the classification). Runs the technique again with its debug readbacks,
+/// on the same backend. Returns a linear image (tone-map it like the final image).
+pub fn debug_view(
+    scene: &Scene,
+    gpu: Option<&GpuContext>,
+    technique: &TechniqueChoice,
+    view: DebugView,
+    final_radiance: &Image,
+) -> Result<Image> {
+    let TechniqueChoice::Epipolar(settings) = technique else {
+        bail!(
+            "--debug {}: debug views exist for the technique `epipolar` only (this is `{}`)",
+            view.name(),
+            technique.name()
+        );
+    };
+    let desc = frame_desc(scene);
+    let debug = match gpu {
+        Some(gpu) => {
+            let spot = match &scene.light {
+                crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
+                _ => None,
+            };
+            let host = GpuHost::new(gpu, &scene.geometry)?;
+            let tex = host.render(gpu, &desc, spot)?;
+            let mut runner = Epipolar::new(gpu, settings.clone())?;
+            let out = gpu.create_output_texture(desc.width, desc.height);
+            let (depth_view, shadow_view) = (tex.depth_view(), tex.shadow_view());
+            let spot_view = tex.spot_texture.create_view(&Default::default());
+            let frame = GpuFrame {
+                desc: &desc,
+                depth: &depth_view,
+                shadow_map: &shadow_view,
+                spot_texture: spot.map(|_| &spot_view),
+            };
+            runner.render(gpu, &frame, &out.create_view(&Default::default()))?;
+            runner.read_debug(gpu)?
+        }
+        None => {
+            let h = host_cpu::render(&scene.geometry, &desc);
+            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+            epipolar::cpu::render_with_debug(&frame, settings)?.2
+        }
+    };
+    Ok(match view {
+        DebugView::Classification => epipolar::debug::classification_view(&debug, final_radiance),
+        DebugView::Radiance => {
+            let scale = 1024u32.div_ceil(debug.samples().max(1)).clamp(1, 16);
+            epipolar::debug::radiance_view(&debug, scale)
+        }
+    })
 }

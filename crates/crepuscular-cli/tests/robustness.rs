@@ -26,8 +26,10 @@ const H: u32 = 36;
 /// returns garbage, lands far above them. Measured worst cases (2026-11-22, CPU and llvmpipe
 /// agree): brute-force 0.25 (dense medium, σt = 5 m⁻¹, 64 steps over 200 m), interleaved
 /// 0.95 and subsampled 0.86 (the g = 0.99 halo: both spread one pixel's phase peak over their
-/// 4×4 neighbourhood). docs/ROBUSTNESS.md has the full table.
-const MAX_NMAE: &[(&str, f64)] = &[("brute-force", 0.35), ("interleaved", 1.1), ("subsampled", 1.1)];
+/// 4×4 neighbourhood), epipolar 0.22 (the dense medium; it re-marches the pixels around the
+/// epipole, so the halo costs it nothing). docs/ROBUSTNESS.md has the full table.
+const MAX_NMAE: &[(&str, f64)] =
+    &[("brute-force", 0.35), ("interleaved", 1.1), ("subsampled", 1.1), ("epipolar", 0.35)];
 
 fn bound(technique: &str) -> f64 {
     MAX_NMAE

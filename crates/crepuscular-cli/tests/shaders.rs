@@ -145,3 +145,63 @@ fn subsampled_params_match_the_wgsl_layout_in_every_pass() {
     let c = format!("const MIN_WEIGHT: f32 = {MIN_WEIGHT:e};");
     assert!(UPSAMPLE_WGSL.contains(&c), "upsample.wgsl lacks `{c}`");
 }
+
+#[test]
+fn epipolar_params_match_the_wgsl_layout_in_every_pass() {
+    use crepuscular::techniques::epipolar::{
+        EpipolarLine, EpipolarParams, GEOMETRY_WGSL, MIN_LINE_LENGTH, MIN_WEIGHT, SHADERS, pass_source,
+    };
+    let rust = [
+        ("steps", offset_of!(EpipolarParams, steps)),
+        ("jitter", offset_of!(EpipolarParams, jitter)),
+        ("frame_index", offset_of!(EpipolarParams, frame_index)),
+        ("spot_steps", offset_of!(EpipolarParams, spot_steps)),
+        ("spot_denominator", offset_of!(EpipolarParams, spot_denominator)),
+        ("slices", offset_of!(EpipolarParams, slices)),
+        ("samples", offset_of!(EpipolarParams, samples)),
+        ("initial_samples", offset_of!(EpipolarParams, initial_samples)),
+        ("length_proportional", offset_of!(EpipolarParams, length_proportional)),
+        ("depth_threshold", offset_of!(EpipolarParams, depth_threshold)),
+        ("threshold_growth", offset_of!(EpipolarParams, threshold_growth)),
+        ("taps", offset_of!(EpipolarParams, taps)),
+        ("weighting", offset_of!(EpipolarParams, weighting)),
+        ("spatial_scale", offset_of!(EpipolarParams, spatial_scale)),
+        ("depth_scale", offset_of!(EpipolarParams, depth_scale)),
+        ("outer_lines", offset_of!(EpipolarParams, outer_lines)),
+        ("fallback_remarch", offset_of!(EpipolarParams, fallback_remarch)),
+        ("degenerate", offset_of!(EpipolarParams, degenerate)),
+        ("max_workgroups", offset_of!(EpipolarParams, max_workgroups)),
+        ("prefilter_level", offset_of!(EpipolarParams, prefilter_level)),
+        ("epipole_radius", offset_of!(EpipolarParams, epipole_radius)),
+        ("epipole", offset_of!(EpipolarParams, epipole)),
+    ];
+    for (name, src, entries) in SHADERS {
+        for entry in entries {
+            check_params(name, &pass_source(src), entry, &rust, std::mem::size_of::<EpipolarParams>());
+        }
+    }
+    // The line record of the storage buffer, member by member.
+    let module = parse("epipolar/lines", &crepuscular::shaders::compose(&pass_source(SHADERS[1].1)));
+    let (members, span) = struct_members(&module, "Line");
+    let rust = [
+        ("end", offset_of!(EpipolarLine, end)),
+        ("dir", offset_of!(EpipolarLine, dir)),
+        ("length", offset_of!(EpipolarLine, length)),
+        ("valid", offset_of!(EpipolarLine, valid)),
+        ("initial", offset_of!(EpipolarLine, initial)),
+        ("_pad", offset_of!(EpipolarLine, _pad)),
+    ];
+    assert_eq!(members.len(), rust.len(), "Line field count: {members:?}");
+    for ((wn, wo), (rn, ro)) in members.iter().zip(rust) {
+        assert_eq!(wn, rn);
+        assert_eq!(*wo as usize, ro, "Line: offset of {rn}");
+    }
+    assert_eq!(span as usize, std::mem::size_of::<EpipolarLine>());
+    // The constants are the same on both sides.
+    for c in [
+        format!("const MIN_WEIGHT: f32 = {MIN_WEIGHT:e};"),
+        format!("const MIN_LINE_LENGTH: f32 = {MIN_LINE_LENGTH:e};"),
+    ] {
+        assert!(GEOMETRY_WGSL.contains(&c), "geometry.wgsl lacks `{c}`");
+    }
+}

@@ -14,13 +14,14 @@ pub fn compose(pass: &str) -> String {
 
 /// Every pass shader of the library, composed, with its name: for validation.
 pub fn all_library_shaders() -> Vec<(&'static str, String)> {
-    use crate::techniques::{brute_force, interleaved, subsampled};
+    use crate::techniques::{brute_force, epipolar, interleaved, subsampled};
     let mut v = vec![("brute_force/march", compose(brute_force::MARCH_WGSL))];
     v.extend(interleaved::SHADERS.iter().map(|(n, s)| (*n, compose(s))));
     v.extend([
         ("subsampled/march", compose(subsampled::MARCH_WGSL)),
         ("subsampled/upsample", compose(subsampled::UPSAMPLE_WGSL)),
     ]);
+    v.extend(epipolar::SHADERS.iter().map(|(n, s, _)| (*n, compose(&epipolar::pass_source(s)))));
     v
 }
 

@@ -2,6 +2,7 @@
 //! `cpu.rs`, the CPU mirror with the same sample placement and function names.
 
 pub mod brute_force;
+pub mod epipolar;
 pub mod interleaved;
 pub mod pass;
 pub mod reference;
@@ -42,6 +43,13 @@ pub const TECHNIQUES: &[TechniqueInfo] = &[
         name: "subsampled",
         summary: "ray marching on a reduced grid, joint-bilateral upsampling by depth, silhouette pixels re-marched at full resolution (GPU + CPU mirror)",
         paper: "the baseline of Engelhardt & Dachsbacher 2010 §6 / Fig. 9",
+        gpu: true,
+        cpu: true,
+    },
+    TechniqueInfo {
+        name: "epipolar",
+        summary: "epipolar sampling: ray-march samples on epipolar lines refined at depth discontinuities, interpolated along and bilaterally between the lines (GPU: lines, refine, indirect march over a compacted list, interpolate, upsample; CPU mirror)",
+        paper: "Engelhardt & Dachsbacher 2010, §4–5",
         gpu: true,
         cpu: true,
     },

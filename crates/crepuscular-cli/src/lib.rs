@@ -8,3 +8,4 @@ pub mod compare;
 pub mod metrics;
 pub mod output;
 pub mod render;
+pub mod view;

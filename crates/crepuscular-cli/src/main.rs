@@ -43,6 +43,47 @@ enum Command {
     /// Move the camera and the light along the scene's looping path, render every frame with a
     /// technique and write an animated GIF; `--flicker` measures temporal stability vs reference.
     Animate(AnimateArgs),
+    /// Open an interactive window: the scene rendered every frame with a GPU technique, an
+    /// orbit/fly camera, a movable light, the medium and every technique setting editable live,
+    /// per-pass timings, debug and error views, screenshots (F12 / P).
+    View(ViewArgs),
+}
+
+#[derive(clap::Args)]
+struct ViewArgs {
+    /// Built-in scene name or path to a .toml scene file.
+    #[arg(default_value = builtin::DEFAULT_SCENE)]
+    scene: String,
+    /// Technique (a GPU technique; see `crepuscular techniques`); switchable in the window.
+    #[arg(long, short, default_value = "brute-force")]
+    technique: String,
+    /// Settings preset: fast, balanced or reference-like (over the scene's table, under --set).
+    #[arg(long, value_parser = parse_preset)]
+    preset: Option<crepuscular::techniques::presets::Preset>,
+    /// A technique setting, `key=value` (TOML value), e.g. `--set steps=128`; repeatable.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Window size WIDTHxHEIGHT, physical pixels, at most 8192 per side.
+    #[arg(long, value_parser = parse_size, default_value = "960x540")]
+    size: (u32, u32),
+    /// Render scale: the scene is rendered at window size × scale, in 0.05..=2 (default 1 on
+    /// a hardware adapter, 0.5 on a software one). Cost ∝ scale².
+    #[arg(long)]
+    scale: Option<f32>,
+    /// Shadow-map texels per side (overrides the scene's shadow_map_size).
+    #[arg(long)]
+    shadow_map_size: Option<u32>,
+    /// Render N frames, write the scene image (tone-mapped, render size, no UI) to --output
+    /// and exit with code 0.
+    #[arg(long, value_name = "N")]
+    screenshot_after: Option<u32>,
+    /// Screenshot path: --screenshot-after writes it; F12 / P write `<stem>-<n>.png` beside it.
+    #[arg(long, short, default_value = "crepuscular-view.png")]
+    output: PathBuf,
+}
+
+fn parse_preset(s: &str) -> Result<crepuscular::techniques::presets::Preset, String> {
+    crepuscular::techniques::presets::Preset::parse(s).map_err(|e| e.to_string())
 }
 
 #[derive(clap::Args)]
@@ -170,6 +211,9 @@ struct RenderArgs {
     /// A technique setting, `key=value` (TOML value), e.g. `--set steps=128`; repeatable.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
+    /// Settings preset: fast, balanced or reference-like (over the scene's table, under --set).
+    #[arg(long, value_parser = parse_preset)]
+    preset: Option<crepuscular::techniques::presets::Preset>,
     /// Tone-mapped final image (PNG).
     #[arg(long, short, default_value = "crepuscular.png")]
     output: PathBuf,
@@ -241,7 +285,7 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
         }
         scene.render.exposure = e;
     }
-    let technique = TechniqueChoice::parse(&a.technique, &scene, &a.set)?;
+    let technique = crepuscular_cli::view::parse_technique(&a.technique, &scene, a.preset, &a.set)?;
     if let Some(view) = a.debug
         && !matches!(technique, TechniqueChoice::Epipolar(_))
     {
@@ -533,6 +577,17 @@ fn run() -> Result<()> {
         Command::Bench(a) => cmd_bench(a),
         Command::Compare(a) => cmd_compare(a),
         Command::Animate(a) => cmd_animate(a),
+        Command::View(a) => crepuscular_cli::view::run(crepuscular_cli::view::ViewOptions {
+            scene: a.scene,
+            technique: a.technique,
+            preset: a.preset,
+            overrides: a.set,
+            size: a.size,
+            scale: a.scale,
+            shadow_map_size: a.shadow_map_size,
+            screenshot_after: a.screenshot_after,
+            output: a.output,
+        }),
         Command::Adapter => {
             let gpu = crepuscular::GpuContext::new()?;
             println!("{}", gpu.describe());

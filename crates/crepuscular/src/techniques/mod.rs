@@ -5,6 +5,7 @@ pub mod brute_force;
 pub mod epipolar;
 pub mod interleaved;
 pub mod pass;
+pub mod presets;
 pub mod reference;
 pub mod subsampled;
 

@@ -1,0 +1,1483 @@
+//! `crepuscular view`: an interactive window (winit + egui) that renders a scene every frame
+//! with a technique on the GPU — the same host renderer and technique runners as `render`
+//! ([`crate::render`]) — with an orbit/fly camera, a movable light, the medium and every
+//! setting of the technique editable live, the per-pass timings, debug views, an error view
+//! against `reference` and screenshots.
+//!
+//! Per frame: the host renderer draws the shadow map, depth and surface; the technique writes
+//! its in-scattering; a fullscreen pass of our own (`view_composite.wgsl`) composites
+//! T(s)·L_surface + L_scatt and tone-maps exactly as `render` does on the CPU, into an
+//! `Rgba8Unorm` texture that egui draws behind its panels. The technique's pipelines are built
+//! once and rebuilt only when its settings change; the scene is re-rendered only when
+//! something changed (camera, light, medium, settings, size) unless "continuous" is on.
+
+use crate::metrics;
+use crate::output;
+use crate::render::{self, DebugView, GpuRunner, TechniqueChoice};
+use anyhow::{Context, Result, anyhow, bail};
+use crepuscular::frame::{FrameDesc, surface_transmittance};
+use crepuscular::gpu::GpuContext;
+use crepuscular::stats::{PassTime, TechniqueStats};
+use crepuscular::techniques::presets::Preset;
+use crepuscular::techniques::reference::{self, ReferenceSettings};
+use crepuscular::tonemap::{ToneMap, composite};
+use crepuscular::{CpuFrame, GpuFrame, Image, Light, Phase};
+use crepuscular_scene::{GpuHost, HostTextures, Scene, host};
+use glam::{Quat, Vec3};
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use winit::application::ApplicationHandler;
+use winit::event::WindowEvent;
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
+use winit::window::{Window, WindowId};
+
+/// The composite + tone-map pass.
+pub const COMPOSITE_WGSL: &str = include_str!("view_composite.wgsl");
+
+/// Default window size.
+pub const DEFAULT_SIZE: (u32, u32) = (960, 540);
+
+/// Seconds of history in the timing graph.
+const HISTORY_S: f64 = 5.0;
+
+/// Options of `crepuscular view`.
+#[derive(Clone, Debug)]
+pub struct ViewOptions {
+    /// Built-in scene name or scene file.
+    pub scene: String,
+    /// Technique name (a GPU technique).
+    pub technique: String,
+    /// A preset applied before `overrides` (over the scene's `[render.<technique>]` table).
+    pub preset: Option<Preset>,
+    /// `key=value` settings of the technique (TOML values).
+    pub overrides: Vec<String>,
+    /// Window inner size, physical pixels.
+    pub size: (u32, u32),
+    /// Render scale: the scene is rendered at window size × scale (None: 1 on a hardware
+    /// adapter, 0.5 on a software one).
+    pub scale: Option<f32>,
+    /// Shadow-map size override.
+    pub shadow_map_size: Option<u32>,
+    /// Render this many frames, save the scene image to `output` and exit.
+    pub screenshot_after: Option<u32>,
+    /// Screenshot path (F12 / P write `<stem>-<n>.png` beside it).
+    pub output: PathBuf,
+}
+
+/// One-line help on a setting, shown as a tooltip (the doc comments are not available at run
+/// time). Settings missing here still get a widget, without a tooltip.
+const SETTING_DOCS: &[(&str, &str, &str)] = &[
+    ("*", "steps", "Ray-marching steps per ray, N. Cost linear in N; more resolves thin shafts, less bands."),
+    ("*", "jitter", "Offset samples by a random fraction of a step: banding becomes noise, no extra cost."),
+    ("*", "frame_index", "Seed of the jitter; change per frame for temporal accumulation."),
+    (
+        "*",
+        "spot_steps",
+        "Spot lights: where the steps go (fixed, exact-cone = the chord inside the cone, appendix-b-*).",
+    ),
+    ("*", "spot_denominator", "Denominator of the appendix-b-* spot policies (a sine in (0, 1])."),
+    ("interleaved", "block", "Block size M: each pixel marches N/M² terms, an M×M sum adds them. 1..=16."),
+    ("interleaved", "depth_aware", "Sum only neighbours within depth_tolerance of the centre's view distance."),
+    ("*", "depth_tolerance", "Relative view-distance difference at which a neighbour / grid sample stops counting."),
+    ("interleaved", "phase_lut", "Read the phase function from a lookup table instead of evaluating it."),
+    ("interleaved", "phase_lut_size", "Entries of the phase table (16 bytes each); error falls as 1/size²."),
+    ("subsampled", "factor", "Subsampling factor f: ray-march a ⌈W/f⌉×⌈H/f⌉ grid; cost falls as 1/f²."),
+    ("subsampled", "grid", "Fixed grid [w, h] overriding factor (TOML array), empty = none."),
+    ("subsampled", "edge_remarch", "Re-march silhouette pixels with no depth-compatible grid neighbour."),
+    ("epipolar", "slices", "Epipolar lines (4..=8192); empty = auto, one per 4 pixels of perimeter."),
+    ("epipolar", "samples", "Texels per line S (2..=8192); empty = auto, one per 1.5 pixels of diagonal."),
+    ("epipolar", "initial_samples", "Initial ray-march samples per line K (typically 8 to 32)."),
+    ("epipolar", "length_proportional_initial_samples", "Give short lines proportionally fewer initial samples."),
+    ("epipolar", "depth_threshold", "Absolute discontinuity threshold, metres of view distance."),
+    ("epipolar", "threshold_growth", "Relative discontinuity threshold (grows with distance)."),
+    ("epipolar", "taps", "Bilateral taps along each line, odd, 1..=9."),
+    ("epipolar", "weighting", "Radial basis of the bilateral weights: gaussian, shepard, threshold."),
+    ("epipolar", "spatial_scale", "Width of the spatial kernel, in tap spacings."),
+    ("epipolar", "depth_scale", "Width of the depth kernel on the relative view-distance difference."),
+    ("epipolar", "outer_lines", "How many lines further out to look when a line has no usable tap."),
+    ("epipolar", "fallback_remarch", "Re-march pixels with no usable tap at full resolution."),
+    ("epipolar", "epipole_radius", "Re-march pixels within this many pixels of the epipole (0 disables)."),
+    ("epipolar", "spot_prefilter", "Spot texture prefilter: \"auto\", \"off\" or a level (TOML)."),
+];
+
+/// Known values of string-valued settings, for a combo box.
+const ENUM_VALUES: &[(&str, &[&str])] = &[
+    ("spot_steps", &["fixed", "exact-cone", "appendix-b-constant", "appendix-b-smoothstep"]),
+    ("weighting", &["gaussian", "shepard", "threshold"]),
+];
+
+/// The tooltip of a technique's setting, if the table has one.
+pub fn setting_doc(technique: &str, key: &str) -> Option<&'static str> {
+    SETTING_DOCS
+        .iter()
+        .find(|(t, k, _)| *t == technique && *k == key)
+        .map(|e| e.2)
+        .or_else(|| SETTING_DOCS.iter().find(|(t, k, _)| *t == "*" && *k == key).map(|e| e.2))
+}
+
+/// Fails with one line when there is no display to open a window on.
+pub fn check_display() -> Result<()> {
+    if cfg!(all(unix, not(target_os = "macos"))) {
+        let set = |v: &str| std::env::var_os(v).is_some_and(|s| !s.is_empty());
+        if !set("DISPLAY") {
+            if set("WAYLAND_DISPLAY") {
+                bail!(
+                    "view: no X11 display (DISPLAY is not set; this build talks X11 only — run it under XWayland or xvfb-run)"
+                );
+            }
+            bail!("view: no display (DISPLAY is not set); on a headless machine run it under `xvfb-run -a`");
+        }
+    }
+    Ok(())
+}
+
+/// The `key=value` overrides that select `preset` for `technique` (empty for an unknown one).
+pub fn preset_overrides(preset: Preset, technique: &str) -> Vec<String> {
+    let Some(settings) = preset.settings(technique) else { return Vec::new() };
+    match serde_json::to_value(&settings) {
+        Ok(serde_json::Value::Object(m)) => json_overrides(&m),
+        _ => Vec::new(),
+    }
+}
+
+/// `key=value` overrides (TOML values) for the fields of a serialised settings object; nulls
+/// (unset options) and the `technique` tag are left out.
+pub fn json_overrides(fields: &serde_json::Map<String, serde_json::Value>) -> Vec<String> {
+    fields
+        .iter()
+        .filter(|(k, _)| *k != "technique")
+        .filter_map(|(k, v)| Some(format!("{k}={}", toml_literal(v)?)))
+        .collect()
+}
+
+fn toml_literal(v: &serde_json::Value) -> Option<String> {
+    use serde_json::Value as J;
+    Some(match v {
+        J::Null => return None,
+        J::Bool(b) => b.to_string(),
+        J::Number(n) => n.to_string(),
+        J::String(s) => toml::Value::String(s.clone()).to_string(),
+        other => toml::Value::try_from(other).ok()?.to_string(),
+    })
+}
+
+/// Parses a technique with an optional preset and overrides, as the viewer and `render
+/// --preset` do: the scene's table, then the preset, then the overrides.
+pub fn parse_technique(
+    name: &str,
+    scene: &Scene,
+    preset: Option<Preset>,
+    overrides: &[String],
+) -> Result<TechniqueChoice> {
+    let mut all = preset.map(|p| preset_overrides(p, name)).unwrap_or_default();
+    all.extend_from_slice(overrides);
+    TechniqueChoice::parse(name, scene, &all)
+}
+
+/// Runs the viewer until the window is closed (or `screenshot_after` frames were rendered).
+pub fn run(opts: ViewOptions) -> Result<()> {
+    let mut scene = render::load_scene(&opts.scene)?;
+    if let Some(s) = opts.shadow_map_size {
+        if s == 0 || s > 16384 {
+            bail!("--shadow-map-size {s}: must be in 1..=16384");
+        }
+        scene.render.shadow.size = s;
+    }
+    let (w, h) = opts.size;
+    if w == 0 || h == 0 || w > 8192 || h > 8192 {
+        bail!("--size {w}x{h}: width and height must be in 1..=8192");
+    }
+    if let Some(s) = opts.scale
+        && !(s.is_finite() && (0.05..=2.0).contains(&s))
+    {
+        bail!("--scale {s}: must be in 0.05..=2");
+    }
+    if opts.screenshot_after == Some(0) {
+        bail!("--screenshot-after 0: must be ≥ 1");
+    }
+    let technique = parse_technique(&opts.technique, &scene, opts.preset, &opts.overrides)?;
+    if !crepuscular::techniques::find(technique.name()).is_some_and(|t| t.gpu) {
+        bail!(
+            "view: `{}` runs on the CPU only; pick a GPU technique (the viewer's error view compares against it)",
+            technique.name()
+        );
+    }
+    check_display()?;
+    let event_loop = EventLoop::new().map_err(|e| anyhow!("view: cannot connect to the display: {e}"))?;
+    event_loop.set_control_flow(ControlFlow::Wait);
+    let mut app = App { opts, scene: Some(scene), technique: Some(technique), viewer: None, error: None };
+    event_loop.run_app(&mut app).map_err(|e| anyhow!("view: event loop: {e}"))?;
+    match app.error {
+        Some(e) => Err(e),
+        None => Ok(()),
+    }
+}
+
+struct App {
+    opts: ViewOptions,
+    scene: Option<Scene>,
+    technique: Option<TechniqueChoice>,
+    viewer: Option<Viewer>,
+    error: Option<anyhow::Error>,
+}
+
+impl ApplicationHandler for App {
+    fn resumed(&mut self, event_loop: &ActiveEventLoop) {
+        if self.viewer.is_some() || self.error.is_some() {
+            return;
+        }
+        let (Some(scene), Some(technique)) = (self.scene.take(), self.technique.take()) else { return };
+        match Viewer::new(event_loop, &self.opts, scene, technique) {
+            Ok(v) => {
+                v.window.request_redraw();
+                self.viewer = Some(v);
+            }
+            Err(e) => {
+                self.error = Some(e);
+                event_loop.exit();
+            }
+        }
+    }
+
+    fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        let Some(v) = self.viewer.as_mut() else { return };
+        let response = v.egui_state.on_window_event(&v.window, &event);
+        match event {
+            WindowEvent::CloseRequested => event_loop.exit(),
+            WindowEvent::Resized(size) => {
+                v.resize(size.width, size.height);
+                v.window.request_redraw();
+            }
+            WindowEvent::RedrawRequested => match v.redraw() {
+                Ok(Flow::Continue) => {}
+                Ok(Flow::Exit) => event_loop.exit(),
+                Err(e) => {
+                    self.error = Some(e);
+                    event_loop.exit();
+                }
+            },
+            _ => {
+                if response.repaint {
+                    v.window.request_redraw();
+                }
+            }
+        }
+    }
+
+    fn about_to_wait(&mut self, _event_loop: &ActiveEventLoop) {
+        if let Some(v) = &self.viewer
+            && v.wants_redraw()
+        {
+            v.window.request_redraw();
+        }
+    }
+}
+
+enum Flow {
+    Continue,
+    Exit,
+}
+
+/// Orbit camera about `target`.
+#[derive(Clone, Copy, Debug)]
+struct Orbit {
+    target: Vec3,
+    yaw: f32,
+    pitch: f32,
+    distance: f32,
+}
+
+impl Orbit {
+    fn from_camera(c: &crepuscular::Camera) -> Self {
+        let off = c.position - c.look_at;
+        let distance = off.length().max(1e-3);
+        Self { target: c.look_at, yaw: off.x.atan2(off.z), pitch: (off.y / distance).clamp(-1.0, 1.0).asin(), distance }
+    }
+    fn position(&self) -> Vec3 {
+        let (sy, cy) = self.yaw.sin_cos();
+        let (sp, cp) = self.pitch.sin_cos();
+        self.target + self.distance * Vec3::new(cp * sy, sp, cp * cy)
+    }
+    fn forward(&self) -> Vec3 {
+        (self.target - self.position()).normalize()
+    }
+    fn right(&self) -> Vec3 {
+        self.forward().cross(Vec3::Y).normalize_or_zero()
+    }
+}
+
+/// Rotates a direction by `yaw` about +Y and by `pitch` about its horizontal perpendicular,
+/// keeping it off the vertical.
+fn rotate_direction(d: Vec3, yaw: f32, pitch: f32) -> Vec3 {
+    let d = Quat::from_rotation_y(yaw) * d.normalize();
+    let axis = Vec3::Y.cross(d).normalize_or_zero();
+    if axis == Vec3::ZERO {
+        return d;
+    }
+    let e = Quat::from_axis_angle(axis, pitch) * d;
+    if e.y.abs() > 0.995 { d } else { e.normalize() }
+}
+
+/// One rendered frame's timings.
+struct FrameTiming {
+    at: Instant,
+    passes: Vec<PassTime>,
+    wall_ms: f64,
+}
+
+/// The composite pass and its output.
+struct Composite {
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    params: wgpu::Buffer,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct CompositeParams {
+    inv_view_proj: [[f32; 4]; 4],
+    camera_pos: [f32; 4],
+    camera_fwd: [f32; 4],
+    sigma_t: [f32; 4],
+    size: [f32; 4],
+}
+
+impl Composite {
+    fn new(device: &wgpu::Device) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("view composite"),
+            source: wgpu::ShaderSource::Wgsl(COMPOSITE_WGSL.into()),
+        });
+        let tex = |binding, sample_type| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Texture {
+                sample_type,
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("view composite"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                tex(1, wgpu::TextureSampleType::Float { filterable: false }),
+                tex(2, wgpu::TextureSampleType::Float { filterable: false }),
+                tex(3, wgpu::TextureSampleType::Depth),
+            ],
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("view composite"),
+            layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("view composite"),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            })),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: Default::default(),
+            depth_stencil: None,
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: wgpu::TextureFormat::Rgba8Unorm,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("view composite params"),
+            size: std::mem::size_of::<CompositeParams>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Self { pipeline, layout, params }
+    }
+}
+
+/// The textures of the current render size.
+struct Targets {
+    width: u32,
+    height: u32,
+    inscatter: wgpu::Texture,
+    display: wgpu::Texture,
+}
+
+/// An image shown in a window of its own (debug view, error map).
+struct Shown {
+    title: String,
+    caption: String,
+    texture: egui::TextureHandle,
+    open: bool,
+}
+
+struct Viewer {
+    window: Arc<Window>,
+    surface: wgpu::Surface<'static>,
+    config: wgpu::SurfaceConfiguration,
+    gpu: GpuContext,
+    egui_ctx: egui::Context,
+    egui_state: egui_winit::State,
+    renderer: egui_wgpu::Renderer,
+    host: GpuHost,
+    composite: Composite,
+    targets: Option<Targets>,
+    display_id: Option<egui::TextureId>,
+    /// The scene as loaded; camera, light and medium below override it.
+    scene: Scene,
+    orbit: Orbit,
+    light: Light,
+    medium: crepuscular::Medium,
+    exposure: f32,
+    scale: f32,
+    technique: TechniqueChoice,
+    runner: Option<GpuRunner>,
+    /// The settings as edited (serde_json object of the technique's fields).
+    fields: serde_json::Map<String, serde_json::Value>,
+    /// TOML text of the fields that are unset options or not scalars.
+    text_fields: std::collections::BTreeMap<String, String>,
+    settings_error: Option<String>,
+    render_error: Option<String>,
+    preset: Option<Preset>,
+    continuous: bool,
+    dirty: bool,
+    last_host: Option<(HostTextures, FrameDesc)>,
+    last_stats: Option<TechniqueStats>,
+    history: VecDeque<FrameTiming>,
+    frames_rendered: u32,
+    screenshot_after: Option<u32>,
+    output: PathBuf,
+    screenshots: u32,
+    status: String,
+    shown: Vec<Shown>,
+    pending: Vec<Action>,
+    reference_steps: u32,
+    keys_down: bool,
+    last_frame: Instant,
+}
+
+/// Work the UI asks for, done after the scene is rendered.
+enum Action {
+    Screenshot,
+    Debug(DebugView),
+    ErrorView,
+}
+
+impl Viewer {
+    fn new(event_loop: &ActiveEventLoop, opts: &ViewOptions, scene: Scene, technique: TechniqueChoice) -> Result<Self> {
+        let (w, h) = opts.size;
+        let attrs = Window::default_attributes()
+            .with_title(format!("crepuscular — {} — {}", scene.name, technique.name()))
+            .with_inner_size(winit::dpi::PhysicalSize::new(w, h));
+        let window = Arc::new(event_loop.create_window(attrs).map_err(|e| anyhow!("view: cannot open a window: {e}"))?);
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY | wgpu::Backends::GL);
+        desc.display = Some(Box::new(event_loop.owned_display_handle()));
+        let instance = wgpu::Instance::new(desc);
+        let surface = instance.create_surface(window.clone()).map_err(|e| {
+            anyhow!("view: no GPU adapter can present to this window (creating the surface failed: {e})")
+        })?;
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: Some(&surface),
+            apply_limit_buckets: false,
+        }))
+        .map_err(|e| anyhow!("view: no GPU adapter that can present to a window ({e}); the viewer needs one"))?;
+        let gpu = GpuContext::from_adapter(adapter).context("view")?;
+        let caps = surface.get_capabilities(&gpu.adapter);
+        let format = caps
+            .formats
+            .iter()
+            .copied()
+            .find(|f| matches!(f, wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Rgba8Unorm))
+            .or_else(|| caps.formats.first().copied())
+            .ok_or_else(|| anyhow!("view: the adapter cannot present to this window (no surface formats)"))?;
+        let size = window.inner_size();
+        let present_mode = if caps.present_modes.contains(&wgpu::PresentMode::Fifo) {
+            wgpu::PresentMode::Fifo
+        } else {
+            caps.present_modes.first().copied().unwrap_or(wgpu::PresentMode::Fifo)
+        };
+        // COPY_SRC where offered, for `CREPUSCULAR_VIEW_UI_SHOT` (a capture of the whole window).
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | (caps.usages & wgpu::TextureUsages::COPY_SRC);
+        let config = wgpu::SurfaceConfiguration {
+            usage,
+            format,
+            color_space: wgpu::SurfaceColorSpace::Auto,
+            width: size.width.max(1),
+            height: size.height.max(1),
+            present_mode,
+            desired_maximum_frame_latency: 2,
+            alpha_mode: caps.alpha_modes.first().copied().unwrap_or(wgpu::CompositeAlphaMode::Auto),
+            view_formats: vec![],
+        };
+        gpu.scoped("configuring the window surface", || surface.configure(&gpu.device, &config))?;
+        let egui_ctx = egui::Context::default();
+        let max_side = gpu.device.limits().max_texture_dimension_2d as usize;
+        let egui_state = egui_winit::State::new(
+            egui_ctx.clone(),
+            egui::ViewportId::ROOT,
+            &window,
+            Some(window.scale_factor() as f32),
+            None,
+            Some(max_side),
+        );
+        let renderer = egui_wgpu::Renderer::new(&gpu.device, format, egui_wgpu::RendererOptions::default());
+        let host = GpuHost::new(&gpu, &scene.geometry)?;
+        let composite = Composite::new(&gpu.device);
+        let runner = technique.gpu_runner(&gpu)?;
+        let scale = opts.scale.unwrap_or(if gpu.software { 0.5 } else { 1.0 });
+        let fields = settings_fields(&technique);
+        eprintln!("view: `{}` with {} on {}", scene.name, technique.name(), gpu.describe());
+        Ok(Self {
+            orbit: Orbit::from_camera(&scene.camera),
+            light: scene.light.clone(),
+            medium: scene.medium.clone(),
+            exposure: scene.render.exposure,
+            text_fields: text_fields(&fields),
+            fields,
+            window,
+            surface,
+            config,
+            gpu,
+            egui_ctx,
+            egui_state,
+            renderer,
+            host,
+            composite,
+            targets: None,
+            display_id: None,
+            scene,
+            scale,
+            technique,
+            runner,
+            settings_error: None,
+            render_error: None,
+            preset: opts.preset,
+            continuous: false,
+            dirty: true,
+            last_host: None,
+            last_stats: None,
+            history: VecDeque::new(),
+            frames_rendered: 0,
+            screenshot_after: opts.screenshot_after,
+            output: opts.output.clone(),
+            screenshots: 0,
+            status: String::new(),
+            shown: Vec::new(),
+            pending: Vec::new(),
+            reference_steps: 256,
+            keys_down: false,
+            last_frame: Instant::now(),
+        })
+    }
+
+    fn wants_redraw(&self) -> bool {
+        self.dirty || self.continuous || self.screenshot_after.is_some() || self.keys_down || !self.pending.is_empty()
+    }
+
+    fn resize(&mut self, w: u32, h: u32) {
+        if w == 0 || h == 0 {
+            return;
+        }
+        self.config.width = w;
+        self.config.height = h;
+        self.surface.configure(&self.gpu.device, &self.config);
+        self.dirty = true;
+    }
+
+    /// The render size: window × scale.
+    fn render_size(&self) -> (u32, u32) {
+        let s = |v: u32| ((v as f32 * self.scale).round() as u32).clamp(1, 8192);
+        (s(self.config.width), s(self.config.height))
+    }
+
+    /// The scene as currently edited, at the render size.
+    fn current_scene(&self) -> Scene {
+        let mut scene = self.scene.clone();
+        scene.camera.position = self.orbit.position();
+        scene.camera.look_at = self.orbit.target;
+        scene.light = self.light.clone();
+        scene.medium = self.medium.clone();
+        scene.render.exposure = self.exposure;
+        let (w, h) = self.render_size();
+        scene.render.width = w;
+        scene.render.height = h;
+        scene
+    }
+
+    fn redraw(&mut self) -> Result<Flow> {
+        let now = Instant::now();
+        let dt = now.duration_since(self.last_frame).as_secs_f32().min(0.25);
+        self.last_frame = now;
+        let raw = self.egui_state.take_egui_input(&self.window);
+        let ctx = self.egui_ctx.clone();
+        let full = ctx.run_ui(raw, |ui| self.ui(ui, dt));
+        self.egui_state.handle_platform_output(&self.window, full.platform_output);
+        let repaint_now = full
+            .viewport_output
+            .get(&egui::ViewportId::ROOT)
+            .is_some_and(|v| v.repaint_delay < Duration::from_millis(50));
+
+        if self.dirty || self.continuous || self.screenshot_after.is_some() {
+            self.dirty = false;
+            match self.render_scene() {
+                Ok(()) => self.render_error = None,
+                Err(e) => {
+                    if self.screenshot_after.is_some() {
+                        return Err(e);
+                    }
+                    self.render_error = Some(format!("{e:#}").replace('\n', " "));
+                }
+            }
+        }
+        for action in std::mem::take(&mut self.pending) {
+            if let Err(e) = self.act(action) {
+                self.status = format!("error: {}", format!("{e:#}").replace('\n', " "));
+            }
+        }
+
+        let frame = match self.surface.get_current_texture() {
+            wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => Some(t),
+            wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
+                self.surface.configure(&self.gpu.device, &self.config);
+                None
+            }
+            wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => None,
+            wgpu::CurrentSurfaceTexture::Validation => bail!("view: the window surface reported a validation error"),
+        };
+        let ppp = full.pixels_per_point;
+        for (id, deltas) in &full.textures_delta.set {
+            for delta in deltas {
+                self.renderer.update_texture(&self.gpu.device, &self.gpu.queue, *id, delta);
+            }
+        }
+        if let Some(frame) = frame {
+            let prims = ctx.tessellate(full.shapes, ppp);
+            let screen = egui_wgpu::ScreenDescriptor {
+                size_in_pixels: [self.config.width, self.config.height],
+                pixels_per_point: ppp,
+            };
+            let view = frame.texture.create_view(&Default::default());
+            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+            let mut cmds = self.renderer.update_buffers(&self.gpu.device, &self.gpu.queue, &mut enc, &prims, &screen);
+            {
+                let pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("egui"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: None,
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                self.renderer.render(&mut pass.forget_lifetime(), &prims, &screen);
+            }
+            cmds.push(enc.finish());
+            self.gpu.queue.submit(cmds);
+            if self.screenshot_after.is_some_and(|n| self.frames_rendered >= n)
+                && let Some(path) = std::env::var_os("CREPUSCULAR_VIEW_UI_SHOT")
+            {
+                self.save_window(&frame.texture, std::path::Path::new(&path))?;
+            }
+            self.window.pre_present_notify();
+            self.gpu.queue.present(frame);
+        }
+        for id in &full.textures_delta.free {
+            self.renderer.free_texture(id);
+        }
+
+        if let Some(n) = self.screenshot_after
+            && self.frames_rendered >= n
+        {
+            let path = self.output.clone();
+            self.save_screenshot(&path)?;
+            eprintln!("wrote {} after {} frames", path.display(), self.frames_rendered);
+            if let Some(f) = self.history.back() {
+                let (w, h) = self.render_size();
+                let passes: Vec<String> = f.passes.iter().map(|p| format!("{} {:.1}", p.name, p.ms)).collect();
+                eprintln!("last frame at {w}x{h}: {:.1} ms ({} ms)", f.wall_ms, passes.join(", "));
+            }
+            return Ok(Flow::Exit);
+        }
+        if repaint_now {
+            self.window.request_redraw();
+        }
+        Ok(Flow::Continue)
+    }
+
+    /// Renders the scene: host renderer, technique, composite into the display texture.
+    fn render_scene(&mut self) -> Result<()> {
+        let start = Instant::now();
+        if self.runner.is_none() {
+            self.runner = self.technique.gpu_runner(&self.gpu)?;
+        }
+        let scene = self.current_scene();
+        let desc = render::frame_desc(&scene);
+        let spot = match &scene.light {
+            Light::Spot { texture, .. } => texture.as_deref(),
+            _ => None,
+        };
+        let (w, h) = (desc.width, desc.height);
+        if self.targets.as_ref().is_none_or(|t| t.width != w || t.height != h) {
+            self.gpu.check_texture_size("render size", w, h)?;
+            let inscatter = self.gpu.create_output_texture(w, h);
+            let display = self.gpu.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("view display"),
+                size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8Unorm,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC,
+                view_formats: &[],
+            });
+            let view = display.create_view(&Default::default());
+            match self.display_id {
+                Some(id) => self.renderer.update_egui_texture_from_wgpu_texture(
+                    &self.gpu.device,
+                    &view,
+                    wgpu::FilterMode::Linear,
+                    id,
+                ),
+                None => {
+                    self.display_id =
+                        Some(self.renderer.register_native_texture(&self.gpu.device, &view, wgpu::FilterMode::Linear))
+                }
+            }
+            self.targets = Some(Targets { width: w, height: h, inscatter, display });
+        }
+        let targets = self.targets.as_ref().expect("targets were just created");
+        let tex = self.host.render(&self.gpu, &desc, spot)?;
+        let runner = self.runner.as_mut().expect("runner was just built");
+        let out_view = targets.inscatter.create_view(&Default::default());
+        let depth_view = tex.depth_view();
+        let shadow_view = tex.shadow_view();
+        let spot_view = tex.spot_texture.create_view(&Default::default());
+        let frame = GpuFrame {
+            desc: &desc,
+            depth: &depth_view,
+            shadow_map: &shadow_view,
+            spot_texture: spot.map(|_| &spot_view),
+        };
+        let stats = runner.render(&self.gpu, &frame, &out_view)?;
+
+        // Composite + tone map.
+        let composite_start = Instant::now();
+        let st = desc.medium.extinction();
+        let params = CompositeParams {
+            inv_view_proj: desc.camera.view_projection(desc.aspect()).inverse().to_cols_array_2d(),
+            camera_pos: [desc.camera.position.x, desc.camera.position.y, desc.camera.position.z, desc.camera.near],
+            camera_fwd: {
+                let f = desc.camera.forward();
+                [f.x, f.y, f.z, desc.camera.far]
+            },
+            sigma_t: [st.x, st.y, st.z, self.exposure],
+            size: [w as f32, h as f32, 0.0, 0.0],
+        };
+        self.gpu.queue.write_buffer(&self.composite.params, 0, bytemuck::bytes_of(&params));
+        let surface_view = tex.surface.create_view(&Default::default());
+        let bind = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("view composite"),
+            layout: &self.composite.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: self.composite.params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&surface_view) },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&out_view) },
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&depth_view) },
+            ],
+        });
+        let display_view = targets.display.create_view(&Default::default());
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("view composite"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &display_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.composite.pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.draw(0..3, 0..1);
+        }
+        self.gpu.queue.submit([enc.finish()]);
+        self.gpu.wait()?;
+        let composite_ms = composite_start.elapsed().as_secs_f64() * 1e3;
+
+        let mut passes: Vec<PassTime> =
+            tex.passes.iter().map(|p| PassTime { name: format!("host: {}", p.name), ms: p.ms }).collect();
+        passes.extend(stats.passes.iter().cloned());
+        passes.push(PassTime { name: "composite".into(), ms: composite_ms });
+        let now = Instant::now();
+        self.history.push_back(FrameTiming { at: now, passes, wall_ms: start.elapsed().as_secs_f64() * 1e3 });
+        while self.history.front().is_some_and(|f| now.duration_since(f.at).as_secs_f64() > HISTORY_S) {
+            self.history.pop_front();
+        }
+        self.last_stats = Some(stats);
+        self.last_host = Some((tex, desc));
+        self.frames_rendered += 1;
+        Ok(())
+    }
+
+    /// The scene image as tone-mapped 8-bit RGB (what the window shows behind the panels).
+    fn read_display(&self) -> Result<(u32, u32, Vec<u8>)> {
+        let t = self.targets.as_ref().context("nothing rendered yet")?;
+        let raw = self.gpu.read_texture_f32(&t.display, 0)?;
+        let rgba: &[u8] = bytemuck::cast_slice(&raw);
+        let rgb = rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+        Ok((t.width, t.height, rgb))
+    }
+
+    /// Saves the window as presented (scene and panels): a debugging aid for the CI check.
+    fn save_window(&self, texture: &wgpu::Texture, path: &std::path::Path) -> Result<()> {
+        if !texture.usage().contains(wgpu::TextureUsages::COPY_SRC) {
+            bail!("CREPUSCULAR_VIEW_UI_SHOT: this surface cannot be read back");
+        }
+        let raw = self.gpu.read_texture_f32(texture, 0)?;
+        let bgra = matches!(texture.format(), wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb);
+        let rgb: Vec<u8> = bytemuck::cast_slice::<f32, u8>(&raw)
+            .chunks_exact(4)
+            .flat_map(|p| if bgra { [p[2], p[1], p[0]] } else { [p[0], p[1], p[2]] })
+            .collect();
+        output::write_png_rgb8(path, texture.width(), texture.height(), &rgb)
+    }
+
+    fn save_screenshot(&self, path: &std::path::Path) -> Result<()> {
+        let (w, h, rgb) = self.read_display()?;
+        output::write_png_rgb8(path, w, h, &rgb)
+    }
+
+    /// The current frame's in-scattering and final radiance, read back (for the CPU-side views).
+    fn read_frame(&self) -> Result<(Image, Image, Vec<f32>)> {
+        let (tex, desc) = self.last_host.as_ref().context("nothing rendered yet")?;
+        let t = self.targets.as_ref().context("nothing rendered yet")?;
+        let inscatter = self.gpu.read_image(&t.inscatter)?;
+        let surface = self.gpu.read_image(&tex.surface)?;
+        let depth = self.gpu.read_texture_f32(&tex.depth, 0)?;
+        let tr = surface_transmittance(desc, &depth);
+        let fin = composite(&surface, &inscatter, &tr);
+        Ok((inscatter, fin, depth))
+    }
+
+    fn show_image(&mut self, title: String, caption: String, w: u32, h: u32, rgb: &[u8]) {
+        let img = egui::ColorImage::from_rgb([w as usize, h as usize], rgb);
+        let texture = self.egui_ctx.load_texture(&title, img, egui::TextureOptions::LINEAR);
+        self.shown.retain(|s| s.title != title);
+        self.shown.push(Shown { title, caption, texture, open: true });
+    }
+
+    fn act(&mut self, action: Action) -> Result<()> {
+        match action {
+            Action::Screenshot => {
+                let stem = self.output.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or("view".into());
+                self.screenshots += 1;
+                let path = self.output.with_file_name(format!("{stem}-{}.png", self.screenshots));
+                self.save_screenshot(&path)?;
+                self.status = format!("wrote {}", path.display());
+                eprintln!("{}", self.status);
+            }
+            Action::Debug(view) => {
+                let (_, fin, _) = self.read_frame()?;
+                let scene = self.current_scene();
+                let img = render::debug_view(&scene, Some(&self.gpu), &self.technique, view, &fin)?;
+                let rgb = ToneMap::new(self.exposure).to_rgb8(&img);
+                let caption = format!("{}×{}", img.width, img.height);
+                self.show_image(format!("epipolar: {}", view.name()), caption, img.width, img.height, &rgb);
+            }
+            Action::ErrorView => {
+                let started = Instant::now();
+                let (inscatter, fin, depth) = self.read_frame()?;
+                let (tex, desc) = self.last_host.as_ref().context("nothing rendered yet")?;
+                let shadow_map = host::read_shadow_map(&self.gpu, tex, desc)?;
+                let surface = self.gpu.read_image(&tex.surface)?;
+                let frame = CpuFrame { desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
+                let settings = ReferenceSettings { steps: self.reference_steps, ..Default::default() };
+                let (ref_in, _) = reference::render(&frame, &settings, &|_, _| {})?;
+                let tr = surface_transmittance(desc, &depth);
+                let ref_fin = composite(&surface, &ref_in, &tr);
+                let tone = ToneMap::new(self.exposure);
+                let m = metrics::compare(&ref_fin, &fin, &tone)?;
+                let mi = metrics::compare(&ref_in, &inscatter, &tone)?;
+                let (w, h, rgb) = metrics::flip_heatmap(&ref_fin, &fin, &tone)?;
+                let caption = format!(
+                    "vs reference ({} steps, {:.1} s): final PSNR {:.2} dB, FLIP {:.4}; in-scattering PSNR {:.2} dB",
+                    self.reference_steps,
+                    started.elapsed().as_secs_f64(),
+                    m.psnr_db,
+                    m.flip_mean,
+                    mi.psnr_db
+                );
+                self.show_image(format!("FLIP error: {}", self.technique.name()), caption, w, h, &rgb);
+            }
+        }
+        Ok(())
+    }
+
+    /// Re-parses the technique from the edited fields; errors go to the panel.
+    fn apply_fields(&mut self) {
+        let mut overrides = json_overrides(&self.fields);
+        for (k, text) in &self.text_fields {
+            if !text.trim().is_empty() {
+                overrides.push(format!("{k}={text}"));
+            }
+        }
+        let mut scene = self.scene.clone();
+        scene.render.techniques.remove(self.technique.name());
+        self.set_technique(TechniqueChoice::parse(self.technique.name(), &scene, &overrides), false);
+    }
+
+    fn set_technique(&mut self, parsed: Result<TechniqueChoice>, refresh: bool) {
+        match parsed {
+            Ok(t) => {
+                let switched = t.name() != self.technique.name();
+                self.technique = t;
+                self.runner = None;
+                self.settings_error = None;
+                self.dirty = true;
+                if switched || refresh {
+                    self.fields = settings_fields(&self.technique);
+                    self.text_fields = text_fields(&self.fields);
+                    self.window.set_title(&format!("crepuscular — {} — {}", self.scene.name, self.technique.name()));
+                }
+            }
+            Err(e) => self.settings_error = Some(format!("{e:#}").replace('\n', " ")),
+        }
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui, dt: f32) {
+        let ctx = ui.ctx().clone();
+        let rect = ctx.content_rect();
+        if let Some(id) = self.display_id {
+            ctx.layer_painter(egui::LayerId::background()).image(
+                id,
+                rect,
+                egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0)),
+                egui::Color32::WHITE,
+            );
+        }
+        self.camera_input(ui, rect, dt);
+
+        egui::Window::new("technique").default_pos(egui::pos2(8.0, 8.0)).vscroll(true).show(&ctx, |ui| {
+            self.technique_panel(ui);
+        });
+        egui::Window::new("scene").default_pos(egui::pos2(rect.right() - 330.0, 8.0)).vscroll(true).show(&ctx, |ui| {
+            self.scene_panel(ui);
+            ui.separator();
+            self.tools_panel(ui);
+        });
+        egui::Window::new("timings")
+            .default_pos(egui::pos2(rect.right() - 330.0, rect.bottom() - 260.0))
+            .default_open(true)
+            .show(&ctx, |ui| {
+                self.stats_panel(ui);
+            });
+        for s in &mut self.shown {
+            egui::Window::new(&s.title).open(&mut s.open).vscroll(true).show(&ctx, |ui| {
+                ui.label(&s.caption);
+                let size = s.texture.size_vec2();
+                let scale = (480.0 / size.x).min(1.0);
+                ui.add(egui::Image::new(egui::load::SizedTexture::new(s.texture.id(), size * scale)));
+            });
+        }
+        self.shown.retain(|s| s.open);
+    }
+
+    fn camera_input(&mut self, ui: &mut egui::Ui, rect: egui::Rect, dt: f32) {
+        let resp = ui.interact(rect, egui::Id::unique("scene view"), egui::Sense::click_and_drag());
+        let (modifiers, scroll) = ui.input(|i| (i.modifiers, i.smooth_scroll_delta.y));
+        let d = resp.drag_delta();
+        let mut changed = false;
+        if d != egui::Vec2::ZERO {
+            let pan = resp.dragged_by(egui::PointerButton::Middle)
+                || (resp.dragged_by(egui::PointerButton::Primary) && modifiers.shift);
+            let light = resp.dragged_by(egui::PointerButton::Secondary)
+                || (resp.dragged_by(egui::PointerButton::Primary) && modifiers.ctrl);
+            if light {
+                self.drag_light(d, modifiers.shift);
+            } else if pan {
+                let s = self.orbit.distance * 0.0015;
+                let right = self.orbit.right();
+                let up = right.cross(self.orbit.forward());
+                self.orbit.target += (-d.x * right + d.y * up) * s;
+            } else if resp.dragged_by(egui::PointerButton::Primary) {
+                self.orbit.yaw -= d.x * 0.008;
+                self.orbit.pitch = (self.orbit.pitch + d.y * 0.008).clamp(-1.5, 1.5);
+            }
+            changed = true;
+        }
+        if resp.hovered() && scroll != 0.0 {
+            self.orbit.distance = (self.orbit.distance * (-scroll * 0.002).exp()).clamp(0.05, 5000.0);
+            changed = true;
+        }
+        self.keys_down = false;
+        if !ctx_wants_keyboard(ui) {
+            let (fwd, right) = (self.orbit.forward(), self.orbit.right());
+            let mut m = Vec3::ZERO;
+            ui.input(|i| {
+                use egui::Key;
+                for (k, v) in [
+                    (Key::W, fwd),
+                    (Key::S, -fwd),
+                    (Key::D, right),
+                    (Key::A, -right),
+                    (Key::E, Vec3::Y),
+                    (Key::Q, -Vec3::Y),
+                ] {
+                    if i.key_down(k) {
+                        m += v;
+                    }
+                }
+                if i.key_pressed(Key::F12) || i.key_pressed(Key::P) {
+                    self.pending.push(Action::Screenshot);
+                }
+            });
+            if m != Vec3::ZERO {
+                let speed = self.orbit.distance.max(1.0) * 0.6 * if modifiers.shift { 4.0 } else { 1.0 };
+                self.orbit.target += m.normalize() * speed * dt;
+                self.keys_down = true;
+                changed = true;
+            }
+        }
+        if changed {
+            self.dirty = true;
+        }
+    }
+
+    /// Right drag: rotates a sun's direction or a spot's aim; with shift (or for a point
+    /// light) moves a spot's or point light's position in the view plane.
+    fn drag_light(&mut self, d: egui::Vec2, shift: bool) {
+        let (yaw, pitch) = (-d.x * 0.005, d.y * 0.005);
+        let right = self.orbit.right();
+        let up = right.cross(self.orbit.forward());
+        let mv = |p: &mut Vec3, dist: f32| *p += (d.x * right - d.y * up) * dist.max(0.5) * 0.002;
+        match &mut self.light {
+            Light::Directional { direction, .. } => *direction = rotate_direction(*direction, yaw, pitch),
+            Light::Spot { direction, position, .. } => {
+                if shift {
+                    let dist = (*position - self.orbit.position()).length();
+                    mv(position, dist);
+                } else {
+                    *direction = rotate_direction(*direction, yaw, pitch);
+                }
+            }
+            Light::Point { position, .. } => {
+                let dist = (*position - self.orbit.position()).length();
+                mv(position, dist);
+            }
+        }
+    }
+
+    fn technique_panel(&mut self, ui: &mut egui::Ui) {
+        let mut name = self.technique.name();
+        ui.horizontal(|ui| {
+            ui.label("technique");
+            egui::ComboBox::from_id_salt("technique").selected_text(name).show_ui(ui, |ui| {
+                for t in crepuscular::techniques::TECHNIQUES.iter().filter(|t| t.gpu) {
+                    ui.selectable_value(&mut name, t.name, t.name).on_hover_text(t.summary);
+                }
+            });
+        });
+        if name != self.technique.name() {
+            let parsed = parse_technique(name, &self.scene, self.preset, &[]);
+            self.set_technique(parsed, true);
+        }
+        let mut preset = self.preset;
+        ui.horizontal(|ui| {
+            ui.label("preset");
+            egui::ComboBox::from_id_salt("preset")
+                .selected_text(preset.map(|p| p.name()).unwrap_or("(custom)"))
+                .show_ui(ui, |ui| {
+                    for p in Preset::ALL {
+                        ui.selectable_value(&mut preset, Some(p), p.name());
+                    }
+                });
+        });
+        if preset != self.preset
+            && let Some(p) = preset
+        {
+            self.preset = Some(p);
+            let mut scene = self.scene.clone();
+            scene.render.techniques.remove(self.technique.name());
+            let parsed = parse_technique(self.technique.name(), &scene, Some(p), &[]);
+            self.set_technique(parsed, true);
+        }
+        let technique = self.technique.name();
+        let mut changed = false;
+        egui::Grid::new("settings").num_columns(2).striped(true).show(ui, |ui| {
+            let keys: Vec<String> = self.fields.keys().cloned().collect();
+            for key in keys {
+                let doc = setting_doc(technique, &key);
+                let label = ui.label(&key);
+                if let Some(doc) = doc {
+                    label.on_hover_text(doc);
+                }
+                let Some(value) = self.fields.get_mut(&key) else { continue };
+                let r = match value {
+                    serde_json::Value::Bool(b) => Some(ui.checkbox(b, "")),
+                    serde_json::Value::Number(n) if n.is_u64() || n.is_i64() => {
+                        let mut v = n.as_i64().unwrap_or(0);
+                        let r = ui.add(egui::DragValue::new(&mut v).speed(1.0));
+                        if r.changed() {
+                            *value = serde_json::Value::from(v);
+                        }
+                        Some(r)
+                    }
+                    serde_json::Value::Number(n) => {
+                        let mut v = n.as_f64().unwrap_or(0.0) as f32 as f64;
+                        let speed = (v.abs() * 0.01).max(0.001);
+                        let r = ui.add(egui::DragValue::new(&mut v).speed(speed).max_decimals(4));
+                        if r.changed() {
+                            *value = serde_json::Value::from(v);
+                        }
+                        Some(r)
+                    }
+                    serde_json::Value::String(s) => match ENUM_VALUES.iter().find(|(k, _)| *k == key) {
+                        Some((_, values)) => {
+                            let before = s.clone();
+                            egui::ComboBox::from_id_salt(("setting", key.as_str())).selected_text(s.as_str()).show_ui(
+                                ui,
+                                |ui| {
+                                    for v in *values {
+                                        ui.selectable_value(s, v.to_string(), *v);
+                                    }
+                                },
+                            );
+                            if *s != before {
+                                changed = true;
+                            }
+                            None
+                        }
+                        None => {
+                            let r = ui.text_edit_singleline(s);
+                            Some(r)
+                        }
+                    },
+                    _ => {
+                        let text = self.text_fields.entry(key.clone()).or_default();
+                        let r = ui.add(egui::TextEdit::singleline(text).hint_text("default (TOML value)"));
+                        Some(r)
+                    }
+                };
+                if let Some(r) = r {
+                    let commit = if matches!(value, serde_json::Value::String(_) | serde_json::Value::Null)
+                        || value.is_array()
+                        || value.is_object()
+                    {
+                        r.lost_focus()
+                    } else {
+                        r.changed()
+                    };
+                    if commit {
+                        changed = true;
+                    }
+                    if let Some(doc) = doc {
+                        r.on_hover_text(doc);
+                    }
+                }
+                ui.end_row();
+            }
+        });
+        if changed {
+            self.preset = None;
+            self.apply_fields();
+        }
+        if let Some(e) = &self.settings_error {
+            ui.colored_label(egui::Color32::from_rgb(255, 110, 90), format!("settings not applied: {e}"));
+        }
+        if ui.button("reset to defaults").clicked() {
+            let parsed = TechniqueChoice::parse(self.technique.name(), &self.scene, &[]);
+            self.preset = None;
+            self.set_technique(parsed, true);
+        }
+    }
+
+    fn scene_panel(&mut self, ui: &mut egui::Ui) {
+        let mut changed = false;
+        ui.label(egui::RichText::new("medium").strong());
+        let rgb = |ui: &mut egui::Ui, label: &str, v: &mut Vec3, tip: &str| {
+            let mut c = false;
+            ui.horizontal(|ui| {
+                ui.label(label).on_hover_text(tip);
+                for x in [&mut v.x, &mut v.y, &mut v.z] {
+                    c |= ui.add(egui::DragValue::new(x).speed(0.0005).range(0.0..=10.0).max_decimals(4)).changed();
+                }
+            });
+            c
+        };
+        changed |= rgb(ui, "σs", &mut self.medium.scattering, "scattering coefficient, 1/m, RGB");
+        changed |= rgb(ui, "σa", &mut self.medium.absorption, "absorption coefficient, 1/m, RGB");
+        ui.horizontal(|ui| {
+            match &mut self.medium.phase {
+                Phase::HenyeyGreenstein { g } | Phase::HoffmanPreetham { g, .. } => {
+                    ui.label("phase g").on_hover_text("Henyey–Greenstein asymmetry; > 0 scatters forward");
+                    changed |= ui.add(egui::Slider::new(g, -0.99..=0.99)).changed();
+                }
+                Phase::Isotropic => {
+                    ui.label("phase: isotropic");
+                    if ui.button("use Henyey–Greenstein").clicked() {
+                        self.medium.phase = Phase::HenyeyGreenstein { g: 0.0 };
+                        changed = true;
+                    }
+                }
+                Phase::Rayleigh => {
+                    ui.label("phase: Rayleigh");
+                }
+            };
+        });
+        ui.label(egui::RichText::new("light & view").strong());
+        match &mut self.light {
+            Light::Directional { intensity, direction, .. } => {
+                ui.label(format!("sun, travelling along ({:.2}, {:.2}, {:.2})", direction.x, direction.y, direction.z));
+                ui.horizontal(|ui| {
+                    ui.label("intensity");
+                    changed |= ui.add(egui::DragValue::new(intensity).speed(0.05).range(0.0..=1e6)).changed();
+                });
+            }
+            Light::Spot { intensity, position, .. } | Light::Point { intensity, position, .. } => {
+                ui.label(format!("light at ({:.2}, {:.2}, {:.2}) m", position.x, position.y, position.z));
+                ui.horizontal(|ui| {
+                    ui.label("intensity");
+                    changed |= ui.add(egui::DragValue::new(intensity).speed(1.0).range(0.0..=1e9)).changed();
+                });
+            }
+        }
+        ui.horizontal(|ui| {
+            ui.label("exposure");
+            changed |= ui.add(egui::DragValue::new(&mut self.exposure).speed(0.01).range(0.0..=100.0)).changed();
+            ui.label("scale").on_hover_text("render resolution = window × scale; cost ∝ scale²");
+            changed |= ui.add(egui::Slider::new(&mut self.scale, 0.1..=1.0)).changed();
+        });
+        ui.horizontal(|ui| {
+            if ui.button("reset camera & light").clicked() {
+                self.orbit = Orbit::from_camera(&self.scene.camera);
+                self.light = self.scene.light.clone();
+                self.medium = self.scene.medium.clone();
+                changed = true;
+            }
+            ui.checkbox(&mut self.continuous, "continuous").on_hover_text("re-render every frame (for timing)");
+        });
+        ui.small("left drag orbit · shift/middle drag pan · wheel dolly · WASD QE fly · right (ctrl) drag light, + shift moves spot/point · F12/P screenshot");
+        if changed {
+            self.dirty = true;
+        }
+    }
+
+    fn stats_panel(&mut self, ui: &mut egui::Ui) {
+        if let Some(e) = &self.render_error {
+            ui.colored_label(egui::Color32::from_rgb(255, 110, 90), format!("render failed: {e}"));
+        }
+        let (w, h) = self.render_size();
+        if let Some(s) = &self.last_stats {
+            ui.label(format!(
+                "{w}×{h}: {} ray-marched samples ({:.1} per pixel), GPU memory {:.2} MiB",
+                s.raymarched_samples,
+                s.raymarched_samples as f64 / (w as f64 * h as f64),
+                s.gpu_memory_bytes as f64 / (1024.0 * 1024.0)
+            ));
+        }
+        if let Some(last) = self.history.back() {
+            let tech: f64 =
+                last.passes.iter().filter(|p| !p.name.starts_with("host") && p.name != "composite").map(|p| p.ms).sum();
+            ui.label(format!("frame {:.1} ms (technique {:.1} ms); {}", last.wall_ms, tech, self.gpu.info.name));
+        }
+        // Stacked bars per frame over the last seconds, one colour per pass.
+        let width = ui.available_width().clamp(200.0, 420.0);
+        let (rect, _) = ui.allocate_exact_size(egui::vec2(width, 90.0), egui::Sense::hover());
+        let painter = ui.painter_at(rect);
+        painter.rect_filled(rect, 2.0, egui::Color32::from_black_alpha(120));
+        let max_ms = self.history.iter().map(|f| f.passes.iter().map(|p| p.ms).sum::<f64>()).fold(1.0, f64::max);
+        let n = self.history.len().max(1);
+        let bar = (rect.width() / n as f32).min(12.0);
+        let mut names: Vec<String> = Vec::new();
+        for (i, f) in self.history.iter().enumerate() {
+            let x0 = rect.left() + i as f32 * bar;
+            let mut y = rect.bottom();
+            for p in &f.passes {
+                let k = names.iter().position(|n| *n == p.name).unwrap_or_else(|| {
+                    names.push(p.name.clone());
+                    names.len() - 1
+                });
+                let hgt = (p.ms / max_ms) as f32 * (rect.height() - 12.0);
+                painter.rect_filled(
+                    egui::Rect::from_min_max(egui::pos2(x0, y - hgt), egui::pos2(x0 + (bar - 1.0).max(1.0), y)),
+                    0.0,
+                    pass_color(k),
+                );
+                y -= hgt;
+            }
+        }
+        painter.text(
+            rect.left_top() + egui::vec2(4.0, 2.0),
+            egui::Align2::LEFT_TOP,
+            format!("per-pass ms, last {HISTORY_S:.0} s (max {max_ms:.1} ms)"),
+            egui::FontId::monospace(10.0),
+            egui::Color32::WHITE,
+        );
+        if let Some(last) = self.history.back() {
+            for p in &last.passes {
+                let k = names.iter().position(|n| *n == p.name).unwrap_or(0);
+                ui.horizontal(|ui| {
+                    let (r, _) = ui.allocate_exact_size(egui::vec2(10.0, 10.0), egui::Sense::hover());
+                    ui.painter().rect_filled(r, 1.0, pass_color(k));
+                    ui.small(format!("{} {:.2} ms", p.name, p.ms));
+                });
+            }
+        }
+    }
+
+    fn tools_panel(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            if ui.button("screenshot (F12)").clicked() {
+                self.pending.push(Action::Screenshot);
+            }
+            if matches!(self.technique, TechniqueChoice::Epipolar(_)) {
+                if ui.button("classification").on_hover_text("epipolar: sample classification (Fig. 9)").clicked() {
+                    self.pending.push(Action::Debug(DebugView::Classification));
+                }
+                if ui.button("radiance").on_hover_text("epipolar: the lines × samples radiance texture").clicked() {
+                    self.pending.push(Action::Debug(DebugView::Radiance));
+                }
+            }
+        });
+        ui.horizontal(|ui| {
+            if ui
+                .button("error vs reference")
+                .on_hover_text("CPU reference on this frame's depth and shadow map; FLIP heat map (slow: seconds)")
+                .clicked()
+            {
+                self.pending.push(Action::ErrorView);
+            }
+            ui.label("steps");
+            let mut s = self.reference_steps / 2;
+            if ui.add(egui::DragValue::new(&mut s).range(1..=2048)).changed() {
+                self.reference_steps = s * 2;
+            }
+        });
+        if !self.status.is_empty() {
+            ui.small(&self.status);
+        }
+    }
+}
+
+fn ctx_wants_keyboard(ui: &egui::Ui) -> bool {
+    ui.ctx().egui_wants_keyboard_input()
+}
+
+fn pass_color(k: usize) -> egui::Color32 {
+    const P: [(u8, u8, u8); 8] = [
+        (90, 160, 255),
+        (255, 170, 60),
+        (110, 210, 120),
+        (230, 90, 110),
+        (190, 130, 255),
+        (240, 230, 90),
+        (80, 220, 220),
+        (200, 200, 200),
+    ];
+    let (r, g, b) = P[k % P.len()];
+    egui::Color32::from_rgb(r, g, b)
+}
+
+/// The technique's settings as a JSON object (without the `technique` tag).
+fn settings_fields(t: &TechniqueChoice) -> serde_json::Map<String, serde_json::Value> {
+    match serde_json::to_value(t) {
+        Ok(serde_json::Value::Object(mut m)) => {
+            m.remove("technique");
+            m
+        }
+        _ => serde_json::Map::new(),
+    }
+}
+
+/// TOML text for the fields that are not scalars (unset options, arrays).
+fn text_fields(fields: &serde_json::Map<String, serde_json::Value>) -> std::collections::BTreeMap<String, String> {
+    fields
+        .iter()
+        .filter(|(_, v)| v.is_null() || v.is_array() || v.is_object())
+        .map(|(k, v)| (k.clone(), toml_literal(v).unwrap_or_default()))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_setting_of_every_technique_round_trips_through_overrides() {
+        let scene = crepuscular_scene::builtin::builtin("colonnade").unwrap();
+        for t in crepuscular::techniques::TECHNIQUES {
+            for p in Preset::ALL {
+                let choice = parse_technique(t.name, &scene, Some(p), &[]).unwrap();
+                let fields = settings_fields(&choice);
+                let mut overrides = json_overrides(&fields);
+                overrides.extend(
+                    text_fields(&fields).into_iter().filter(|(_, v)| !v.is_empty()).map(|(k, v)| format!("{k}={v}")),
+                );
+                let back = TechniqueChoice::parse(t.name, &scene, &overrides).unwrap();
+                assert_eq!(serde_json::to_value(&back).unwrap(), serde_json::to_value(&choice).unwrap(), "{}", t.name);
+            }
+        }
+    }
+
+    #[test]
+    fn bad_values_are_errors_not_panics() {
+        let scene = crepuscular_scene::builtin::builtin("colonnade").unwrap();
+        assert!(TechniqueChoice::parse("brute-force", &scene, &["steps=0".into()]).is_err());
+        assert!(TechniqueChoice::parse("epipolar", &scene, &["weighting=\"nope\"".into()]).is_err());
+    }
+
+    #[test]
+    fn tooltips_cover_the_common_settings() {
+        assert!(setting_doc("brute-force", "steps").is_some());
+        assert!(setting_doc("epipolar", "taps").is_some());
+        assert!(setting_doc("brute-force", "no-such-key").is_none());
+    }
+
+    #[test]
+    fn rotating_a_direction_keeps_it_unit_and_off_vertical() {
+        let d = rotate_direction(Vec3::new(1.0, -0.2, 0.0), 0.3, 2.0);
+        assert!((d.length() - 1.0).abs() < 1e-4 && d.y.abs() <= 0.995);
+    }
+}

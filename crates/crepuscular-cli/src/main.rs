@@ -3,7 +3,7 @@
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use crepuscular::tonemap::ToneMap;
-use crepuscular_cli::render::{self, Backend, RenderOptions, TechniqueChoice};
+use crepuscular_cli::render::{self, Backend, RenderOptions};
 use crepuscular_cli::{metrics, output};
 use crepuscular_scene::builtin;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -229,8 +229,9 @@ struct RenderArgs {
     exposure: Option<f32>,
     /// Also write a debug view of the technique (`epipolar`: `classification`, the sample
     /// classification of Engelhardt & Dachsbacher 2010 Fig. 9 bottom; `radiance`, the lines ×
-    /// samples radiance texture scaled up) as `<output stem>.<view>.png`, tone-mapped like the
-    /// image. Costs one more run of the technique.
+    /// samples radiance texture scaled up; `interleaved`: `pattern`, each pixel's block offset
+    /// over the image) as `<output stem>.<view>.png`, tone-mapped like the image. Costs one
+    /// more run of the technique (epipolar).
     #[arg(long, value_enum, value_name = "VIEW")]
     debug: Option<render::DebugView>,
 }
@@ -287,13 +288,9 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
     }
     let technique = crepuscular_cli::view::parse_technique(&a.technique, &scene, a.preset, &a.set)?;
     if let Some(view) = a.debug
-        && !matches!(technique, TechniqueChoice::Epipolar(_))
+        && !render::DebugView::of(&technique).contains(&view)
     {
-        bail!(
-            "--debug {}: debug views exist for the technique `epipolar` only (this is `{}`)",
-            view.name(),
-            technique.name()
-        );
+        bail!("--debug {}: not a debug view of `{}` ({})", view.name(), technique.name(), render::debug_view_list());
     }
     let notice = |m: &str| eprintln!("{m}");
     let gpu = render::open_gpu(a.backend, &notice)?;

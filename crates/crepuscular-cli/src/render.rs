@@ -353,6 +353,10 @@ pub enum DebugView {
     /// `epipolar`: the radiance texture (one row per epipolar line, one column per sample
     /// along it; culled lines black), scaled up to at least 1024 pixels wide.
     Radiance,
+    /// `interleaved`: the interleaving pattern (Tóth & Umenhoffer 2009 §4.1) — each pixel
+    /// coloured by its offset k of the M×M block (which of the N/M² terms of eq. 1 it
+    /// marches), blended half and half over the final image.
+    Pattern,
 }
 
 impl DebugView {
@@ -361,8 +365,26 @@ impl DebugView {
         match self {
             DebugView::Classification => "classification",
             DebugView::Radiance => "radiance",
+            DebugView::Pattern => "pattern",
         }
     }
+
+    /// The debug views `technique` has (empty: none).
+    pub fn of(technique: &TechniqueChoice) -> &'static [DebugView] {
+        match technique {
+            TechniqueChoice::Epipolar(_) => &[DebugView::Classification, DebugView::Radiance],
+            TechniqueChoice::Interleaved(_) => &[DebugView::Pattern],
+            _ => &[],
+        }
+    }
+}
+
+/// A colour per block offset k of `m2` = M² offsets: a hue wheel, so neighbouring offsets differ.
+fn offset_colour(k: u32, m2: u32) -> [f32; 3] {
+    let h = (k as f32 + 0.5) / m2.max(1) as f32 * 6.0;
+    // Hue → RGB at full saturation: each channel a trapezoid on the wheel, a third apart.
+    let c = |n: f32| 1.0 - (((n + h) % 6.0 - 3.0).abs() - 1.0).clamp(0.0, 1.0);
+    [c(0.0), c(4.0), c(2.0)]
 }
 
 /// Renders `view` for the frame `render` drew (`final_radiance` is that frame's final image,
@@ -375,12 +397,25 @@ pub fn debug_view(
     view: DebugView,
     final_radiance: &Image,
 ) -> Result<Image> {
+    if !DebugView::of(technique).contains(&view) {
+        bail!("--debug {}: not a debug view of `{}` ({})", view.name(), technique.name(), debug_view_list());
+    }
+    if let TechniqueChoice::Interleaved(s) = technique {
+        let m2 = s.block * s.block;
+        let mut img = final_radiance.clone();
+        for y in 0..img.height {
+            for x in 0..img.width {
+                let c = offset_colour(interleaved::cpu::block_offset(s, x, y), m2);
+                let p = &mut img.pixels[(y * img.width + x) as usize];
+                for i in 0..3 {
+                    p[i] = 0.5 * p[i] + 0.5 * c[i];
+                }
+            }
+        }
+        return Ok(img);
+    }
     let TechniqueChoice::Epipolar(settings) = technique else {
-        bail!(
-            "--debug {}: debug views exist for the technique `epipolar` only (this is `{}`)",
-            view.name(),
-            technique.name()
-        );
+        bail!("--debug {}: not a debug view of `{}`", view.name(), technique.name());
     };
     let desc = frame_desc(scene);
     let debug = match gpu {
@@ -416,5 +451,11 @@ pub fn debug_view(
             let scale = 1024u32.div_ceil(debug.samples().max(1)).clamp(1, 16);
             epipolar::debug::radiance_view(&debug, scale)
         }
+        DebugView::Pattern => bail!("--debug pattern: not a debug view of `epipolar`"),
     })
+}
+
+/// "epipolar: classification, radiance; interleaved: pattern" — for error messages and help.
+pub fn debug_view_list() -> &'static str {
+    "debug views: epipolar — classification, radiance; interleaved — pattern"
 }

@@ -1372,12 +1372,14 @@ impl Viewer {
             if ui.button("screenshot (F12)").clicked() {
                 self.pending.push(Action::Screenshot);
             }
-            if matches!(self.technique, TechniqueChoice::Epipolar(_)) {
-                if ui.button("classification").on_hover_text("epipolar: sample classification (Fig. 9)").clicked() {
-                    self.pending.push(Action::Debug(DebugView::Classification));
-                }
-                if ui.button("radiance").on_hover_text("epipolar: the lines × samples radiance texture").clicked() {
-                    self.pending.push(Action::Debug(DebugView::Radiance));
+            for &view in DebugView::of(&self.technique) {
+                let tip = match view {
+                    DebugView::Classification => "epipolar: sample classification (Fig. 9)",
+                    DebugView::Radiance => "epipolar: the lines × samples radiance texture",
+                    DebugView::Pattern => "interleaved: each pixel's offset in the M×M block",
+                };
+                if ui.button(view.name()).on_hover_text(tip).clicked() {
+                    self.pending.push(Action::Debug(view));
                 }
             }
         });

@@ -237,3 +237,58 @@ fn compare_writes_a_contact_sheet_and_reports() {
     let md = std::fs::read_to_string(d.join("report.md")).unwrap();
     assert!(md.contains("interleaved") && md.contains("sheet.png"), "{md}");
 }
+
+#[test]
+fn debug_views_are_written_for_their_techniques_and_refused_for_others() {
+    let d = tmp("debug-views");
+    for (technique, view, size) in [
+        ("epipolar", "classification", (64, 36)),
+        ("epipolar", "radiance", (0, 0)),
+        ("interleaved", "pattern", (64, 36)),
+    ] {
+        let out = d.join(format!("{technique}.png"));
+        let r = bin()
+            .args([
+                "render",
+                "stained-glass",
+                "--backend",
+                "cpu",
+                "--size",
+                "64x36",
+                "-t",
+                technique,
+                "--debug",
+                view,
+                "-o",
+            ])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(r.status.success(), "{technique} {view}: {}", String::from_utf8_lossy(&r.stderr));
+        let p = out.with_extension(format!("{view}.png"));
+        let img = image::open(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        if size != (0, 0) {
+            assert_eq!((img.width(), img.height()), size, "{view} has the frame's size");
+        } else {
+            assert!(
+                img.width() >= 256 && img.height() >= 256,
+                "the radiance texture is scaled up: {}×{}",
+                img.width(),
+                img.height()
+            );
+        }
+        // The view is not the plain image: it draws over it.
+        let plain = image::open(&out).unwrap().to_rgb8();
+        if size != (0, 0) {
+            assert_ne!(plain.as_raw(), img.to_rgb8().as_raw(), "{view} draws nothing");
+        }
+    }
+    let r = bin()
+        .args(["render", "colonnade", "--backend", "cpu", "--size", "32x18", "--debug", "pattern", "-o"])
+        .arg(d.join("bf.png"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(!r.status.success() && err.contains("not a debug view of `brute-force`"), "{err}");
+    assert!(!d.join("bf.png").exists(), "refused before rendering");
+}

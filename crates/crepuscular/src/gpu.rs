@@ -205,20 +205,32 @@ impl GpuContext {
             wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
         );
         self.queue.submit([enc.finish()]);
+        self.read_mapped(&buffer, "reading back a texture", |data| {
+            let mut out = Vec::with_capacity((w * h * bpp / 4) as usize);
+            for y in 0..h {
+                let start = (y * padded) as usize;
+                out.extend_from_slice(bytemuck::cast_slice(&data[start..start + row as usize]));
+            }
+            out
+        })
+    }
+
+    /// Maps a whole `MAP_READ` buffer once the GPU work before it has finished, hands its
+    /// bytes to `f`, and unmaps it: the one readback path of the library (textures, counters,
+    /// timestamps). A failed map or a GPU fault is an [`Error::Gpu`] naming `context`.
+    pub fn read_mapped<T>(&self, buffer: &wgpu::Buffer, context: &str, f: impl FnOnce(&[u8]) -> T) -> Result<T, Error> {
+        let err = |message: String| Error::Gpu { context: context.into(), message };
         let slice = buffer.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
         self.wait()?;
-        let data = slice
-            .get_mapped_range()
-            .map_err(|e| Error::Gpu { context: "reading back a texture".into(), message: e.to_string() })?;
-        let mut out = Vec::with_capacity((w * h * bpp / 4) as usize);
-        for y in 0..h {
-            let start = (y * padded) as usize;
-            out.extend_from_slice(bytemuck::cast_slice(&data[start..start + row as usize]));
-        }
-        drop(data);
+        // Unmap only what was mapped: a failed map leaves the buffer unmapped.
+        rx.try_recv().map_err(|e| err(format!("map_async did not complete: {e}")))?.map_err(|e| err(e.to_string()))?;
+        let value = slice.get_mapped_range().map(|data| f(&data));
         buffer.unmap();
-        Ok(out)
+        value.map_err(|e| err(e.to_string()))
     }
 
     /// Reads back an `Rgba32Float` texture as an [`crate::Image`].
@@ -297,19 +309,31 @@ impl GpuContext {
 
     /// Creates the `Rgba32Float` storage texture a technique writes its in-scattering into.
     pub fn create_output_texture(&self, width: u32, height: u32) -> wgpu::Texture {
-        self.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("in-scattering"),
-            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba32Float,
-            usage: wgpu::TextureUsages::STORAGE_BINDING
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        })
+        storage_texture(&self.device, "in-scattering", wgpu::TextureFormat::Rgba32Float, width, height)
     }
+}
+
+/// A `width`×`height` 2D texture that a pass writes (storage), the next reads (sampled) and a
+/// test or debug view reads back (copy source): every intermediate of the techniques.
+pub fn storage_texture(
+    device: &wgpu::Device,
+    label: &str,
+    format: wgpu::TextureFormat,
+    width: u32,
+    height: u32,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::STORAGE_BINDING
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    })
 }
 
 /// Timestamp slots for one pass, handed to the pass descriptor.
@@ -417,16 +441,8 @@ impl PassTimer {
         enc.resolve_query_set(set, 0..n, &resolve, 0);
         enc.copy_buffer_to_buffer(&resolve, 0, &read, 0, (n * 8) as u64);
         gpu.queue.submit([enc.finish()]);
-        let slice = read.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        gpu.wait()?;
         let period = gpu.queue.get_timestamp_period() as f64;
-        let ticks: Vec<u64> = bytemuck::cast_slice(
-            &slice
-                .get_mapped_range()
-                .map_err(|e| Error::Gpu { context: "reading timestamps".into(), message: e.to_string() })?,
-        )
-        .to_vec();
+        let ticks: Vec<u64> = gpu.read_mapped(&read, "reading timestamps", |d| bytemuck::cast_slice(d).to_vec())?;
         Ok(self
             .names
             .into_iter()

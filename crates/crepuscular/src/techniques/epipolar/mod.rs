@@ -950,20 +950,8 @@ impl Epipolar {
         self.sized = None;
         self.sized = Some(gpu.scoped("allocating the epipolar line textures", || {
             let device = &gpu.device;
-            let texture = |label, format, width, height| {
-                device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage: wgpu::TextureUsages::STORAGE_BINDING
-                        | wgpu::TextureUsages::TEXTURE_BINDING
-                        | wgpu::TextureUsages::COPY_SRC,
-                    view_formats: &[],
-                })
-            };
+            let texture =
+                |label, format, width, height| crate::gpu::storage_texture(device, label, format, width, height);
             let buffer = |label, size| {
                 device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some(label),
@@ -1017,18 +1005,13 @@ impl Epipolar {
             Some((w, h)) => {
                 if self.prefiltered.as_ref().is_none_or(|p| p.texture.width() != w || p.texture.height() != h) {
                     self.prefiltered = Some(gpu.scoped("allocating the prefiltered spot texture", || {
-                        let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
-                            label: Some("epipolar prefiltered spot texture"),
-                            size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
-                            mip_level_count: 1,
-                            sample_count: 1,
-                            dimension: wgpu::TextureDimension::D2,
-                            format: wgpu::TextureFormat::Rgba32Float,
-                            usage: wgpu::TextureUsages::STORAGE_BINDING
-                                | wgpu::TextureUsages::TEXTURE_BINDING
-                                | wgpu::TextureUsages::COPY_SRC,
-                            view_formats: &[],
-                        });
+                        let texture = crate::gpu::storage_texture(
+                            &gpu.device,
+                            "epipolar prefiltered spot texture",
+                            wgpu::TextureFormat::Rgba32Float,
+                            w,
+                            h,
+                        );
                         let view = texture.create_view(&Default::default());
                         Prefiltered { texture, view }
                     })?);
@@ -1194,27 +1177,15 @@ impl Epipolar {
     /// Maps the counters' readback copy: [marched pixels, re-marched pixels, valid lines,
     /// ray-march texels].
     fn read_counters(&self, gpu: &GpuContext) -> Result<[u64; 4], Error> {
-        let err = |message: String| Error::Gpu { context: "reading the epipolar counters".into(), message };
-        let slice = self.counters_readback.slice(..);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        gpu.wait()?;
-        // Unmap only what was mapped: a failed map leaves the buffer unmapped.
-        rx.try_recv().map_err(|e| err(format!("map_async did not complete: {e}")))?.map_err(|e| err(e.to_string()))?;
-        let value = slice.get_mapped_range().map(|data| {
-            let v: &[u32] = bytemuck::cast_slice(&data);
+        gpu.read_mapped(&self.counters_readback, "reading the epipolar counters", |data| {
+            let v: &[u32] = bytemuck::cast_slice(data);
             [v[0] as u64, v[1] as u64, v[2] as u64, v[3] as u64]
-        });
-        self.counters_readback.unmap();
-        value.map_err(|e| err(e.to_string()))
+        })
     }
 }
 
 /// Copies a storage buffer into a mapped readback buffer and returns its bytes.
 fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, Error> {
-    let err = |message: String| Error::Gpu { context: "reading back a buffer".into(), message };
     let read = gpu.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("epipolar readback"),
         size: buffer.size(),
@@ -1224,14 +1195,5 @@ fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, Error
     let mut enc = gpu.device.create_command_encoder(&Default::default());
     enc.copy_buffer_to_buffer(buffer, 0, &read, 0, buffer.size());
     gpu.queue.submit([enc.finish()]);
-    let slice = read.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    gpu.wait()?;
-    rx.try_recv().map_err(|e| err(format!("map_async did not complete: {e}")))?.map_err(|e| err(e.to_string()))?;
-    let bytes = slice.get_mapped_range().map(|d| d.to_vec());
-    read.unmap();
-    bytes.map_err(|e| err(e.to_string()))
+    gpu.read_mapped(&read, "reading back a buffer", |d| d.to_vec())
 }

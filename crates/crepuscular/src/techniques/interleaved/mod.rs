@@ -438,18 +438,7 @@ impl Interleaved {
         self.targets = None;
         let targets = gpu.scoped("allocating the interleaved textures", || {
             let tex = |label| {
-                gpu.device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::Rgba32Float,
-                    usage: wgpu::TextureUsages::STORAGE_BINDING
-                        | wgpu::TextureUsages::TEXTURE_BINDING
-                        | wgpu::TextureUsages::COPY_SRC,
-                    view_formats: &[],
-                })
+                crate::gpu::storage_texture(&gpu.device, label, wgpu::TextureFormat::Rgba32Float, width, height)
             };
             let march = tex("interleaved march");
             let rows = tex("interleaved rows");

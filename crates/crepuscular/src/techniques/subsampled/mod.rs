@@ -24,7 +24,7 @@ pub mod cpu;
 
 use crate::error::Error;
 use crate::frame::GpuFrame;
-use crate::gpu::{GpuContext, PassTimer, wait_idle};
+use crate::gpu::{GpuContext, PassTimer};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
 use crate::stats::TechniqueStats;
 use crate::techniques::pass;
@@ -311,18 +311,13 @@ impl Subsampled {
         gpu.check_texture_size("subsampled grid", gw, gh)?;
         if self.grid.as_ref().is_none_or(|g| g.texture.width() != gw || g.texture.height() != gh) {
             self.grid = Some(gpu.scoped("allocating the subsampled grid", || {
-                let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some("subsampled grid"),
-                    size: wgpu::Extent3d { width: gw, height: gh, depth_or_array_layers: 1 },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::Rgba32Float,
-                    usage: wgpu::TextureUsages::STORAGE_BINDING
-                        | wgpu::TextureUsages::TEXTURE_BINDING
-                        | wgpu::TextureUsages::COPY_SRC,
-                    view_formats: &[],
-                });
+                let texture = crate::gpu::storage_texture(
+                    &gpu.device,
+                    "subsampled grid",
+                    wgpu::TextureFormat::Rgba32Float,
+                    gw,
+                    gh,
+                );
                 let view = texture.create_view(&Default::default());
                 Grid { texture, view }
             })?);
@@ -389,19 +384,9 @@ impl Subsampled {
 
     /// Maps the counter's readback copy (after the frame's passes) and returns it.
     fn read_counter(&self, gpu: &GpuContext) -> Result<u64, Error> {
-        let err = |message: String| Error::Gpu { context: "reading the re-marched pixel count".into(), message };
-        let slice = self.counter_readback.slice(..);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        wait_idle(&gpu.device)?;
-        // Unmap only what was mapped: a failed map leaves the buffer unmapped.
-        rx.try_recv().map_err(|e| err(format!("map_async did not complete: {e}")))?.map_err(|e| err(e.to_string()))?;
-        let value = slice.get_mapped_range().map(|data| u32::from_le_bytes([data[0], data[1], data[2], data[3]]));
-        self.counter_readback.unmap();
-        let value = value.map_err(|e| err(e.to_string()))?;
-        Ok(value as u64)
+        gpu.read_mapped(&self.counter_readback, "reading the re-marched pixel count", |d| {
+            u32::from_le_bytes([d[0], d[1], d[2], d[3]]) as u64
+        })
     }
 }
 

@@ -15,7 +15,7 @@ use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::GpuContext;
 use crepuscular::stats::TechniqueStats;
 use crepuscular::tonemap::{ToneMap, composite};
-use crepuscular::{Camera, CpuFrame, GpuFrame, Image, Light, ShadowMap};
+use crepuscular::{Camera, CpuFrame, Image, Light, ShadowMap};
 use crepuscular_scene::{Geometry, GpuHost, HostTextures, Scene, builtin, host, host_cpu};
 use glam::{Quat, Vec3};
 use serde::Serialize;
@@ -346,15 +346,8 @@ impl AnimatedTechnique {
                 }
                 let (_, runner, out) = self.gpu.as_mut().context("no GPU runner")?;
                 let out_view = out.create_view(&Default::default());
-                let (dv, sv) = (tex.depth_view(), tex.shadow_view());
-                let spot_view = tex.spot_texture.create_view(&Default::default());
-                let has_spot_texture = matches!(&frame.desc.light, Light::Spot { texture: Some(_), .. });
-                let gf = GpuFrame {
-                    desc: &frame.desc,
-                    depth: &dv,
-                    shadow_map: &sv,
-                    spot_texture: has_spot_texture.then_some(&spot_view),
-                };
+                let views = tex.views();
+                let gf = views.frame(&frame.desc);
                 let stats = runner.render(g, &gf, &out_view)?;
                 (g.read_image(out)?, stats)
             }

@@ -18,7 +18,7 @@ use crepuscular::gpu::GpuContext;
 use crepuscular::stats::TechniqueStats;
 use crepuscular::techniques::reference::{self, ReferenceSettings};
 use crepuscular::tonemap::{ToneMap, composite};
-use crepuscular::{CpuFrame, GpuFrame, Image};
+use crepuscular::{CpuFrame, Image};
 use crepuscular_scene::{GpuHost, host, host_cpu};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -533,14 +533,8 @@ pub fn run(
                         };
                         let out = g.create_output_texture(w, h);
                         let out_view = out.create_view(&Default::default());
-                        let (dv, sv) = (t.depth_view(), t.shadow_view());
-                        let spot_view = t.spot_texture.create_view(&Default::default());
-                        let frame = GpuFrame {
-                            desc: &desc,
-                            depth: &dv,
-                            shadow_map: &sv,
-                            spot_texture: spot.map(|_| &spot_view),
-                        };
+                        let views = t.views();
+                        let frame = views.frame(&desc);
                         let mut stats = None;
                         for i in 0..plan.warmup + plan.repeat {
                             let s = runner.render(g, &frame, &out_view)?;

@@ -293,15 +293,8 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
                 Some(mut runner) => {
                     let out = gpu.create_output_texture(desc.width, desc.height);
                     let out_view = out.create_view(&Default::default());
-                    let depth_view = tex.depth_view();
-                    let shadow_view = tex.shadow_view();
-                    let spot_view = tex.spot_texture.create_view(&Default::default());
-                    let frame = GpuFrame {
-                        desc: &desc,
-                        depth: &depth_view,
-                        shadow_map: &shadow_view,
-                        spot_texture: spot.map(|_| &spot_view),
-                    };
+                    let views = tex.views();
+                    let frame = views.frame(&desc);
                     let stats = runner.render(gpu, &frame, &out_view)?;
                     (gpu.read_image(&out)?, stats)
                 }
@@ -428,14 +421,8 @@ pub fn debug_view(
             let tex = host.render(gpu, &desc, spot)?;
             let mut runner = Epipolar::new(gpu, settings.clone())?;
             let out = gpu.create_output_texture(desc.width, desc.height);
-            let (depth_view, shadow_view) = (tex.depth_view(), tex.shadow_view());
-            let spot_view = tex.spot_texture.create_view(&Default::default());
-            let frame = GpuFrame {
-                desc: &desc,
-                depth: &depth_view,
-                shadow_map: &shadow_view,
-                spot_texture: spot.map(|_| &spot_view),
-            };
+            let views = tex.views();
+            let frame = views.frame(&desc);
             runner.render(gpu, &frame, &out.create_view(&Default::default()))?;
             runner.read_debug(gpu)?
         }

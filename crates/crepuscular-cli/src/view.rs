@@ -21,7 +21,7 @@ use crepuscular::stats::{PassTime, TechniqueStats};
 use crepuscular::techniques::presets::Preset;
 use crepuscular::techniques::reference::{self, ReferenceSettings};
 use crepuscular::tonemap::{ToneMap, composite};
-use crepuscular::{CpuFrame, GpuFrame, Image, Light, Phase};
+use crepuscular::{CpuFrame, Image, Light, Phase};
 use crepuscular_scene::{GpuHost, HostTextures, Scene, host};
 use glam::{Quat, Vec3};
 use std::collections::VecDeque;
@@ -783,15 +783,8 @@ impl Viewer {
         let tex = self.host.render(&self.gpu, &desc, spot)?;
         let runner = self.runner.as_mut().expect("runner was just built");
         let out_view = targets.inscatter.create_view(&Default::default());
-        let depth_view = tex.depth_view();
-        let shadow_view = tex.shadow_view();
-        let spot_view = tex.spot_texture.create_view(&Default::default());
-        let frame = GpuFrame {
-            desc: &desc,
-            depth: &depth_view,
-            shadow_map: &shadow_view,
-            spot_texture: spot.map(|_| &spot_view),
-        };
+        let views = tex.views();
+        let frame = views.frame(&desc);
         let stats = runner.render(&self.gpu, &frame, &out_view)?;
 
         // Composite + tone map.
@@ -816,7 +809,7 @@ impl Viewer {
                 wgpu::BindGroupEntry { binding: 0, resource: self.composite.params.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&surface_view) },
                 wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&out_view) },
-                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&depth_view) },
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(frame.depth) },
             ],
         });
         let display_view = targets.display.create_view(&Default::default());

@@ -6,7 +6,7 @@ use crate::scene::{Geometry, Vertex};
 use crepuscular::frame::FrameDesc;
 use crepuscular::gpu::{GpuContext, PassTimer};
 use crepuscular::stats::PassTime;
-use crepuscular::{Error, RgbTexture, ShadowMap};
+use crepuscular::{Error, GpuFrame, RgbTexture, ShadowMap};
 use wgpu::util::DeviceExt;
 
 /// Shadow-map depth shader.
@@ -48,6 +48,35 @@ impl HostTextures {
     pub fn depth_view(&self) -> wgpu::TextureView {
         self.depth
             .create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() })
+    }
+    /// The views a technique binds; [`HostViews::frame`] makes the [`GpuFrame`] of them.
+    pub fn views(&self) -> HostViews {
+        HostViews {
+            depth: self.depth_view(),
+            shadow_map: self.shadow_view(),
+            spot_texture: self.spot_texture.create_view(&Default::default()),
+        }
+    }
+}
+
+/// Views of a frame's host textures, as a technique binds them.
+pub struct HostViews {
+    depth: wgpu::TextureView,
+    shadow_map: wgpu::TextureView,
+    spot_texture: wgpu::TextureView,
+}
+
+impl HostViews {
+    /// The frame a technique renders: these views for `desc`, with the spot texture only when
+    /// `desc`'s light is a spot with a texture (the host binds a 1×1 white one otherwise).
+    pub fn frame<'a>(&'a self, desc: &'a FrameDesc) -> GpuFrame<'a> {
+        let textured = matches!(&desc.light, crepuscular::Light::Spot { texture: Some(_), .. });
+        GpuFrame {
+            desc,
+            depth: &self.depth,
+            shadow_map: &self.shadow_map,
+            spot_texture: textured.then_some(&self.spot_texture),
+        }
     }
 }
 

@@ -1057,14 +1057,8 @@ fn epipolar_vs_reference_on_every_builtin_scene_gpu() {
         // The GPU host renderer's own depth and shadow map; the reference runs on the CPU over
         // that very shadow map.
         let tex = GpuHost::new(&gpu, &scene.geometry).unwrap().render(&gpu, &desc, spot).unwrap();
-        let (depth_view, shadow_view) = (tex.depth_view(), tex.shadow_view());
-        let spot_view = tex.spot_texture.create_view(&Default::default());
-        let gframe = crepuscular::GpuFrame {
-            desc: &desc,
-            depth: &depth_view,
-            shadow_map: &shadow_view,
-            spot_texture: spot.map(|_| &spot_view),
-        };
+        let views = tex.views();
+        let gframe = views.frame(&desc);
         let g = run_gpu(&gpu, &mut ep, &gframe);
         assert_eq!(g.stats.backend, "gpu");
         assert!(g.out.all_finite());

@@ -602,14 +602,8 @@ fn interleaved_vs_reference_on_every_builtin_scene_gpu() {
         // The GPU host renderer's own depth and shadow map, as `crepuscular render` uses them;
         // the reference runs on the CPU over that very shadow map.
         let tex = GpuHost::new(&gpu, &scene.geometry).unwrap().render(&gpu, &desc, spot).unwrap();
-        let (depth_view, shadow_view) = (tex.depth_view(), tex.shadow_view());
-        let spot_view = tex.spot_texture.create_view(&Default::default());
-        let gframe = GpuFrame {
-            desc: &desc,
-            depth: &depth_view,
-            shadow_map: &shadow_view,
-            spot_texture: spot.map(|_| &spot_view),
-        };
+        let views = tex.views();
+        let gframe = views.frame(&desc);
         let g = run_gpu(&gpu, &mut il, &gframe);
         assert_eq!(g.stats.backend, "gpu");
         let depth = gpu.read_texture_f32(&tex.depth, 0).unwrap();

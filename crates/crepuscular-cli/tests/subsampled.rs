@@ -537,14 +537,8 @@ fn subsampled_vs_reference_on_every_builtin_scene_gpu() {
             _ => None,
         };
         let tex = crepuscular_scene::GpuHost::new(&gpu, &scene.geometry).unwrap().render(&gpu, &desc, spot).unwrap();
-        let (depth_view, shadow_view) = (tex.depth_view(), tex.shadow_view());
-        let spot_view = tex.spot_texture.create_view(&Default::default());
-        let frame = crepuscular::GpuFrame {
-            desc: &desc,
-            depth: &depth_view,
-            shadow_map: &shadow_view,
-            spot_texture: spot.map(|_| &spot_view),
-        };
+        let views = tex.views();
+        let frame = views.frame(&desc);
         let out = gpu.create_output_texture(desc.width, desc.height);
         let mut ss = subsampled::Subsampled::new(&gpu, SubsampledSettings::default()).unwrap();
         let stats = ss.render(&gpu, &frame, &out.create_view(&Default::default())).unwrap();

@@ -8,6 +8,7 @@ use crepuscular::stats::{PassTime, TechniqueStats};
 use crepuscular::techniques::brute_force::{self, BruteForce, BruteForceSettings};
 use crepuscular::techniques::epipolar::{self, Epipolar, EpipolarSettings};
 use crepuscular::techniques::interleaved::{self, Interleaved, InterleavedSettings};
+use crepuscular::techniques::prefiltered::{self, Prefiltered, PrefilteredSettings};
 use crepuscular::techniques::reference::{self, ReferenceSettings};
 use crepuscular::techniques::subsampled::{self, Subsampled, SubsampledSettings};
 use crepuscular::tonemap::composite;
@@ -53,6 +54,8 @@ pub enum TechniqueChoice {
     Subsampled(SubsampledSettings),
     /// `epipolar`.
     Epipolar(EpipolarSettings),
+    /// `prefiltered`.
+    Prefiltered(PrefilteredSettings),
     /// `reference`.
     Reference(ReferenceSettings),
 }
@@ -67,6 +70,8 @@ pub enum GpuRunner {
     Subsampled(Subsampled),
     /// `epipolar`.
     Epipolar(Epipolar),
+    /// `prefiltered`.
+    Prefiltered(Prefiltered),
 }
 
 impl GpuRunner {
@@ -77,6 +82,7 @@ impl GpuRunner {
             GpuRunner::Interleaved(t) => t.render(gpu, frame, output)?,
             GpuRunner::Subsampled(t) => t.render(gpu, frame, output)?,
             GpuRunner::Epipolar(t) => t.render(gpu, frame, output)?,
+            GpuRunner::Prefiltered(t) => t.render(gpu, frame, output)?,
         })
     }
 }
@@ -89,6 +95,7 @@ impl TechniqueChoice {
             TechniqueChoice::Interleaved(_) => "interleaved",
             TechniqueChoice::Subsampled(_) => "subsampled",
             TechniqueChoice::Epipolar(_) => "epipolar",
+            TechniqueChoice::Prefiltered(_) => "prefiltered",
             TechniqueChoice::Reference(_) => "reference",
         }
     }
@@ -100,6 +107,7 @@ impl TechniqueChoice {
             TechniqueChoice::Interleaved(s) => Some(GpuRunner::Interleaved(Interleaved::new(gpu, s.clone())?)),
             TechniqueChoice::Subsampled(s) => Some(GpuRunner::Subsampled(Subsampled::new(gpu, s.clone())?)),
             TechniqueChoice::Epipolar(s) => Some(GpuRunner::Epipolar(Epipolar::new(gpu, s.clone())?)),
+            TechniqueChoice::Prefiltered(s) => Some(GpuRunner::Prefiltered(Prefiltered::new(gpu, s.clone())?)),
             TechniqueChoice::Reference(_) => None,
         })
     }
@@ -111,6 +119,7 @@ impl TechniqueChoice {
             TechniqueChoice::Interleaved(s) => interleaved::cpu::render(frame, s)?,
             TechniqueChoice::Subsampled(s) => subsampled::cpu::render(frame, s)?,
             TechniqueChoice::Epipolar(s) => epipolar::cpu::render(frame, s)?,
+            TechniqueChoice::Prefiltered(s) => prefiltered::cpu::render(frame, s)?,
             TechniqueChoice::Reference(s) => reference::render(frame, s, progress)?,
         })
     }
@@ -149,6 +158,11 @@ impl TechniqueChoice {
                     let s: EpipolarSettings = t.try_into().with_context(|| src.clone())?;
                     s.validate().with_context(|| src.clone())?;
                     TechniqueChoice::Epipolar(s)
+                }
+                "prefiltered" => {
+                    let s: PrefilteredSettings = t.try_into().with_context(|| src.clone())?;
+                    s.validate().with_context(|| src.clone())?;
+                    TechniqueChoice::Prefiltered(s)
                 }
                 "reference" => TechniqueChoice::Reference(t.try_into().with_context(|| src.clone())?),
                 other => {

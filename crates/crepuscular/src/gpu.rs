@@ -86,7 +86,7 @@ impl GpuContext {
         let software = info.device_type == wgpu::DeviceType::Cpu
             || info.name.to_lowercase().contains("llvmpipe")
             || info.name.to_lowercase().contains("swiftshader");
-        let wanted = wgpu::Features::TIMESTAMP_QUERY;
+        let wanted = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::DEPTH_CLIP_CONTROL;
         let features = adapter.features() & wanted;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("crepuscular"),

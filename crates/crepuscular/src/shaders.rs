@@ -22,6 +22,7 @@ pub fn all_library_shaders() -> Vec<(&'static str, String)> {
         ("subsampled/upsample", compose(subsampled::UPSAMPLE_WGSL)),
     ]);
     v.extend(epipolar::SHADERS.iter().map(|(n, s, _)| (*n, compose(&epipolar::pass_source(s)))));
+    v.extend(crate::techniques::prefiltered::shaders().into_iter().map(|(n, s, _)| (n, compose(&s))));
     v
 }
 

@@ -5,6 +5,7 @@ pub mod brute_force;
 pub mod epipolar;
 pub mod interleaved;
 pub mod pass;
+pub mod prefiltered;
 pub mod presets;
 pub mod reference;
 pub mod subsampled;
@@ -51,6 +52,13 @@ pub const TECHNIQUES: &[TechniqueInfo] = &[
         name: "epipolar",
         summary: "epipolar sampling: ray-march samples on epipolar lines refined at depth discontinuities, interpolated along and bilaterally between the lines (GPU: lines, refine, indirect march over a compacted list, interpolate, upsample; CPU mirror)",
         paper: "Engelhardt & Dachsbacher 2010, §4–5",
+        gpu: true,
+        cpu: true,
+    },
+    TechniqueInfo {
+        name: "prefiltered",
+        summary: "filter-based single scattering: Fourier-expanded visibility on a rectified shadow map, prefix-summed per row with transmittance weights, one filtered lookup and dot product per pixel (GPU: rectify, prefilter, evaluate; CPU mirror)",
+        paper: "Klehm, Seidel & Eisemann 2014, §3–5",
         gpu: true,
         cpu: true,
     },

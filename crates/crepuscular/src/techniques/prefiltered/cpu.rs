@@ -1,0 +1,381 @@
+//! CPU mirror of `prefiltered`: the same arithmetic (f32) as rectify.wgsl, prefilter.wgsl and
+//! evaluate.wgsl, function for function, including the storage's quantisation of the filtered
+//! bases. Each pass is public so a test can compare it with its GPU twin.
+
+use super::rectify::{Mode, Rectification, Z_MARGIN, line_occluder};
+use super::settings::PrefilteredSettings;
+use super::{epipole_pixel, stats_extra};
+use crate::error::Error;
+use crate::frame::{CpuFrame, FrameDesc};
+use crate::image::Image;
+use crate::integrand::{light_incident, light_position};
+use crate::march::{PixelMarch, frame_cone, light_reach, march_interval, march_pixel, mean_extinction, step_offset};
+use crate::model::segment_transmittance;
+use crate::stats::{PassTime, TechniqueStats};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::f32::consts::PI;
+
+/// The outputs of every pass of one frame.
+#[derive(Clone, Debug)]
+pub struct Passes {
+    /// The rectification of the frame.
+    pub rect: Rectification,
+    /// The rectified shadow map: normalised depths, `width × height`, row-major.
+    pub depth: Vec<f32>,
+    /// The filtered bases as stored (in [0, 1]): `layers × height × width` RGBA texels.
+    pub basis: Vec<[f32; 4]>,
+    /// The running weight sum of each region's prefix sum, `width × height`.
+    pub cumw: Vec<f32>,
+    /// The in-scattering.
+    pub image: Image,
+}
+
+/// Mirrors `depth_to_basis_z` in WGSL: a [0, 1] depth into the Fourier domain [m, 1 − m]
+/// ([`Z_MARGIN`]).
+pub fn basis_z(z: f32) -> f32 {
+    Z_MARGIN + (1.0 - 2.0 * Z_MARGIN) * z.clamp(0.0, 1.0)
+}
+
+/// Eq. 8: the basis values B_n(z) for n = 4·layer … 4·layer + 3: B_{2k} = sin(c_k z),
+/// B_{2k+1} = cos(c_k z), c_k = π(2k + 1) (the paper's k counts from 1). Mirrors `basis4`.
+pub fn basis4(z: f32, layer: u32) -> [f32; 4] {
+    let k0 = 2 * layer;
+    let c0 = PI * (2 * k0 + 1) as f32;
+    let c1 = PI * (2 * k0 + 3) as f32;
+    [(c0 * z).sin(), (c0 * z).cos(), (c1 * z).sin(), (c1 * z).cos()]
+}
+
+/// Eq. 8: the ray coefficients a_n(z_r) for the same n: a_{2k} = 2/c_k·cos(c_k z_r),
+/// a_{2k+1} = −2/c_k·sin(c_k z_r). Mirrors `coeff4`.
+pub fn coeff4(z: f32, layer: u32) -> [f32; 4] {
+    let k0 = 2 * layer;
+    let c0 = PI * (2 * k0 + 1) as f32;
+    let c1 = PI * (2 * k0 + 3) as f32;
+    [2.0 / c0 * (c0 * z).cos(), -2.0 / c0 * (c0 * z).sin(), 2.0 / c1 * (c1 * z).cos(), -2.0 / c1 * (c1 * z).sin()]
+}
+
+/// Eq. 9–10: the truncated Fourier series of the visibility step V(z_r, z_i) = H(z_r − z_i)
+/// with `bases` terms (unclamped, so its ringing can be measured).
+pub fn fourier_visibility(z_r: f32, z_i: f32, bases: u32) -> f32 {
+    let mut v = 0.5;
+    for l in 0..bases / 4 {
+        let a = coeff4(z_r, l);
+        let b = basis4(z_i, l);
+        v += a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
+    }
+    v
+}
+
+/// Pass `rectify` (§4.1 resampling; the projective map resampled the same way when the host did
+/// not rasterize it): per texel, the first occluder on its light line from the standard shadow
+/// map, as a normalised depth (1 where the line is unoccluded). Mirrors rectify.wgsl.
+pub fn rectify(frame: &CpuFrame, rect: &Rectification) -> Vec<f32> {
+    let (w, h) = (rect.width as usize, rect.height as usize);
+    let light = light_position(&frame.desc.light);
+    let bias = frame.desc.shadow_bias;
+    let mut out = vec![1.0f32; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(row, line)| {
+        for (col, z) in line.iter_mut().enumerate() {
+            let (c, r) = (col as f32 + 0.5, row as f32 + 0.5);
+            let (p, dir) = rect.texel_line(c, r);
+            *z = match line_occluder(frame.shadow_map, light, p, dir, bias) {
+                Some(o) => rect.occluder_depth(c, o),
+                None => 1.0,
+            };
+        }
+    });
+    out
+}
+
+/// Mirrors `texel_depth` in prefilter.wgsl: a texel's depth, with the volume bias added when
+/// the host rasterized the map (`bias` world units along the light, i.e. bias/(x·(r₁ − r₀)) in
+/// the projective depth).
+pub fn texel_depth(rect: &Rectification, stored: f32, col: u32, bias: Option<f32>) -> f32 {
+    match bias {
+        Some(b) if rect.mode == Mode::Projective => {
+            let x = rect.line_of_column(col as f32 + 0.5);
+            stored + b / (x * (rect.ranges.w - rect.ranges.z))
+        }
+        _ => stored,
+    }
+}
+
+/// The weight of texel `col` of row `row` in the prefix sum (§3.2, eq. 11 and Listing 2):
+/// 1 without transmittance weighting; for a directional light the transmittance integrated over
+/// the texel's segment of the reference ray, e^(−σ̄t_a)·(1 − e^(−σ̄(t_b − t_a)))/σ̄ (eq. 11, with
+/// the exact segment ends of the projective map rather than eq. 12's constant ratio; the first
+/// texel reaches back to the camera); for a local light that times the light's falloff, cone
+/// and phase function at the segment's midpoint (§3.2, "Angular-dependency").
+/// Mirrors `texel_weight` in prefilter.wgsl.
+pub fn texel_weight(desc: &FrameDesc, rect: &Rectification, weighted: bool, row: u32, col: u32) -> f32 {
+    if !weighted {
+        return 1.0;
+    }
+    let sigma = mean_extinction(desc);
+    let ta = if col == 0 { 0.0 } else { rect.reference_distance(row, col as f32) };
+    let tb = rect.reference_distance(row, col as f32 + 1.0);
+    if !ta.is_finite() {
+        return 0.0;
+    }
+    if !rect.local {
+        return (-sigma * ta).exp() * segment_transmittance(Vec3::splat(sigma), tb - ta).x;
+    }
+    if !tb.is_finite() {
+        return 0.0;
+    }
+    let tm = 0.5 * (ta + tb);
+    let dir = rect.reference_dir(row);
+    let p = rect.camera + dir * tm;
+    let (l_in, wl) = light_incident(&desc.light, &desc.medium, &desc.shadow.view_proj[0], p);
+    let ph = desc.medium.phase.eval(wl.dot(-dir));
+    let lum = (l_in * ph).dot(Vec3::splat(1.0 / 3.0));
+    lum * (-sigma * tm).exp() * (tb - ta)
+}
+
+/// Pass `prefilter` (§3.3, Listings 1–3): per row, region and group of `bases_per_thread`
+/// bases, the weighted running mean Σwᵢ·B(zᵢ)/Σwᵢ of eq. 8's bases of the row's depths (fused
+/// basis transform, Listing 3), stored mapped to [0, 1] (Appendix A) and quantised as the
+/// texture stores it; and each region's running weight sum. Mirrors prefilter.wgsl.
+pub fn prefilter(
+    desc: &FrameDesc,
+    rect: &Rectification,
+    settings: &PrefilteredSettings,
+    depth: &[f32],
+    host_bias: Option<f32>,
+) -> (Vec<[f32; 4]>, Vec<f32>) {
+    let (w, h) = (rect.width as usize, rect.height as usize);
+    let layers = settings.layers() as usize;
+    let weighted = settings.transmittance_weights;
+    let rows: Vec<(Vec<[f32; 4]>, Vec<f32>)> = (0..h)
+        .into_par_iter()
+        .map(|row| {
+            let mut basis = vec![[0.0f32; 4]; layers * w];
+            let mut cumw = vec![0.0f32; w];
+            for region in 0..rect.regions {
+                let [c0, c1] = rect.region_columns(region);
+                let mut filt = vec![[0.0f32; 4]; layers];
+                let mut sum = 0.0f32;
+                for col in c0..c1 {
+                    let z = basis_z(texel_depth(rect, depth[row * w + col as usize], col, host_bias));
+                    let wt = texel_weight(desc, rect, weighted, row as u32, col);
+                    sum += wt;
+                    let f = if sum > 0.0 { wt / sum } else { 1.0 };
+                    cumw[col as usize] = sum;
+                    for (l, fl) in filt.iter_mut().enumerate() {
+                        let b = basis4(z, l as u32);
+                        for c in 0..4 {
+                            fl[c] += (b[c] - fl[c]) * f;
+                        }
+                        basis[l * w + col as usize] = fl.map(|v| settings.precision.quantise(v * 0.5 + 0.5));
+                    }
+                }
+            }
+            (basis, cumw)
+        })
+        .collect();
+    let mut basis = vec![[0.0f32; 4]; layers * w * h];
+    let mut cumw = vec![0.0f32; w * h];
+    for (row, (b, c)) in rows.into_iter().enumerate() {
+        for l in 0..layers {
+            basis[(l * h + row) * w..(l * h + row + 1) * w].copy_from_slice(&b[l * w..(l + 1) * w]);
+        }
+        cumw[row * w..(row + 1) * w].copy_from_slice(&c);
+    }
+    (basis, cumw)
+}
+
+/// Bilinear footprint of a lookup at column coordinate `col` (the end of the prefix at the
+/// surface) and row coordinate `row` in region [c0, c1): texel positions, weights. The prefix
+/// through texel i ends at column i + 1, hence the −1. Mirrors `lookup_coords` in evaluate.wgsl.
+fn footprint(rect: &Rectification, col: f32, row: f32, c0: u32, c1: u32) -> ([usize; 2], [usize; 2], f32, f32) {
+    let px = (col - 1.0).clamp(c0 as f32, (c1 - 1) as f32);
+    let py = row - 0.5;
+    let x0 = px.floor();
+    let y0 = py.floor();
+    let (fx, fy) = (px - x0, py - y0);
+    let h = rect.height as i32;
+    let wrap = |y: i32| if rect.full_circle { y.rem_euclid(h) } else { y.clamp(0, h - 1) };
+    let x0 = x0 as usize;
+    let x1 = (x0 + 1).min(rect.width as usize - 1);
+    let y0i = y0 as i32;
+    ([x0, x1], [wrap(y0i) as usize, wrap(y0i + 1) as usize], fx, fy)
+}
+
+fn bilinear<T: Copy>(get: impl Fn(usize, usize) -> T, lerp: impl Fn(T, T, f32) -> T, fp: ([usize; 2], [usize; 2], f32, f32)) -> T {
+    let ([x0, x1], [y0, y1], fx, fy) = fp;
+    let a = lerp(get(x0, y0), get(x1, y0), fx);
+    let b = lerp(get(x0, y1), get(x1, y1), fx);
+    lerp(a, b, fy)
+}
+
+/// The prefiltered average visibility of a ray of depth `z` (normalised) ending at column `col`,
+/// row `row`, region `region` (Listing 4; with regions, the weight-sum-weighted mean of one
+/// lookup per region, §3.3). Clamped to [0, 1] (Appendix A). Mirrors `prefiltered_visibility`.
+pub fn prefiltered_visibility(p: &Passes, bases: u32, row: f32, col: f32, region: u32, z: f32) -> f32 {
+    let rect = &p.rect;
+    let (w, h) = (rect.width as usize, rect.height as usize);
+    let zs = basis_z(z);
+    let layers = bases / 4;
+    let coeffs: Vec<[f32; 4]> = (0..layers).map(|l| coeff4(zs, l)).collect();
+    let lerp4 = |a: [f32; 4], b: [f32; 4], t: f32| [0, 1, 2, 3].map(|i| a[i] + (b[i] - a[i]) * t);
+    let vis_at = |fp| {
+        let mut v = 0.5;
+        for (l, a) in coeffs.iter().enumerate() {
+            let b = bilinear(|x, y| p.basis[(l * h + y) * w + x], lerp4, fp);
+            for c in 0..4 {
+                v += a[c] * (2.0 * b[c] - 1.0);
+            }
+        }
+        v
+    };
+    let lerp1 = |a: f32, b: f32, t: f32| a + (b - a) * t;
+    let mut num = 0.0;
+    let mut den = 0.0;
+    for r in 0..=region {
+        let [c0, c1] = rect.region_columns(r);
+        let at = if r == region { col } else { c1 as f32 };
+        let fp = footprint(rect, at, row, c0, c1);
+        let v = vis_at(fp);
+        if rect.regions == 1 {
+            return v.clamp(0.0, 1.0);
+        }
+        let wt = bilinear(|x, y| p.cumw[y * w + x], lerp1, fp);
+        num += wt * v;
+        den += wt;
+    }
+    let v = if den > 0.0 { num / den } else { 0.5 };
+    v.clamp(0.0, 1.0)
+}
+
+/// The unoccluded in-scattering along the view ray to distance `s`, the factor the prefiltered
+/// visibility multiplies. Directional: the closed form σs·p·E·(1 − e^(−σt·s))/σt (eq. 2–3).
+/// Spot and point: `light_steps` shadow-free quadrature points over the ray's lit interval,
+/// placed and weighted as `brute-force` places its samples (the "quadrature table" route to the
+/// unoccluded integral of Sun et al. 2005). Mirrors `unoccluded_inscatter` in evaluate.wgsl.
+pub fn unoccluded_inscatter(desc: &FrameDesc, settings: &PrefilteredSettings, dir: Vec3, s: f32) -> Vec3 {
+    let st = desc.medium.extinction();
+    let ss = desc.medium.scattering;
+    let (l_in, wl) = light_incident(&desc.light, &desc.medium, &desc.shadow.view_proj[0], desc.camera.position);
+    if matches!(desc.light, crate::Light::Directional { .. }) {
+        return ss * desc.medium.phase.eval(wl.dot(-dir)) * l_in * segment_transmittance(st, s);
+    }
+    let cone = frame_cone(desc);
+    let iv = march_interval(
+        cone.as_ref(),
+        light_reach(desc),
+        desc.camera.position,
+        dir,
+        s,
+        settings.spot_steps,
+        settings.spot_denominator,
+    );
+    if iv.1 <= iv.0 {
+        return Vec3::ZERO;
+    }
+    let n = settings.light_steps;
+    let delta = (iv.1 - iv.0) / n as f32;
+    let seg = segment_transmittance(st, delta);
+    let off = step_offset(mean_extinction(desc), delta, 0.5);
+    let mut sum = Vec3::ZERO;
+    for i in 0..n {
+        let t0 = iv.0 + i as f32 * delta;
+        let p = desc.camera.position + dir * (t0 + off);
+        let (l, wl) = light_incident(&desc.light, &desc.medium, &desc.shadow.view_proj[0], p);
+        sum += ss * desc.medium.phase.eval(wl.dot(-dir)) * l * (-st * t0).exp() * seg;
+    }
+    sum
+}
+
+/// Pass `evaluate` (Listing 4): per pixel, the unoccluded in-scattering times the prefiltered
+/// visibility; pixels within `epipole_radius` of the visible light are ray-marched instead (§5).
+/// Mirrors evaluate.wgsl.
+pub fn evaluate(frame: &CpuFrame, settings: &PrefilteredSettings, p: &Passes, epipole: Option<[f32; 2]>) -> Image {
+    let desc = frame.desc;
+    let inv = desc.camera.view_projection(desc.aspect()).inverse();
+    let cone = frame_cone(desc);
+    let march = PixelMarch {
+        steps: settings.epipole_steps,
+        jitter: false,
+        frame_index: 0,
+        spot_steps: settings.spot_steps,
+        spot_denominator: settings.spot_denominator,
+    };
+    let w = desc.width as usize;
+    let mut image = Image::new(desc.width, desc.height);
+    image.pixels.par_chunks_mut(w).enumerate().for_each(|(y, line)| {
+        for (x, out) in line.iter_mut().enumerate() {
+            let (x, y) = (x as u32, y as u32);
+            let dir = desc.pixel_ray(&inv, x, y);
+            let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
+            let l = if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
+                march_pixel(frame, cone.as_ref(), &march, x, y, dir, s)
+            } else {
+                let (row, col, region, z) = p.rect.rectify_point(desc.camera.position + dir * s, dir);
+                unoccluded_inscatter(desc, settings, dir, s)
+                    * prefiltered_visibility(p, settings.bases, row, col, region, z)
+            };
+            *out = [l.x, l.y, l.z, 1.0];
+        }
+    });
+    image
+}
+
+/// Mirrors `in_epipole_disc` in evaluate.wgsl.
+pub fn in_epipole_disc(epipole: Option<[f32; 2]>, radius: u32, x: u32, y: u32) -> bool {
+    let Some([ex, ey]) = epipole else { return false };
+    let (dx, dy) = (x as f32 + 0.5 - ex, y as f32 + 0.5 - ey);
+    radius > 0 && dx * dx + dy * dy <= (radius * radius) as f32
+}
+
+/// Every pass of a frame; `host_depth` is a rectified map the host rasterized with
+/// [`Rectification::raster`] (projective frames only), else the shadow map is resampled.
+pub fn passes(frame: &CpuFrame, settings: &PrefilteredSettings, host_depth: Option<&[f32]>) -> Result<(Passes, Vec<PassTime>), Error> {
+    settings.validate()?;
+    let desc = frame.desc;
+    let mut times = vec![];
+    let mut timed = |name: &str, t: std::time::Instant| times.push(PassTime { name: name.into(), ms: t.elapsed().as_secs_f64() * 1e3 });
+    let t = std::time::Instant::now();
+    let rect = Rectification::new(desc, &settings.rectify_options());
+    let host = host_depth.filter(|_| rect.mode == Mode::Projective);
+    if let Some(d) = host
+        && d.len() != (rect.width * rect.height) as usize
+    {
+        return Err(Error::invalid("prefiltered host depth", d.len(), "must hold map_size[0]·map_size[1] texels"));
+    }
+    let depth = match host {
+        Some(d) => d.to_vec(),
+        None => rectify(frame, &rect),
+    };
+    timed("rectify", t);
+    let t = std::time::Instant::now();
+    let (basis, cumw) = prefilter(desc, &rect, settings, &depth, host.map(|_| desc.shadow_bias));
+    timed("prefilter", t);
+    let t = std::time::Instant::now();
+    let mut p = Passes { rect, depth, basis, cumw, image: Image::new(1, 1) };
+    p.image = evaluate(frame, settings, &p, epipole_pixel(desc, settings.epipole_radius));
+    timed("evaluate", t);
+    Ok((p, times))
+}
+
+/// Renders `frame` on the CPU; the result matches [`super::Prefiltered::render`] up to the GPU's
+/// filtering precision.
+pub fn render(frame: &CpuFrame, settings: &PrefilteredSettings) -> Result<(Image, TechniqueStats), Error> {
+    render_with(frame, settings, None)
+}
+
+/// [`render`] with a host-rasterized rectified map (see [`passes`]).
+pub fn render_with(frame: &CpuFrame, settings: &PrefilteredSettings, host_depth: Option<&[f32]>) -> Result<(Image, TechniqueStats), Error> {
+    let (p, times) = passes(frame, settings, host_depth)?;
+    let epipole = epipole_pixel(frame.desc, settings.epipole_radius);
+    let stats = TechniqueStats {
+        technique: "prefiltered".into(),
+        backend: "cpu".into(),
+        timing: "wall-clock".into(),
+        passes: times,
+        raymarched_samples: super::epipole_samples(frame.desc, settings, epipole),
+        gpu_memory_bytes: 0,
+        extra: stats_extra(settings, &p.rect, host_depth.is_some() && p.rect.mode == Mode::Projective),
+    };
+    Ok((p.image, stats))
+}

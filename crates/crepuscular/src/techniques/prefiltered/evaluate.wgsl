@@ -1,0 +1,125 @@
+// prefiltered pass `evaluate` (cpu.rs evaluate, prefiltered_visibility, unoccluded_inscatter):
+// Klehm et al. 2014 Listing 4. Per pixel: the surface point into the rectified map, the ray's
+// coefficients a(z), one bilinear lookup of the filtered bases per region, a dot product + ½,
+// clamped (Appendix A), times the unoccluded in-scattering; pixels in a small disc around a
+// visible light are ray-marched instead (§5, Fig. 8).
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var<uniform> params: Params;
+@group(0) @binding(2) var depth_tex: texture_2d<f32>;
+@group(0) @binding(3) var shadow_map: texture_2d_array<f32>;
+@group(0) @binding(4) var spot_tex: texture_2d<f32>;
+@group(0) @binding(5) var out_tex: texture_storage_2d<rgba32float, write>;
+@group(0) @binding(6) var<storage, read> rows: array<f32>;
+@group(0) @binding(7) var basis_tex: texture_2d_array<f32>;
+@group(0) @binding(8) var basis_sampler: sampler;
+@group(0) @binding(9) var cumw_tex: texture_2d<f32>;
+
+// cpu.rs footprint: the lookup position (texel space) of the prefix ending at column `col`.
+fn lookup_pos(p: Params, col: f32, row: f32, c0: u32, c1: u32) -> vec2<f32> {
+    return vec2<f32>(clamp(col - 1.0, f32(c0), f32(c1 - 1u)), row - 0.5);
+}
+
+fn load_cumw(p: Params, pos: vec2<f32>) -> f32 {
+    let x0 = floor(pos.x);
+    let y0 = floor(pos.y);
+    let fr = pos - vec2<f32>(x0, y0);
+    let h = i32(p.ints.w);
+    let xa = i32(x0);
+    let xb = min(xa + 1, i32(p.ints.z) - 1);
+    var ya = i32(y0);
+    var yb = ya + 1;
+    if (p.ints2.w & 2u) != 0u {
+        ya = ((ya % h) + h) % h;
+        yb = ((yb % h) + h) % h;
+    } else {
+        ya = clamp(ya, 0, h - 1);
+        yb = clamp(yb, 0, h - 1);
+    }
+    let a = mix(textureLoad(cumw_tex, vec2<i32>(xa, ya), 0).r, textureLoad(cumw_tex, vec2<i32>(xb, ya), 0).r, fr.x);
+    let b = mix(textureLoad(cumw_tex, vec2<i32>(xa, yb), 0).r, textureLoad(cumw_tex, vec2<i32>(xb, yb), 0).r, fr.x);
+    return mix(a, b, fr.y);
+}
+
+fn vis_at(p: Params, pos: vec2<f32>, zs: f32) -> f32 {
+    let uv = (pos + 0.5) / vec2<f32>(f32(p.ints.z), f32(p.ints.w));
+    var v = 0.5;
+    for (var l = 0u; l < p.ints2.y / 4u; l++) {
+        let b = textureSampleLevel(basis_tex, basis_sampler, uv, i32(l), 0.0);
+        v += dot(coeff4(zs, l), 2.0 * b - 1.0);
+    }
+    return v;
+}
+
+fn prefiltered_visibility(p: Params, row: f32, col: f32, region: u32, z: f32) -> f32 {
+    let zs = basis_z(z);
+    var num = 0.0;
+    var den = 0.0;
+    for (var r = 0u; r <= region; r++) {
+        let cols = region_columns(p, r);
+        var at = f32(cols.y);
+        if r == region {
+            at = col;
+        }
+        let pos = lookup_pos(p, at, row, cols.x, cols.y);
+        let v = vis_at(p, pos, zs);
+        if p.ints2.x == 1u {
+            return clamp(v, 0.0, 1.0);
+        }
+        let wt = load_cumw(p, pos);
+        num += wt * v;
+        den += wt;
+    }
+    var v = 0.5;
+    if den > 0.0 {
+        v = num / den;
+    }
+    return clamp(v, 0.0, 1.0);
+}
+
+fn unoccluded_inscatter(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> vec3<f32> {
+    let st = extinction(f);
+    if f.ints.z == 0u {
+        let inc = light_incident(f, spot_tex, f.camera_pos.xyz);
+        return f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance * segment_transmittance(st, s);
+    }
+    let iv = march_interval(f, f.camera_pos.xyz, dir, s, p.ints3.w, p.epipole.w);
+    if iv.y <= iv.x {
+        return vec3<f32>(0.0);
+    }
+    let n = p.ints3.z;
+    let delta = (iv.y - iv.x) / f32(n);
+    let seg = segment_transmittance(st, delta);
+    let off = step_offset((st.x + st.y + st.z) / 3.0, delta, 0.5);
+    var sum = vec3<f32>(0.0);
+    for (var i = 0u; i < n; i++) {
+        let t0 = iv.x + f32(i) * delta;
+        let inc = light_incident(f, spot_tex, f.camera_pos.xyz + dir * (t0 + off));
+        sum += f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance * exp(-st * t0) * seg;
+    }
+    return sum;
+}
+
+fn in_epipole_disc(p: Params, px: vec2<u32>) -> bool {
+    let r = p.ints3.x;
+    let d = vec2<f32>(px) + 0.5 - p.epipole.xy;
+    return r > 0u && dot(d, d) <= f32(r * r);
+}
+
+@compute @workgroup_size(8, 8)
+fn evaluate(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= frame.ints.x || id.y >= frame.ints.y {
+        return;
+    }
+    let px = id.xy;
+    let dir = pixel_ray(frame, px);
+    let s = view_distance(frame, textureLoad(depth_tex, vec2<i32>(px), 0).r, dir);
+    var l = vec3<f32>(0.0);
+    if in_epipole_disc(params, px) {
+        l = march_pixel(frame, shadow_map, spot_tex, px, dir, s, params.ints3.y, 0u, 0u, params.ints3.w, params.epipole.w);
+    } else {
+        let rp = rectify_point(params, frame.camera_pos.xyz + dir * s, dir);
+        l = unoccluded_inscatter(frame, params, dir, s) * prefiltered_visibility(params, rp.row, rp.col, rp.region, rp.z);
+    }
+    textureStore(out_tex, vec2<i32>(px), vec4<f32>(l, 1.0));
+}

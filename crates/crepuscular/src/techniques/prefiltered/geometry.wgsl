@@ -1,0 +1,167 @@
+// prefiltered: the rectification (rectify.rs) and the Fourier basis (cpu.rs), shared by the
+// passes; each function has a Rust twin of the same name. Klehm, Seidel & Eisemann 2014.
+
+struct Params {
+    ints: vec4<u32>,   // mode (0 projective, 1 epipolar), local light, map width, map height
+    ints2: vec4<u32>,  // regions, bases M, bases per thread, flags (1 weights, 2 full circle, 4 host raster)
+    ints3: vec4<u32>,  // epipole radius, epipole steps, light steps, spot-step policy
+    camera: vec4<f32>, // camera position, mean extinction
+    light: vec4<f32>,  // light position, camera–light distance
+    axes: array<vec4<f32>, 3>,
+    ranges: vec4<f32>, // projective (q0, q1, r0, r1); epipolar (phi0, phi1, theta0, theta1)
+    epipole: vec4<f32>, // epipole pixel xy, volume bias, App. B denominator
+    region_x: array<vec4<f32>, 3>,
+}
+
+const Z_MARGIN: f32 = 0.0625;
+
+fn region_x(p: Params, i: u32) -> f32 {
+    return p.region_x[i / 4u][i % 4u];
+}
+
+// rectify.rs Rectification::row_phi (and row_q).
+fn row_param(p: Params, row: f32) -> f32 {
+    return p.ranges.x + row / f32(p.ints.w) * (p.ranges.y - p.ranges.x);
+}
+
+fn slice_dir(p: Params, phi: f32) -> vec3<f32> {
+    return p.axes[0].xyz * cos(phi) + p.axes[1].xyz * sin(phi);
+}
+
+fn region_columns(p: Params, region: u32) -> vec2<u32> {
+    return vec2<u32>(region * p.ints.z / p.ints2.x, (region + 1u) * p.ints.z / p.ints2.x);
+}
+
+struct Column {
+    region: u32,
+    col: f32,
+}
+
+fn column_of(p: Params, c: f32) -> Column {
+    var out: Column;
+    if p.ints.x == 0u {
+        var r = 0u;
+        while r + 1u < p.ints2.x && c >= region_x(p, r + 1u) {
+            r += 1u;
+        }
+        let x0 = region_x(p, r);
+        let x1 = region_x(p, r + 1u);
+        let u = clamp((1.0 / x0 - 1.0 / max(c, 1e-6)) / (1.0 / x0 - 1.0 / x1), 0.0, 1.0);
+        let ab = region_columns(p, r);
+        out.region = r;
+        out.col = f32(ab.x) + u * f32(ab.y - ab.x);
+        return out;
+    }
+    let u = clamp(c / region_x(p, 1u), 0.0, 1.0);
+    let col = u * f32(p.ints.z);
+    out.col = col;
+    out.region = min(u32(col) * p.ints2.x / max(p.ints.z, 1u), p.ints2.x - 1u);
+    return out;
+}
+
+fn line_of_column(p: Params, col: f32) -> f32 {
+    if p.ints.x == 0u {
+        let r = min(u32(max(col, 0.0)) * p.ints2.x / p.ints.z, p.ints2.x - 1u);
+        let ab = region_columns(p, r);
+        let u = (col - f32(ab.x)) / f32(ab.y - ab.x);
+        let x0 = region_x(p, r);
+        let x1 = region_x(p, r + 1u);
+        return 1.0 / (1.0 / x0 - u * (1.0 / x0 - 1.0 / x1));
+    }
+    return col / f32(p.ints.z) * region_x(p, 1u);
+}
+
+const INF: f32 = 3.0e38;
+
+fn reference_distance(p: Params, rr: f32, row: u32, col: f32) -> f32 {
+    let c = line_of_column(p, col);
+    if p.ints.x == 0u {
+        let q = row_param(p, f32(row) + 0.5);
+        return c * sqrt(1.0 + q * q + rr * rr);
+    }
+    if p.ints.y == 0u {
+        return c / max(sin(rr), 1e-6);
+    }
+    if rr + c >= PI - 1e-6 {
+        return INF;
+    }
+    return p.light.w * sin(c) / max(sin(rr + c), 1e-9);
+}
+
+fn reference_dir(p: Params, rr: f32, row: u32) -> vec3<f32> {
+    if p.ints.x == 0u {
+        let q = row_param(p, f32(row) + 0.5);
+        return normalize(p.axes[0].xyz + p.axes[1].xyz * q + p.axes[2].xyz * rr);
+    }
+    return p.axes[2].xyz * cos(rr) + slice_dir(p, row_param(p, f32(row) + 0.5)) * sin(rr);
+}
+
+struct Rectified {
+    row: f32,
+    col: f32,
+    region: u32,
+    z: f32,
+}
+
+fn reject(v: vec3<f32>, a: vec3<f32>) -> vec3<f32> {
+    return v - a * dot(v, a);
+}
+
+fn rectify_point(p: Params, pt: vec3<f32>, dir: vec3<f32>) -> Rectified {
+    var out: Rectified;
+    let v = pt - p.camera.xyz;
+    if p.ints.x == 0u {
+        let ex = p.axes[0].xyz;
+        let l = vec3<f32>(dot(dir, ex), dot(dir, p.axes[1].xyz), dot(dir, p.axes[2].xyz));
+        let lx = max(l.x, 1e-6);
+        out.row = (l.y / lx - p.ranges.x) / (p.ranges.y - p.ranges.x) * f32(p.ints.w);
+        out.z = clamp((l.z / lx - p.ranges.z) / (p.ranges.w - p.ranges.z), 0.0, 1.0);
+        let c = column_of(p, max(dot(v, ex), region_x(p, 0u)));
+        out.col = c.col;
+        out.region = c.region;
+        return out;
+    }
+    let a = p.axes[2].xyz;
+    var phi = atan2(dot(dir, p.axes[1].xyz), dot(dir, p.axes[0].xyz));
+    if (p.ints2.w & 2u) == 0u {
+        phi = clamp(phi, p.ranges.x, p.ranges.y);
+    }
+    out.row = (phi - p.ranges.x) / (p.ranges.y - p.ranges.x) * f32(p.ints.w);
+    let theta = acos(clamp(dot(dir, a), -1.0, 1.0));
+    out.z = clamp((theta - p.ranges.z) / (p.ranges.w - p.ranges.z), 0.0, 1.0);
+    var c = 0.0;
+    if p.ints.y == 1u {
+        let to_cam = p.camera.xyz - p.light.xyz;
+        let to_p = pt - p.light.xyz;
+        var cosang = 1.0;
+        if dot(to_cam, to_cam) > 0.0 && dot(to_p, to_p) > 0.0 {
+            cosang = dot(normalize(to_cam), normalize(to_p));
+        }
+        c = acos(clamp(cosang, -1.0, 1.0));
+    } else {
+        c = length(reject(v, a));
+    }
+    let col = column_of(p, c);
+    out.col = col.col;
+    out.region = col.region;
+    return out;
+}
+
+// Fourier basis, eq. 8 (cpu.rs basis_z, basis4, coeff4).
+fn basis_z(z: f32) -> f32 {
+    return Z_MARGIN + (1.0 - 2.0 * Z_MARGIN) * clamp(z, 0.0, 1.0);
+}
+
+fn basis4(z: f32, layer: u32) -> vec4<f32> {
+    let k0 = 2u * layer;
+    let c0 = PI * f32(2u * k0 + 1u);
+    let c1 = PI * f32(2u * k0 + 3u);
+    return vec4<f32>(sin(c0 * z), cos(c0 * z), sin(c1 * z), cos(c1 * z));
+}
+
+fn coeff4(z: f32, layer: u32) -> vec4<f32> {
+    let k0 = 2u * layer;
+    let c0 = PI * f32(2u * k0 + 1u);
+    let c1 = PI * f32(2u * k0 + 3u);
+    return vec4<f32>(2.0 / c0 * cos(c0 * z), -2.0 / c0 * sin(c0 * z), 2.0 / c1 * cos(c1 * z), -2.0 / c1 * sin(c1 * z));
+}

@@ -1,0 +1,507 @@
+//! Technique `prefiltered`: filter-based single scattering on rectified shadow maps (Klehm,
+//! Seidel & Eisemann 2014). Instead of marching each view ray through the shadow map, the
+//! visibility step of every texel of a *rectified* shadow map — where each view ray runs along
+//! one row at one depth — is expanded in a Fourier basis (§3.1, eq. 8–10), the bases are
+//! prefix-summed along the rows once per frame with transmittance weights (§3.2–3.3,
+//! Listings 1–3), and each pixel then needs one filtered lookup and one dot product
+//! (Listing 4): a constant cost per pixel, whatever the scene.
+//!
+//! Passes (GPU, and their CPU mirror in `cpu.rs`):
+//!
+//! 1. `rectify` (rectify.wgsl): the rectified shadow map (rectify.rs: the projective map of
+//!    §4.2 or the epipolar one of §4.1), resampled from the standard shadow map — skipped when
+//!    the host rasterized the projective map itself ([`Prefiltered::raster_request`]).
+//! 2. `prefilter` (prefilter.wgsl): basis transform fused with the weighted prefix sum, one
+//!    thread per row × region × group of bases.
+//! 3. `evaluate` (evaluate.wgsl): per pixel, the unoccluded in-scattering times the prefiltered
+//!    visibility; a small disc around a visible light is ray-marched (§5, Fig. 8).
+
+pub mod cpu;
+pub mod raster;
+pub mod rectify;
+pub mod settings;
+
+pub use rectify::{Mode, Rectification, RectificationChoice, ReferenceRay};
+pub use settings::{BasisPrecision, PrefilteredParams, PrefilteredSettings};
+
+use crate::error::Error;
+use crate::frame::{FrameDesc, GpuFrame};
+use crate::gpu::{GpuContext, PassTimer};
+use crate::march::mean_extinction;
+use crate::stats::TechniqueStats;
+use crate::techniques::pass;
+use raster::RectifiedRaster;
+use std::collections::BTreeMap;
+
+/// The rectification and Fourier basis shared by the passes (prepended to each).
+pub const GEOMETRY_WGSL: &str = include_str!("geometry.wgsl");
+/// Pass `rectify`.
+pub const RECTIFY_WGSL: &str = include_str!("rectify.wgsl");
+/// Pass `prefilter` (its storage format is the `BASIS_FORMAT` placeholder).
+pub const PREFILTER_WGSL: &str = include_str!("prefilter.wgsl");
+/// Pass `evaluate`.
+pub const EVALUATE_WGSL: &str = include_str!("evaluate.wgsl");
+
+/// The pass shaders: (name, source with the geometry prepended and the 8-bit format, entry).
+pub fn shaders() -> [(&'static str, String, &'static str); 3] {
+    [
+        ("prefiltered/rectify", pass_source(RECTIFY_WGSL, BasisPrecision::Unorm8), "rectify"),
+        ("prefiltered/prefilter", pass_source(PREFILTER_WGSL, BasisPrecision::Unorm8), "prefilter"),
+        ("prefiltered/evaluate", pass_source(EVALUATE_WGSL, BasisPrecision::Unorm8), "evaluate"),
+    ]
+}
+
+/// A pass shader with the shared geometry prepended and the basis storage format filled in
+/// (common.wgsl is added by [`crate::shaders::compose`]).
+pub fn pass_source(pass: &str, precision: BasisPrecision) -> String {
+    format!("{GEOMETRY_WGSL}\n// ---- prefiltered pass ----\n{}", pass.replace("BASIS_FORMAT", precision.wgsl()))
+}
+
+/// Pixel position of the light's epipole when the light is directly visible on screen (its
+/// direction is in front of the camera and within `radius` pixels of the image), else None.
+/// Directional: the sun's direction; spot and point: the light's position.
+pub fn epipole_pixel(desc: &FrameDesc, radius: u32) -> Option<[f32; 2]> {
+    if radius == 0 {
+        return None;
+    }
+    let vp = desc.camera.view_projection(desc.aspect());
+    let p = match &desc.light {
+        crate::Light::Directional { direction, .. } => desc.camera.position - direction.normalize(),
+        crate::Light::Spot { position, .. } | crate::Light::Point { position, .. } => *position,
+    };
+    let c = vp * p.extend(1.0);
+    if c.w <= 1e-6 {
+        return None;
+    }
+    let x = (c.x / c.w * 0.5 + 0.5) * desc.width as f32;
+    let y = (0.5 - c.y / c.w * 0.5) * desc.height as f32;
+    let r = radius as f32;
+    let inside = x >= -r && y >= -r && x <= desc.width as f32 + r && y <= desc.height as f32 + r;
+    (inside && x.is_finite() && y.is_finite()).then_some([x, y])
+}
+
+/// Ray-marched samples of a frame: the pixels of the epipole disc times their steps.
+pub fn epipole_samples(desc: &FrameDesc, settings: &PrefilteredSettings, epipole: Option<[f32; 2]>) -> u64 {
+    let Some([ex, ey]) = epipole else { return 0 };
+    let r = settings.epipole_radius as f32;
+    let (x0, x1) = ((ex - r).floor().max(0.0) as u32, ((ex + r).ceil().max(0.0) as u32).min(desc.width));
+    let (y0, y1) = ((ey - r).floor().max(0.0) as u32, ((ey + r).ceil().max(0.0) as u32).min(desc.height));
+    let mut n = 0u64;
+    for y in y0..y1 {
+        for x in x0..x1 {
+            n += cpu::in_epipole_disc(epipole, settings.epipole_radius, x, y) as u64;
+        }
+    }
+    n * settings.epipole_steps as u64
+}
+
+/// `TechniqueStats::extra` of a frame: the rectification chosen (`projective` 1/0), the
+/// projected frustum angle, whether the host rasterized the map, and the filtered-basis memory.
+pub(crate) fn stats_extra(settings: &PrefilteredSettings, rect: &Rectification, host: bool) -> BTreeMap<String, f64> {
+    [
+        ("projective", (rect.mode == Mode::Projective) as u32 as f64),
+        ("frustum_angle_degrees", rect.frustum_angle as f64),
+        ("host_rasterized", host as u32 as f64),
+        ("basis_bytes", settings.basis_bytes() as f64),
+        ("map_columns", rect.width as f64),
+        ("map_rows", rect.height as f64),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect()
+}
+
+/// The technique's own textures, reallocated when the map size, M or the precision changes.
+struct Maps {
+    depth: wgpu::Texture,
+    basis: wgpu::Texture,
+    cumw: wgpu::Texture,
+    depth_view: wgpu::TextureView,
+    basis_store: wgpu::TextureView,
+    basis_sample: wgpu::TextureView,
+    cumw_view: wgpu::TextureView,
+    key: (u32, u32, u32, BasisPrecision),
+}
+
+/// The GPU side of `prefiltered`: three pipelines, buffers, samplers and the map textures.
+pub struct Prefiltered {
+    /// Current settings; changes apply on the next render.
+    pub settings: PrefilteredSettings,
+    rectify_pipeline: wgpu::ComputePipeline,
+    prefilter_pipeline: wgpu::ComputePipeline,
+    evaluate_pipeline: wgpu::ComputePipeline,
+    rectify_layout: wgpu::BindGroupLayout,
+    prefilter_layout: wgpu::BindGroupLayout,
+    evaluate_layout: wgpu::BindGroupLayout,
+    pipeline_precision: BasisPrecision,
+    frame_buffer: wgpu::Buffer,
+    params_buffer: wgpu::Buffer,
+    rows_buffer: Option<wgpu::Buffer>,
+    clamp_sampler: wgpu::Sampler,
+    wrap_sampler: wgpu::Sampler,
+    white: wgpu::TextureView,
+    maps: Option<Maps>,
+    last: Option<Rectification>,
+}
+
+fn storage_entry(binding: u32, format: wgpu::TextureFormat, dim: wgpu::TextureViewDimension) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::StorageTexture { access: wgpu::StorageTextureAccess::WriteOnly, format, view_dimension: dim },
+        count: None,
+    }
+}
+
+fn prefilter_layout(device: &wgpu::Device, precision: BasisPrecision) -> wgpu::BindGroupLayout {
+    use wgpu::TextureViewDimension as D;
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("prefiltered prefilter"),
+        entries: &[
+            pass::uniform_entry(0),
+            pass::uniform_entry(1),
+            pass::texture_entry(2, D::D2),
+            pass::storage_buffer_entry(3, true, None),
+            pass::texture_entry(4, D::D2),
+            storage_entry(5, precision.format(), D::D2Array),
+            storage_entry(6, wgpu::TextureFormat::R32Float, D::D2),
+        ],
+    })
+}
+
+impl Prefiltered {
+    /// Builds the pipelines and buffers.
+    pub fn new(gpu: &GpuContext, settings: PrefilteredSettings) -> Result<Self, Error> {
+        settings.validate()?;
+        gpu.scoped("creating the prefiltered pipelines", || {
+            use wgpu::TextureViewDimension as D;
+            let device = &gpu.device;
+            let rectify_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("prefiltered rectify"),
+                entries: &[
+                    pass::uniform_entry(0),
+                    pass::uniform_entry(1),
+                    pass::texture_entry(3, D::D2Array),
+                    pass::storage_buffer_entry(4, true, None),
+                    storage_entry(5, wgpu::TextureFormat::R32Float, D::D2),
+                ]
+                .map(|mut e| {
+                    e.binding = match e.binding {
+                        3 => 2,
+                        4 => 3,
+                        5 => 4,
+                        b => b,
+                    };
+                    e
+                }),
+            });
+            let prefilter_layout = prefilter_layout(device, settings.precision);
+            let evaluate_layout = pass::frame_pass_layout(
+                device,
+                "prefiltered evaluate",
+                &[
+                    pass::storage_buffer_entry(6, true, None),
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 7,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::Texture {
+                            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                            view_dimension: D::D2Array,
+                            multisampled: false,
+                        },
+                        count: None,
+                    },
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 8,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                        count: None,
+                    },
+                    pass::texture_entry(9, D::D2),
+                ],
+            );
+            let pipe = |label: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
+                pass::compute_pipeline(device, label, &pass_source(src, settings.precision), entry, layout)
+            };
+            let rectify_pipeline = pipe("prefiltered/rectify.wgsl", RECTIFY_WGSL, "rectify", &rectify_layout);
+            let prefilter_pipeline = pipe("prefiltered/prefilter.wgsl", PREFILTER_WGSL, "prefilter", &prefilter_layout);
+            let evaluate_pipeline = pipe("prefiltered/evaluate.wgsl", EVALUATE_WGSL, "evaluate", &evaluate_layout);
+            let sampler = |mode| {
+                device.create_sampler(&wgpu::SamplerDescriptor {
+                    label: Some("prefiltered basis"),
+                    address_mode_u: wgpu::AddressMode::ClampToEdge,
+                    address_mode_v: mode,
+                    mag_filter: wgpu::FilterMode::Linear,
+                    min_filter: wgpu::FilterMode::Linear,
+                    ..Default::default()
+                })
+            };
+            Self {
+                pipeline_precision: settings.precision,
+                settings,
+                rectify_pipeline,
+                prefilter_pipeline,
+                evaluate_pipeline,
+                rectify_layout,
+                prefilter_layout,
+                evaluate_layout,
+                frame_buffer: pass::uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64),
+                params_buffer: pass::uniform_buffer(device, "prefiltered params", std::mem::size_of::<PrefilteredParams>() as u64),
+                rows_buffer: None,
+                clamp_sampler: sampler(wgpu::AddressMode::ClampToEdge),
+                wrap_sampler: sampler(wgpu::AddressMode::Repeat),
+                white: gpu.upload_rgb_texture(None).create_view(&Default::default()),
+                maps: None,
+                last: None,
+            }
+        })
+    }
+
+    /// The rectification this frame would use, and the host raster request when it is the
+    /// projective one (§4.2): a host that rasterizes it (depth-clamped, see [`RectifiedRaster`])
+    /// passes the result to [`Prefiltered::render_with`] and the `rectify` pass is skipped.
+    pub fn raster_request(&self, desc: &FrameDesc) -> Option<RectifiedRaster> {
+        Rectification::new(desc, &self.settings.rectify_options()).raster()
+    }
+
+    /// The rectification of the last frame rendered.
+    pub fn last_rectification(&self) -> Option<&Rectification> {
+        self.last.as_ref()
+    }
+
+    /// Bytes of GPU memory this technique holds: the filtered bases (Table 2's column), the
+    /// rectified depth and the weight sums, the per-row buffer and the uniforms.
+    pub fn gpu_memory_bytes(&self) -> u64 {
+        let maps = self.maps.as_ref().map_or(0, |m| {
+            let (w, h, layers, p) = m.key;
+            w as u64 * h as u64 * (layers as u64 * 4 * p.bytes() + 8)
+        });
+        maps + self.rows_buffer.as_ref().map_or(0, |b| b.size()) + self.frame_buffer.size() + self.params_buffer.size() + 16
+    }
+
+    /// Reads back the last frame's maps for tests and debug views: the rectified depth
+    /// (`width × height`), the stored bases (`layers × height × width` RGBA) and the weight sums.
+    pub fn read_maps(&self, gpu: &GpuContext) -> Result<(Vec<f32>, Vec<[f32; 4]>, Vec<f32>), Error> {
+        let m = self.maps.as_ref().ok_or_else(|| Error::invalid("prefiltered maps", "none", "render a frame first"))?;
+        let depth = gpu.read_texture_f32(&m.depth, 0)?;
+        let cumw = gpu.read_texture_f32(&m.cumw, 0)?;
+        let (w, h, layers, p) = m.key;
+        let mut basis = Vec::with_capacity((w * h * layers) as usize);
+        for l in 0..layers {
+            basis.extend(read_rgba_layer(gpu, &m.basis, l, p)?);
+        }
+        Ok((depth, basis, cumw))
+    }
+
+    /// Renders the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of the
+    /// frame's size), resampling the rectified map from the shadow map.
+    pub fn render(&mut self, gpu: &GpuContext, frame: &GpuFrame, output: &wgpu::TextureView) -> Result<TechniqueStats, Error> {
+        self.render_with(gpu, frame, None, output)
+    }
+
+    /// [`Prefiltered::render`] with the rectified map a host rasterized from
+    /// [`Prefiltered::raster_request`] (a `D2` view of a `Depth32Float` or `R32Float` texture of
+    /// `map_size`); ignored when this frame's rectification is not projective.
+    pub fn render_with(
+        &mut self,
+        gpu: &GpuContext,
+        frame: &GpuFrame,
+        host_depth: Option<&wgpu::TextureView>,
+        output: &wgpu::TextureView,
+    ) -> Result<TechniqueStats, Error> {
+        self.settings.validate()?;
+        let s = self.settings.clone();
+        let desc = frame.desc;
+        let [w, h] = s.map_size;
+        gpu.check_texture_size("prefiltered rectified map", w, h)?;
+        if self.pipeline_precision != s.precision {
+            let fresh = Prefiltered::new(gpu, s.clone())?;
+            *self = Prefiltered { maps: None, ..fresh };
+        }
+        let rect = Rectification::new(desc, &s.rectify_options());
+        let host = host_depth.filter(|_| rect.mode == Mode::Projective);
+        let key = (w, h, s.layers(), s.precision);
+        if self.maps.as_ref().is_none_or(|m| m.key != key) {
+            self.maps = Some(gpu.scoped("allocating the prefiltered maps", || allocate_maps(&gpu.device, key))?);
+        }
+        let rows_size = (h as u64 * 4).max(16);
+        if self.rows_buffer.as_ref().is_none_or(|b| b.size() != rows_size) {
+            self.rows_buffer = Some(gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("prefiltered rows"),
+                size: rows_size,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }));
+        }
+        let rows = self.rows_buffer.as_ref().expect("allocated above");
+        gpu.queue.write_buffer(rows, 0, bytemuck::cast_slice(&rect.rows));
+        let epipole = epipole_pixel(desc, s.epipole_radius);
+        let params = PrefilteredParams::new(&s, &rect, mean_extinction(desc), desc.shadow_bias, epipole, host.is_some());
+        gpu.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&desc.uniforms()));
+        gpu.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
+        let maps = self.maps.as_ref().expect("allocated above");
+        let view = wgpu::BindingResource::TextureView;
+        let (rectify_bind, prefilter_bind, evaluate_bind) = gpu.scoped("binding the prefiltered inputs", || {
+            let bind = |label, layout, entries: &[wgpu::BindGroupEntry]| {
+                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries })
+            };
+            let rectify = bind(
+                "prefiltered rectify",
+                &self.rectify_layout,
+                &[
+                    wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: view(frame.shadow_map) },
+                    wgpu::BindGroupEntry { binding: 3, resource: rows.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 4, resource: view(&maps.depth_view) },
+                ],
+            );
+            let prefilter = bind(
+                "prefiltered prefilter",
+                &self.prefilter_layout,
+                &[
+                    wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: view(frame.spot_texture.unwrap_or(&self.white)) },
+                    wgpu::BindGroupEntry { binding: 3, resource: rows.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 4, resource: view(host.unwrap_or(&maps.depth_view)) },
+                    wgpu::BindGroupEntry { binding: 5, resource: view(&maps.basis_store) },
+                    wgpu::BindGroupEntry { binding: 6, resource: view(&maps.cumw_view) },
+                ],
+            );
+            let mut entries =
+                pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, output).to_vec();
+            let sampler = if rect.full_circle { &self.wrap_sampler } else { &self.clamp_sampler };
+            entries.extend([
+                wgpu::BindGroupEntry { binding: 6, resource: rows.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 7, resource: view(&maps.basis_sample) },
+                wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::Sampler(sampler) },
+                wgpu::BindGroupEntry { binding: 9, resource: view(&maps.cumw_view) },
+            ]);
+            let evaluate = bind("prefiltered evaluate", &self.evaluate_layout, &entries);
+            (rectify, prefilter, evaluate)
+        })?;
+        let mut timer = PassTimer::new(gpu, 3);
+        if host.is_none() {
+            timer.pass(gpu, "rectify", |enc, ts| {
+                let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("prefiltered rectify"),
+                    timestamp_writes: ts.map(|t| t.compute()),
+                });
+                p.set_pipeline(&self.rectify_pipeline);
+                p.set_bind_group(0, &rectify_bind, &[]);
+                p.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+            })?;
+        }
+        let threads = h * s.regions * (s.bases / s.bases_per_thread);
+        timer.pass(gpu, "prefilter", |enc, ts| {
+            let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("prefiltered prefilter"),
+                timestamp_writes: ts.map(|t| t.compute()),
+            });
+            p.set_pipeline(&self.prefilter_pipeline);
+            p.set_bind_group(0, &prefilter_bind, &[]);
+            let groups = threads.div_ceil(64);
+            p.dispatch_workgroups(groups.min(65535), groups.div_ceil(65535), 1);
+        })?;
+        timer.pass(gpu, "evaluate", |enc, ts| {
+            let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("prefiltered evaluate"),
+                timestamp_writes: ts.map(|t| t.compute()),
+            });
+            p.set_pipeline(&self.evaluate_pipeline);
+            p.set_bind_group(0, &evaluate_bind, &[]);
+            p.dispatch_workgroups(desc.width.div_ceil(8), desc.height.div_ceil(8), 1);
+        })?;
+        let mode = timer.mode().to_string();
+        let passes = timer.finish(gpu)?;
+        let extra = stats_extra(&s, &rect, host.is_some());
+        self.last = Some(rect);
+        Ok(TechniqueStats {
+            technique: "prefiltered".into(),
+            backend: "gpu".into(),
+            timing: mode,
+            passes,
+            raymarched_samples: epipole_samples(desc, &s, epipole),
+            gpu_memory_bytes: self.gpu_memory_bytes(),
+            extra,
+        })
+    }
+}
+
+fn allocate_maps(device: &wgpu::Device, key: (u32, u32, u32, BasisPrecision)) -> Maps {
+    let (w, h, layers, precision) = key;
+    let depth = crate::gpu::storage_texture(device, "prefiltered rectified depth", wgpu::TextureFormat::R32Float, w, h);
+    let cumw = crate::gpu::storage_texture(device, "prefiltered weight sums", wgpu::TextureFormat::R32Float, w, h);
+    let basis = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("prefiltered filtered bases"),
+        size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: layers },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: precision.format(),
+        usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let array = wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() };
+    Maps {
+        depth_view: depth.create_view(&Default::default()),
+        cumw_view: cumw.create_view(&Default::default()),
+        basis_store: basis.create_view(&array),
+        basis_sample: basis.create_view(&array),
+        depth,
+        basis,
+        cumw,
+        key,
+    }
+}
+
+/// Reads one layer of an `Rgba8Unorm` / `Rgba16Float` array texture as f32 RGBA.
+fn read_rgba_layer(gpu: &GpuContext, tex: &wgpu::Texture, layer: u32, p: BasisPrecision) -> Result<Vec<[f32; 4]>, Error> {
+    let (w, h) = (tex.width(), tex.height());
+    let bpp = 4 * p.bytes() as u32;
+    let row = w * bpp;
+    let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("basis readback"),
+        size: (padded * h) as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    enc.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo { texture: tex, mip_level: 0, origin: wgpu::Origin3d { x: 0, y: 0, z: layer }, aspect: wgpu::TextureAspect::All },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded), rows_per_image: Some(h) },
+        },
+        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+    );
+    gpu.queue.submit([enc.finish()]);
+    gpu.read_mapped(&buffer, "reading back the filtered bases", |data| {
+        let mut out = Vec::with_capacity((w * h) as usize);
+        for y in 0..h as usize {
+            let r = &data[y * padded as usize..y * padded as usize + row as usize];
+            match p {
+                BasisPrecision::Unorm8 => out.extend(r.chunks_exact(4).map(|c| [0, 1, 2, 3].map(|i| c[i] as f32 / 255.0))),
+                BasisPrecision::Float16 => out.extend(r.chunks_exact(8).map(|c| {
+                    let hv = |i: usize| f16_to_f32(u16::from_le_bytes([c[2 * i], c[2 * i + 1]]));
+                    [hv(0), hv(1), hv(2), hv(3)]
+                })),
+            }
+        }
+        out
+    })
+}
+
+/// IEEE half → f32.
+fn f16_to_f32(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exp = ((h >> 10) & 0x1f) as i32;
+    let man = (h & 0x3ff) as f32;
+    sign * match exp {
+        0 => man * 2f32.powi(-24),
+        31 => f32::INFINITY,
+        e => (1.0 + man / 1024.0) * 2f32.powi(e - 15),
+    }
+}

@@ -1,0 +1,110 @@
+// prefiltered pass `rectify` (cpu.rs rectify; rectify.rs texel_line, occluder_depth,
+// line_occluder): per texel of the rectified map, the first occluder on its light line from the
+// standard shadow map, as a normalised depth (Klehm et al. 2014 §4.1: "Each light ray, defined by
+// the texel position in the rectified shadow map, can be mapped to world space and then to the
+// shadow map to recover the necessary input shadow map texel").
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var<uniform> params: Params;
+@group(0) @binding(2) var shadow_map: texture_2d_array<f32>;
+@group(0) @binding(3) var<storage, read> rows: array<f32>;
+@group(0) @binding(4) var out_depth: texture_storage_2d<r32float, write>;
+
+struct Line {
+    p: vec3<f32>,
+    dir: vec3<f32>,
+}
+
+fn texel_line(p: Params, col: f32, row: f32) -> Line {
+    var l: Line;
+    let c = line_of_column(p, col);
+    if p.ints.x == 0u {
+        let q = row_param(p, row);
+        l.p = p.camera.xyz + p.axes[0].xyz * c + p.axes[1].xyz * (q * c);
+        l.dir = p.axes[2].xyz;
+        return l;
+    }
+    let w = slice_dir(p, row_param(p, row));
+    let a = p.axes[2].xyz;
+    if p.ints.y == 1u {
+        l.p = p.light.xyz;
+        l.dir = normalize(-a * cos(c) + w * sin(c));
+    } else {
+        l.p = p.camera.xyz + w * c;
+        l.dir = -a;
+    }
+    return l;
+}
+
+struct Occluder {
+    found: bool,
+    o: vec3<f32>,
+}
+
+fn line_occluder(f: Frame, pt: vec3<f32>, dir: vec3<f32>, bias: f32) -> Occluder {
+    var r: Occluder;
+    r.found = false;
+    let ortho = f.shadow_ints.z == 1u;
+    var q = pt;
+    if !ortho {
+        q = f.light_pos.xyz + dir;
+    }
+    var layer = 0u;
+    if f.shadow_ints.x == 6u {
+        layer = cube_face(dir);
+    }
+    let c = f.shadow_view_proj[layer] * vec4<f32>(q, 1.0);
+    if c.w <= 0.0 {
+        return r;
+    }
+    let ndc = c.xyz / c.w;
+    if abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 {
+        return r;
+    }
+    let n = f32(f.shadow_ints.y);
+    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    let texel = vec2<u32>(min(floor(uv * n), vec2<f32>(n - 1.0)));
+    let d = textureLoad(shadow_map, vec2<i32>(texel), i32(layer), 0).r;
+    if d >= 1.0 {
+        return r;
+    }
+    let stored = shadow_linear_depth(f, d);
+    if ortho {
+        r.o = q + dir * (stored - shadow_linear_depth(f, ndc.z));
+    } else {
+        r.o = f.light_pos.xyz + dir * (stored / c.w);
+    }
+    r.o += dir * bias;
+    r.found = true;
+    return r;
+}
+
+fn occluder_depth(p: Params, col: f32, o: vec3<f32>) -> f32 {
+    let v = o - p.camera.xyz;
+    if p.ints.x == 0u {
+        let x = line_of_column(p, col);
+        return clamp((dot(v, p.axes[2].xyz) / x - p.ranges.z) / (p.ranges.w - p.ranges.z), 0.0, 1.0);
+    }
+    let len = length(v);
+    if len < 1e-6 {
+        return 0.0;
+    }
+    let theta = acos(clamp(dot(v, p.axes[2].xyz) / len, -1.0, 1.0));
+    return clamp((theta - p.ranges.z) / (p.ranges.w - p.ranges.z), 0.0, 1.0);
+}
+
+@compute @workgroup_size(8, 8)
+fn rectify(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= params.ints.z || id.y >= params.ints.w {
+        return;
+    }
+    let c = f32(id.x) + 0.5;
+    let r = f32(id.y) + 0.5;
+    let line = texel_line(params, c, r);
+    let occ = line_occluder(frame, line.p, line.dir, frame.shadow_params.z);
+    var z = 1.0;
+    if occ.found {
+        z = occluder_depth(params, c, occ.o);
+    }
+    textureStore(out_depth, vec2<i32>(id.xy), vec4<f32>(z, 0.0, 0.0, 0.0));
+}

@@ -348,7 +348,7 @@ impl AnimatedTechnique {
                 let out_view = out.create_view(&Default::default());
                 let views = tex.views();
                 let gf = views.frame(&frame.desc);
-                let stats = runner.render(g, &gf, &out_view)?;
+                let stats = runner.render(g, None, &gf, &out_view)?;
                 (g.read_image(out)?, stats)
             }
             _ => {
@@ -356,7 +356,7 @@ impl AnimatedTechnique {
                 let sm = frame.shadow_map.as_ref().context("no shadow map")?;
                 let cf =
                     CpuFrame { desc: &frame.desc, depth: &frame.depth, shadow_map: sm, surface: Some(&frame.surface) };
-                choice.run_cpu(&cf, progress)?
+                choice.run_cpu(&cf, None, progress)?
             }
         };
         if !img.all_finite() {

@@ -467,9 +467,12 @@ pub fn run(
             progress(&format!("{} {w}×{h}: host frame ×{}", scene.name, plan.warmup + plan.repeat));
             // The host frame (no scattering), timed like a technique; its outputs feed every row.
             let mut host_frames = Vec::new();
-            let (depth, surface, shadow_map, gpu_tex) = match gpu {
-                Some(g) => {
-                    let gh = GpuHost::new(g, &scene.geometry)?;
+            let gpu_host = match gpu {
+                Some(g) => Some(GpuHost::new(g, &scene.geometry)?),
+                None => None,
+            };
+            let (depth, surface, shadow_map, gpu_tex) = match (gpu, &gpu_host) {
+                (Some(g), Some(gh)) => {
                     let mut last = None;
                     for i in 0..plan.warmup + plan.repeat {
                         let t = gh.render(g, &desc, spot)?;
@@ -484,7 +487,7 @@ pub fn run(
                     let sm = host::read_shadow_map(g, &t, &desc)?;
                     (depth, surface, sm, Some(t))
                 }
-                None => {
+                _ => {
                     let mut last = None;
                     for i in 0..plan.warmup + plan.repeat {
                         let hc = host_cpu::render(&scene.geometry, &desc);
@@ -537,7 +540,7 @@ pub fn run(
                         let frame = views.frame(&desc);
                         let mut stats = None;
                         for i in 0..plan.warmup + plan.repeat {
-                            let s = runner.render(g, &frame, &out_view)?;
+                            let s = runner.render(g, gpu_host.as_ref(), &frame, &out_view)?;
                             if i >= plan.warmup {
                                 timing = s.timing.clone();
                                 frames.push(s.passes.clone());
@@ -548,7 +551,7 @@ pub fn run(
                     }
                     _ => {
                         for i in 0..plan.warmup + plan.repeat {
-                            let (img, s) = choice.run_cpu(&cpu_frame, &|_, _| {})?;
+                            let (img, s) = choice.run_cpu(&cpu_frame, Some(&scene.geometry), &|_, _| {})?;
                             if i >= plan.warmup {
                                 frames.push(s.passes.clone());
                             }

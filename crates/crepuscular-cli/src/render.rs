@@ -13,7 +13,7 @@ use crepuscular::techniques::reference::{self, ReferenceSettings};
 use crepuscular::techniques::subsampled::{self, Subsampled, SubsampledSettings};
 use crepuscular::tonemap::composite;
 use crepuscular::{CpuFrame, GpuFrame, Image, ShadowProjection};
-use crepuscular_scene::{GpuHost, Scene, builtin, file, host, host_cpu};
+use crepuscular_scene::{Geometry, GpuHost, Scene, builtin, file, host, host_cpu};
 use serde::Serialize;
 use std::path::Path;
 
@@ -76,7 +76,34 @@ pub enum GpuRunner {
 
 impl GpuRunner {
     /// Renders the in-scattering of `frame` into `output` (Rgba32Float storage, frame size).
-    pub fn render(&mut self, gpu: &GpuContext, frame: &GpuFrame, output: &wgpu::TextureView) -> Result<TechniqueStats> {
+    /// `host` is the renderer that drew the frame's textures: `prefiltered` asks it to
+    /// rasterize its projective rectified shadow map (Klehm et al. 2014, §4.2); without one it
+    /// resamples the map from the shadow map.
+    pub fn render(
+        &mut self,
+        gpu: &GpuContext,
+        host: Option<&GpuHost>,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<TechniqueStats> {
+        if let GpuRunner::Prefiltered(t) = self {
+            let (Some(host), Some(request)) = (host, t.raster_request(frame.desc)) else {
+                return Ok(t.render(gpu, frame, output)?);
+            };
+            // The host's rectified raster is part of this technique's frame: timed as a pass by
+            // synchronised wall clock.
+            let start = std::time::Instant::now();
+            let map = host.render_rectified(gpu, &request)?;
+            gpu.wait()?;
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            let view = map.create_view(&wgpu::TextureViewDescriptor {
+                aspect: wgpu::TextureAspect::DepthOnly,
+                ..Default::default()
+            });
+            let mut stats = t.render_with(gpu, frame, Some(&view), output)?;
+            stats.passes.insert(0, PassTime { name: "rasterize (host)".into(), ms });
+            return Ok(stats);
+        }
         Ok(match self {
             GpuRunner::BruteForce(t) => t.render(gpu, frame, output)?,
             GpuRunner::Interleaved(t) => t.render(gpu, frame, output)?,
@@ -112,8 +139,25 @@ impl TechniqueChoice {
         })
     }
 
-    /// Runs the technique's CPU implementation on a frame.
-    pub fn run_cpu(&self, frame: &CpuFrame, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<(Image, TechniqueStats)> {
+    /// Runs the technique's CPU implementation on a frame; `geometry` (the scene's) lets
+    /// `prefiltered` rasterize its projective rectified shadow map as the GPU host does.
+    pub fn run_cpu(
+        &self,
+        frame: &CpuFrame,
+        geometry: Option<&Geometry>,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(Image, TechniqueStats)> {
+        if let (TechniqueChoice::Prefiltered(s), Some(g)) = (self, geometry) {
+            let rect = prefiltered::Rectification::new(frame.desc, &s.rectify_options());
+            if let Some(request) = rect.raster() {
+                let start = std::time::Instant::now();
+                let map = crepuscular_scene::raster::rasterize_rectified(g, &request);
+                let ms = start.elapsed().as_secs_f64() * 1e3;
+                let (img, mut stats) = prefiltered::cpu::render_with(frame, s, Some(&map))?;
+                stats.passes.insert(0, PassTime { name: "rasterize (host)".into(), ms });
+                return Ok((img, stats));
+            }
+        }
         Ok(match self {
             TechniqueChoice::BruteForce(s) => brute_force::cpu::march(frame, s)?,
             TechniqueChoice::Interleaved(s) => interleaved::cpu::render(frame, s)?,
@@ -309,7 +353,7 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
                     let out_view = out.create_view(&Default::default());
                     let views = tex.views();
                     let frame = views.frame(&desc);
-                    let stats = runner.render(gpu, &frame, &out_view)?;
+                    let stats = runner.render(gpu, Some(&host), &frame, &out_view)?;
                     (gpu.read_image(&out)?, stats)
                 }
                 None => {
@@ -317,7 +361,7 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
                     let shadow_map = host::read_shadow_map(gpu, &tex, &desc)?;
                     let frame =
                         CpuFrame { desc: &desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
-                    opts.technique.run_cpu(&frame, opts.progress)?
+                    opts.technique.run_cpu(&frame, Some(&scene.geometry), opts.progress)?
                 }
             };
             (inscatter, surface, depth, tex.passes, stats, adapter)
@@ -325,7 +369,7 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
         None => {
             let h = host_cpu::render(&scene.geometry, &desc);
             let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
-            let (inscatter, stats) = opts.technique.run_cpu(&frame, opts.progress)?;
+            let (inscatter, stats) = opts.technique.run_cpu(&frame, Some(&scene.geometry), opts.progress)?;
             (inscatter, h.surface, h.depth, h.passes, stats, adapter_stats(None))
         }
     };

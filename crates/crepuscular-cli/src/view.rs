@@ -785,7 +785,7 @@ impl Viewer {
         let out_view = targets.inscatter.create_view(&Default::default());
         let views = tex.views();
         let frame = views.frame(&desc);
-        let stats = runner.render(&self.gpu, &frame, &out_view)?;
+        let stats = runner.render(&self.gpu, Some(&self.host), &frame, &out_view)?;
 
         // Composite + tone map.
         let composite_start = Instant::now();

@@ -6,13 +6,17 @@ use crate::scene::{Geometry, Vertex};
 use crepuscular::frame::FrameDesc;
 use crepuscular::gpu::{GpuContext, PassTimer};
 use crepuscular::stats::PassTime;
+use crepuscular::techniques::prefiltered::raster::RectifiedRaster;
 use crepuscular::{Error, GpuFrame, RgbTexture, ShadowMap};
+use std::sync::OnceLock;
 use wgpu::util::DeviceExt;
 
 /// Shadow-map depth shader.
 pub const SHADOW_DEPTH_WGSL: &str = include_str!("shaders/shadow_depth.wgsl");
 /// Surface shader (composed with the library's common.wgsl).
 pub const SURFACE_WGSL: &str = include_str!("shaders/surface.wgsl");
+/// Depth shader of the rectified shadow map (`prefiltered`), with both depth-clamping paths.
+pub const RECTIFIED_DEPTH_WGSL: &str = include_str!("shaders/rectified_depth.wgsl");
 
 /// The host renderer's pipelines and the scene's vertex data on the GPU.
 pub struct GpuHost {
@@ -23,6 +27,10 @@ pub struct GpuHost {
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
     index_count: u32,
+    /// Rectified shadow-map pipelines, built on first use: with `unclipped_depth` (hardware
+    /// depth clamping) and with depth clamped in the fragment shader.
+    rectified_unclipped: OnceLock<wgpu::RenderPipeline>,
+    rectified_shader_clamp: OnceLock<wgpu::RenderPipeline>,
 }
 
 /// What the host renderer produced for a frame: the textures the effect reads.
@@ -227,8 +235,172 @@ impl GpuHost {
                 vertices,
                 indices,
                 index_count: idx.len() as u32,
+                rectified_unclipped: OnceLock::new(),
+                rectified_shader_clamp: OnceLock::new(),
             }
         })
+    }
+
+    /// Rasterizes the rectified shadow map that `prefiltered` asks for (conventions: see
+    /// [`RectifiedRaster`]) into a `Depth32Float` texture of `width × height` texels (usage
+    /// `TEXTURE_BINDING | COPY_SRC | RENDER_ATTACHMENT`): one render pass, cleared to 1.0, one
+    /// viewport and scissor rectangle per region, depth test LESS, no culling, depth clamped to
+    /// [0, 1] instead of clipped — in hardware where the device has
+    /// `DEPTH_CLIP_CONTROL` ([`hardware_depth_clamp`]), in the fragment shader otherwise.
+    /// [`crate::raster::rasterize_rectified`] is the CPU equivalent.
+    pub fn render_rectified(&self, gpu: &GpuContext, request: &RectifiedRaster) -> Result<wgpu::Texture, Error> {
+        self.render_rectified_with(gpu, request, false)
+    }
+
+    /// [`GpuHost::render_rectified`], clamping the depth in the fragment shader (the path of
+    /// devices without `DEPTH_CLIP_CONTROL`) even where the device could clamp it in hardware
+    /// when `force_shader_clamp` is true. Both paths give the same depths up to rounding.
+    /// Region columns must satisfy `columns[0] ≤ columns[1] ≤ width` ([`Error::Invalid`]
+    /// otherwise); an empty region draws nothing.
+    pub fn render_rectified_with(
+        &self,
+        gpu: &GpuContext,
+        request: &RectifiedRaster,
+        force_shader_clamp: bool,
+    ) -> Result<wgpu::Texture, Error> {
+        let (width, height) = (request.width, request.height);
+        gpu.check_texture_size("rectified shadow map size", width, height)?;
+        for (i, r) in request.regions.iter().enumerate() {
+            if r.columns[0] > r.columns[1] || r.columns[1] > width {
+                return Err(Error::invalid(
+                    format!("rectified shadow map region {i} columns"),
+                    format!("{:?}", r.columns),
+                    format!("needs columns[0] ≤ columns[1] ≤ width = {width}"),
+                ));
+            }
+        }
+        let pipeline = self.rectified_pipeline(gpu, force_shader_clamp || !hardware_depth_clamp(gpu))?;
+        let device = &gpu.device;
+        gpu.scoped("rendering the rectified shadow map", || {
+            let texture = device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("rectified shadow map"),
+                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Depth32Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC
+                    | wgpu::TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            });
+            let view = texture.create_view(&Default::default());
+            let groups: Vec<wgpu::BindGroup> = request
+                .regions
+                .iter()
+                .map(|r| {
+                    let buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("rectified region matrix"),
+                        contents: bytemuck::cast_slice(&r.view_proj.to_cols_array()),
+                        usage: wgpu::BufferUsages::UNIFORM,
+                    });
+                    device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some("rectified region"),
+                        layout: &self.shadow_layout,
+                        entries: &[wgpu::BindGroupEntry { binding: 0, resource: buf.as_entire_binding() }],
+                    })
+                })
+                .collect();
+            let mut enc =
+                device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("rectified shadow map") });
+            {
+                let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("rectified shadow map"),
+                    color_attachments: &[],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &view,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(1.0),
+                            store: wgpu::StoreOp::Store,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                pass.set_pipeline(pipeline);
+                pass.set_vertex_buffer(0, self.vertices.slice(..));
+                pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
+                for (r, bg) in request.regions.iter().zip(&groups) {
+                    let [c0, c1] = r.columns;
+                    if c1 == c0 {
+                        continue;
+                    }
+                    pass.set_viewport(c0 as f32, 0.0, (c1 - c0) as f32, height as f32, 0.0, 1.0);
+                    pass.set_scissor_rect(c0, 0, c1 - c0, height);
+                    pass.set_bind_group(0, bg, &[]);
+                    pass.draw_indexed(0..self.index_count, 0, 0..1);
+                }
+            }
+            gpu.queue.submit([enc.finish()]);
+            texture
+        })
+    }
+
+    /// The rectified shadow-map pipeline of one depth-clamping path, built on first use.
+    fn rectified_pipeline(&self, gpu: &GpuContext, shader_clamp: bool) -> Result<&wgpu::RenderPipeline, Error> {
+        let cell = if shader_clamp { &self.rectified_shader_clamp } else { &self.rectified_unclipped };
+        if let Some(p) = cell.get() {
+            return Ok(p);
+        }
+        let device = &gpu.device;
+        let pipeline = gpu.scoped("creating the rectified shadow-map pipeline", || {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("host/rectified_depth.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(RECTIFIED_DEPTH_WGSL.into()),
+            });
+            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("rectified shadow map"),
+                bind_group_layouts: &[Some(&self.shadow_layout)],
+                immediate_size: 0,
+            });
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(if shader_clamp {
+                    "rectified depth (shader clamp)"
+                } else {
+                    "rectified depth (unclipped)"
+                }),
+                layout: Some(&layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some(if shader_clamp { "vs_clamped" } else { "vs" }),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(wgpu::VertexBufferLayout {
+                        array_stride: std::mem::size_of::<Vertex>() as u64,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &VERTEX_ATTRIBUTES[..1],
+                    })],
+                },
+                primitive: wgpu::PrimitiveState {
+                    cull_mode: None,
+                    unclipped_depth: !shader_clamp,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: wgpu::TextureFormat::Depth32Float,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: shader_clamp.then(|| wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("fs_clamped"),
+                    compilation_options: Default::default(),
+                    targets: &[],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        })?;
+        Ok(cell.get_or_init(|| pipeline))
     }
 
     /// Renders the shadow map, then depth and surface radiance for `desc`. Passes:
@@ -365,6 +537,12 @@ impl GpuHost {
         let passes = timer.finish(gpu)?;
         Ok(HostTextures { depth, surface, shadow_map, spot_texture, passes })
     }
+}
+
+/// Whether `gpu` clamps depth in hardware (`DEPTH_CLIP_CONTROL`, so `unclipped_depth`
+/// pipelines): the path [`GpuHost::render_rectified`] takes; the shader fallback otherwise.
+pub fn hardware_depth_clamp(gpu: &GpuContext) -> bool {
+    gpu.device.features().contains(wgpu::Features::DEPTH_CLIP_CONTROL)
 }
 
 /// Reads the shadow map back to the CPU.

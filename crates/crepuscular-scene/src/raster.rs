@@ -13,11 +13,14 @@
 //!   draws every pixel on an edge shared by two triangles exactly once.
 //! - No face culling. Depth is NDC z interpolated linearly in screen space, clamped to [0, 1];
 //!   the depth test is LESS against a buffer cleared to 1.0, in primitive order.
+//! - [`rasterize_rectified`] draws with depth clamping instead (wgpu's `unclipped_depth`):
+//!   no near/far clipping, the interpolated depth clamped to [0, 1] per pixel.
 //!
 //! The work runs on rayon: triangles are transformed and clipped in parallel chunks, binned
 //! into horizontal bands of [`BAND_ROWS`] rows, and the bands are rasterized in parallel.
 
 use crate::scene::Geometry;
+use crepuscular::techniques::prefiltered::raster::RectifiedRaster;
 use crepuscular::{ShadowMap, ShadowProjection};
 use glam::{Mat4, Vec4};
 use rayon::prelude::*;
@@ -150,12 +153,21 @@ fn snap(v: f64) -> f64 {
     (v * SUBPIXEL).round_ties_even() / SUBPIXEL
 }
 
+/// Whether triangles are clipped against the near and far planes (the GPU default) or only
+/// against x, y (and so w > 0), their depth clamped to [0, 1] instead (`unclipped_depth`).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum DepthMode {
+    Clip,
+    Clamp,
+}
+
 /// Transforms, clips and snaps one triangle, pushing its screen triangles.
 #[allow(clippy::too_many_arguments)]
 fn setup_triangle(
     geometry: &Geometry,
     view_proj: &Mat4,
     planes: &[[f64; 4]; 6],
+    depth_mode: DepthMode,
     width: u32,
     height: u32,
     t: u32,
@@ -163,6 +175,9 @@ fn setup_triangle(
     tris: &mut Vec<ScreenTri>,
     persps: &mut Vec<Persp>,
 ) {
+    // The near and far planes are the first two: skipped when depth is clamped. The x and y
+    // planes alone keep w ≥ 0 (|x| ≤ g·w).
+    let first_plane = if depth_mode == DepthMode::Clamp { 2 } else { 0 };
     let base = 3 * t as usize;
     let mut verts = [ClipVert::default(); 3];
     for (k, vert) in verts.iter_mut().enumerate() {
@@ -180,7 +195,7 @@ fn setup_triangle(
 
     // Outcodes: trivially reject, and clip only against the planes that cut the triangle.
     let mut cut = [false; 6];
-    for (p, plane) in planes.iter().enumerate() {
+    for (p, plane) in planes.iter().enumerate().skip(first_plane) {
         let d = verts.map(|v| plane_dist(plane, &v.c));
         let outside = d.map(|d| d < 0.0);
         if outside.iter().all(|&o| o) {
@@ -192,7 +207,7 @@ fn setup_triangle(
     poly[..3].copy_from_slice(&verts);
     let mut n = 3;
     let mut tmp = [ClipVert::default(); MAX_POLY];
-    for (p, plane) in planes.iter().enumerate() {
+    for (p, plane) in planes.iter().enumerate().skip(first_plane) {
         if cut[p] {
             n = clip_polygon(&poly[..n], plane, &mut tmp, p == 0);
             std::mem::swap(&mut poly, &mut tmp);
@@ -208,18 +223,55 @@ fn setup_triangle(
     let mut sy = [0.0; MAX_POLY];
     let mut sz = [0.0; MAX_POLY];
     let mut iw = [0.0; MAX_POLY];
+    // Unsnapped screen positions (for the depth plane of clamped depth).
+    let mut ux = [0.0; MAX_POLY];
+    let mut uy = [0.0; MAX_POLY];
     for i in 0..n {
         let c = &poly[i].c;
         if c[3] <= 0.0 || c[3].is_nan() {
             return;
         }
         let inv = 1.0 / c[3];
-        sx[i] = snap((c[0] * inv * 0.5 + 0.5) * wf);
-        sy[i] = snap((0.5 - c[1] * inv * 0.5) * hf);
-        sz[i] = (c[2] * inv).clamp(0.0, 1.0);
+        ux[i] = (c[0] * inv * 0.5 + 0.5) * wf;
+        uy[i] = (0.5 - c[1] * inv * 0.5) * hf;
+        sx[i] = snap(ux[i]);
+        sy[i] = snap(uy[i]);
+        // Clipped depth is already in [0, 1] (up to rounding); clamped depth is clamped after
+        // interpolation, per pixel, as the GPU clamps it.
+        sz[i] = match depth_mode {
+            DepthMode::Clip => (c[2] * inv).clamp(0.0, 1.0),
+            DepthMode::Clamp => c[2] * inv,
+        };
         iw[i] = inv;
-        if !(sx[i].is_finite() && sy[i].is_finite() && inv.is_finite()) {
+        if !(sx[i].is_finite() && sy[i].is_finite() && sz[i].is_finite() && inv.is_finite()) {
             return;
+        }
+    }
+    if depth_mode == DepthMode::Clamp {
+        // Without near clipping, vertices next to the eye plane (w → 0) keep depths with
+        // |z/w| ≫ 1, and snapping their screen positions would tilt the depth plane by up to
+        // ~1e-4 over the visible part. Keep the exact plane, from the unsnapped positions (of
+        // the best-conditioned fan triangle), and evaluate it at the snapped vertices.
+        let mut best = (0.0, 1);
+        for i in 1..n - 1 {
+            let area = ((ux[i] - ux[0]) * (uy[i + 1] - uy[0]) - (uy[i] - uy[0]) * (ux[i + 1] - ux[0])).abs();
+            if area > best.0 {
+                best = (area, i);
+            }
+        }
+        let (area, i) = best;
+        if area > 0.0 && area.is_finite() {
+            let (dx1, dy1, dz1) = (ux[i] - ux[0], uy[i] - uy[0], sz[i] - sz[0]);
+            let (dx2, dy2, dz2) = (ux[i + 1] - ux[0], uy[i + 1] - uy[0], sz[i + 1] - sz[0]);
+            let det = dx1 * dy2 - dy1 * dx2;
+            let a = (dz1 * dy2 - dy1 * dz2) / det;
+            let b = (dx1 * dz2 - dz1 * dx2) / det;
+            let (x0, y0, z0) = (ux[0], uy[0], sz[0]);
+            if a.is_finite() && b.is_finite() {
+                for j in 0..n {
+                    sz[j] = z0 + a * (sx[j] - x0) + b * (sy[j] - y0);
+                }
+            }
         }
     }
 
@@ -266,6 +318,7 @@ fn setup_triangle(
 fn setup(
     geometry: &Geometry,
     view_proj: Mat4,
+    depth_mode: DepthMode,
     width: u32,
     height: u32,
     want_persp: bool,
@@ -280,7 +333,18 @@ fn setup(
             let mut tris = Vec::with_capacity((end - start) as usize);
             let mut persps = Vec::new();
             for t in start..end {
-                setup_triangle(geometry, &view_proj, &planes, width, height, t, want_persp, &mut tris, &mut persps);
+                setup_triangle(
+                    geometry,
+                    &view_proj,
+                    &planes,
+                    depth_mode,
+                    width,
+                    height,
+                    t,
+                    want_persp,
+                    &mut tris,
+                    &mut persps,
+                );
             }
             (tris, persps)
         })
@@ -441,7 +505,7 @@ pub fn rasterize(geometry: &Geometry, view_proj: Mat4, width: u32, height: u32) 
     if pixels == 0 {
         return out;
     }
-    let (tris, persps) = setup(geometry, view_proj, width, height, true);
+    let (tris, persps) = setup(geometry, view_proj, DepthMode::Clip, width, height, true);
     let w = width as usize;
     let bands = (height as usize).div_ceil(BAND_ROWS);
     let (offsets, items) = bin(&tris, bands);
@@ -482,12 +546,17 @@ pub fn rasterize(geometry: &Geometry, view_proj: Mat4, width: u32, height: u32) 
 /// `size_w × size_h` [0, 1] depths, row-major from the top-left pixel, 1.0 where nothing was
 /// drawn.
 pub fn rasterize_depth_only(geometry: &Geometry, view_proj: Mat4, size_w: u32, size_h: u32) -> Vec<f32> {
+    depth_only(geometry, view_proj, DepthMode::Clip, size_w, size_h)
+}
+
+/// [`rasterize_depth_only`] with near/far clipping or depth clamping.
+fn depth_only(geometry: &Geometry, view_proj: Mat4, depth_mode: DepthMode, size_w: u32, size_h: u32) -> Vec<f32> {
     let pixels = size_w as usize * size_h as usize;
     let mut depth = vec![1.0f32; pixels];
     if pixels == 0 {
         return depth;
     }
-    let (tris, _) = setup(geometry, view_proj, size_w, size_h, false);
+    let (tris, _) = setup(geometry, view_proj, depth_mode, size_w, size_h, false);
     let w = size_w as usize;
     let bands = (size_h as usize).div_ceil(BAND_ROWS);
     let (offsets, items) = bin(&tris, bands);
@@ -508,4 +577,32 @@ pub fn render_shadow_map(geometry: &Geometry, projection: &ShadowProjection) -> 
         depth.extend(rasterize_depth_only(geometry, *vp, n, n));
     }
     ShadowMap { projection: projection.clone(), depth }
+}
+
+/// Rasterizes the rectified shadow map that the `prefiltered` technique asks for (see
+/// [`RectifiedRaster`] for the conventions): each region is drawn as its own viewport of
+/// `columns[1] − columns[0]` × `height` texels at column `columns[0]`, with depth clamping: the
+/// triangles are clipped against x and y only (and so to w > 0), not against the near and far
+/// planes, and the interpolated depth is clamped to [0, 1] at each texel centre. Returns
+/// `width × height` depths, row-major from the top-left texel, 1.0 where nothing was drawn.
+/// Column ranges are clipped to `0..width`; an empty range draws nothing.
+pub fn rasterize_rectified(geometry: &Geometry, request: &RectifiedRaster) -> Vec<f32> {
+    let (w, h) = (request.width as usize, request.height as usize);
+    let mut depth = vec![1.0f32; w * h];
+    for region in &request.regions {
+        let c0 = region.columns[0].min(request.width);
+        let c1 = region.columns[1].min(request.width);
+        if c1 <= c0 {
+            continue;
+        }
+        let rw = (c1 - c0) as usize;
+        let part = depth_only(geometry, region.view_proj, DepthMode::Clamp, rw as u32, request.height);
+        // Overlapping regions keep the nearer depth, as the depth test of one GPU pass does.
+        for (row, src) in depth.chunks_exact_mut(w).zip(part.chunks_exact(rw)) {
+            for (d, &s) in row[c0 as usize..c1 as usize].iter_mut().zip(src) {
+                *d = d.min(s);
+            }
+        }
+    }
+    depth
 }

@@ -1,9 +1,13 @@
 //! Tests of the CPU rasterizer: coverage, the top-left rule, depth, near clipping,
-//! barycentrics and shadow maps.
+//! barycentrics and shadow maps; and of the rectified shadow map of `prefiltered` (depth
+//! clamped instead of clipped), CPU and GPU.
 
+use crepuscular::techniques::prefiltered::raster::{RasterRegion, RectifiedRaster};
 use crepuscular::{Camera, Light, ShadowProjection};
-use crepuscular_scene::raster::{DepthBuffer, rasterize, rasterize_depth_only, render_shadow_map};
-use crepuscular_scene::{Geometry, Vertex};
+use crepuscular_scene::builtin::builtin;
+use crepuscular_scene::host::hardware_depth_clamp;
+use crepuscular_scene::raster::{DepthBuffer, rasterize, rasterize_depth_only, rasterize_rectified, render_shadow_map};
+use crepuscular_scene::{Geometry, GpuHost, Vertex};
 use glam::{DVec3, Mat4, Vec3};
 
 fn vertex(p: Vec3) -> Vertex {
@@ -559,4 +563,294 @@ fn timing_50k_triangles() {
         g.triangle_count(),
         covered_count(&buf)
     );
+}
+
+// ---------------------------------------------------------------------------------------------
+// The rectified shadow map of `prefiltered`: regions as viewports, depth clamped, not clipped.
+
+/// Texels (in a request's row-major layout) of region `r`.
+fn region_texels(req: &RectifiedRaster, r: usize) -> impl Iterator<Item = (u32, u32)> + '_ {
+    let [c0, c1] = req.regions[r].columns;
+    (0..req.height).flat_map(move |y| (c0..c1).map(move |x| (x, y)))
+}
+
+/// A camera's world → clip matrix (`Mat4::perspective_rh`, vertical field of view in degrees).
+fn perspective(eye: Vec3, target: Vec3, fov_y: f32, aspect: f32, near: f32, far: f32) -> Mat4 {
+    Mat4::perspective_rh(fov_y.to_radians(), aspect, near, far) * Mat4::look_at_rh(eye, target, Vec3::Y)
+}
+
+/// Two regions of a 96×64 map over the colonnade: the scene camera with a near plane far in
+/// front of it (much of the scene has z/w < 0) and a close far plane, and a view from above.
+fn colonnade_request() -> (Geometry, RectifiedRaster) {
+    let scene = builtin("colonnade").unwrap();
+    let cam = &scene.camera;
+    let (w, h, split) = (96, 64, 40);
+    let a = perspective(cam.position, cam.look_at, 60.0, split as f32 / h as f32, 6.0, 25.0);
+    let b = perspective(Vec3::new(2.0, 24.0, 22.0), Vec3::ZERO, 50.0, (w - split) as f32 / h as f32, 8.0, 60.0);
+    let request = RectifiedRaster {
+        width: w,
+        height: h,
+        regions: vec![
+            RasterRegion { view_proj: a, columns: [0, split] },
+            RasterRegion { view_proj: b, columns: [split, w] },
+        ],
+    };
+    (scene.geometry, request)
+}
+
+/// Fraction of texels where `a` and `b` differ by at most `tol`, and the largest difference.
+fn agreement(a: &[f32], b: &[f32], tol: f32) -> (f64, f32) {
+    assert_eq!(a.len(), b.len());
+    let ok = a.iter().zip(b).filter(|(x, y)| (*x - *y).abs() <= tol).count();
+    let max = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max);
+    (ok as f64 / a.len() as f64, max)
+}
+
+#[test]
+fn rectified_regions_are_viewports_with_clamped_depth() {
+    let (g, req) = colonnade_request();
+    let map = rasterize_rectified(&g, &req);
+    assert_eq!(map.len(), (req.width * req.height) as usize);
+    assert!(map.iter().all(|d| (0.0..=1.0).contains(d)));
+    let idx = |x: u32, y: u32| (y * req.width + x) as usize;
+    for (r, region) in req.regions.iter().enumerate() {
+        let [c0, c1] = region.columns;
+        let rw = c1 - c0;
+        // Each region is its own viewport: where the clipped raster of that viewport has a
+        // depth strictly inside (0, 1), the clamped one has the same depth (the nearest
+        // surface there is not clipped); where it is 0 or uncovered the clamped one may be
+        // 0 instead (something in front of the near plane).
+        let clipped = rasterize_depth_only(&g, region.view_proj, rw, req.height);
+        let (mut same, mut inside, mut clamped_near) = (0, 0, 0);
+        let mut worst = 0.0f32;
+        for (x, y) in region_texels(&req, r) {
+            let c = clipped[(y * rw + x - c0) as usize];
+            let d = map[idx(x, y)];
+            if c > 0.0 && c < 1.0 {
+                inside += 1;
+                // Up to rounding: the clipped raster's depth plane moves with the snapping of
+                // the vertices it cuts at the near plane (~1e-4 here, with near = 6).
+                same += ((c - d).abs() <= 5e-4 || d == 0.0) as usize;
+                if d != 0.0 {
+                    worst = worst.max((c - d).abs());
+                }
+            }
+            clamped_near += (d == 0.0 && c != 0.0) as usize;
+        }
+        println!(
+            "region {r}: {inside} texels inside (0, 1), {clamped_near} clamped to 0 that clipping loses, largest difference {worst}"
+        );
+        assert!(inside > 500, "region {r}: {inside}");
+        assert!(same as f64 >= 0.99 * inside as f64, "region {r}: {same} of {inside}");
+        if r == 0 {
+            assert!(clamped_near > 100, "region 0 has geometry in front of its near plane: {clamped_near}");
+        }
+    }
+    // An empty region or an empty request draws nothing.
+    let one = RectifiedRaster {
+        regions: vec![RasterRegion { view_proj: req.regions[0].view_proj, columns: [0, req.width] }],
+        ..req.clone()
+    };
+    let with_empty = RectifiedRaster {
+        regions: vec![one.regions[0], RasterRegion { view_proj: req.regions[1].view_proj, columns: [7, 7] }],
+        ..req.clone()
+    };
+    assert_eq!(rasterize_rectified(&g, &one), rasterize_rectified(&g, &with_empty));
+    let none = RectifiedRaster { regions: vec![], ..req.clone() };
+    assert!(rasterize_rectified(&g, &none).iter().all(|&d| d == 1.0));
+}
+
+#[test]
+fn rectified_gpu_matches_cpu_on_the_colonnade() {
+    let Some(gpu) = crepuscular::gpu::test_gpu("rectified_gpu_matches_cpu_on_the_colonnade") else { return };
+    let (g, req) = colonnade_request();
+    let host = GpuHost::new(&gpu, &g).unwrap();
+    let cpu = rasterize_rectified(&g, &req);
+    let tex = host.render_rectified(&gpu, &req).unwrap();
+    assert_eq!((tex.width(), tex.height(), tex.format()), (req.width, req.height, wgpu::TextureFormat::Depth32Float));
+    assert!(tex.usage().contains(
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::RENDER_ATTACHMENT
+    ));
+    let gpu_map = gpu.read_texture_f32(&tex, 0).unwrap();
+    let (frac, max) = agreement(&gpu_map, &cpu, 1e-4);
+    let path = if hardware_depth_clamp(&gpu) { "unclipped_depth" } else { "shader clamp" };
+    println!("GPU ({path}) vs CPU: {:.3}% of texels within 1e-4, largest difference {max}", 100.0 * frac);
+    assert!(frac >= 0.99, "{frac}");
+    // Both regions drew something, and region 0 has texels clamped to 0.
+    for r in 0..2 {
+        assert!(region_texels(&req, r).any(|(x, y)| gpu_map[(y * req.width + x) as usize] < 1.0), "region {r}");
+    }
+    assert!(region_texels(&req, 0).filter(|&(x, y)| gpu_map[(y * req.width + x) as usize] == 0.0).count() > 100);
+    // Region columns outside the map are refused.
+    let bad = RectifiedRaster {
+        regions: vec![RasterRegion { view_proj: Mat4::IDENTITY, columns: [10, req.width + 1] }],
+        ..req.clone()
+    };
+    assert!(matches!(host.render_rectified(&gpu, &bad), Err(crepuscular::Error::Invalid { .. })));
+}
+
+/// Two regions of a 64×32 map: region 0 with the identity matrix (clip = NDC) over a quad at
+/// z = −0.5, one at z = 1.5 and a strip whose depth runs from −0.5 to 1.5 across the region;
+/// region 1 a perspective camera at (10, 0, 5) looking down −z (near 1, far 10) over a quad
+/// between the eye and the near plane, one beyond the far plane and a ground plane at y = −0.5
+/// that runs from behind the eye past the far plane. Each region's objects lie outside the
+/// other's view. Returns the geometry, the request and the expected depth per texel (`None`
+/// within a texel of an edge).
+fn near_far_request() -> (Geometry, RectifiedRaster, Vec<Option<f32>>) {
+    let quad = |x0: f32, x1: f32, y0: f32, y1: f32, z0: f32, z1: f32| {
+        // Depth z0 on the left edge, z1 on the right.
+        let p = |x: f32, y: f32| Vec3::new(x, y, z0 + (z1 - z0) * (x - x0) / (x1 - x0));
+        [[p(x0, y0), p(x1, y0), p(x1, y1)], [p(x0, y0), p(x1, y1), p(x0, y1)]]
+    };
+    let zquad = |x0: f32, x1: f32, y0: f32, y1: f32, z: f32| {
+        let p = |x: f32, y: f32| Vec3::new(x, y, z);
+        [[p(x0, y0), p(x1, y0), p(x1, y1)], [p(x0, y0), p(x1, y1), p(x0, y1)]]
+    };
+    let mut tris = Vec::new();
+    tris.extend(quad(-0.75, -0.25, 0.25, 0.75, -0.5, -0.5)); // in front of the near plane
+    tris.extend(quad(0.25, 0.75, 0.25, 0.75, 1.5, 1.5)); // beyond the far plane
+    tris.extend(quad(-1.5, 1.5, -0.75, -0.25, -1.0, 2.0)); // z = 0.5 + x
+    let (ex, ez) = (10.0, 5.0);
+    tris.extend(zquad(ex - 0.3, ex - 0.1, -0.1, 0.1, ez - 0.5)); // view distance 0.5 < near
+    tris.extend(zquad(ex + 2.0, ex + 6.0, -2.0, 2.0, ez - 20.0)); // view distance 20 > far
+    let ground = |x: f32, z: f32| Vec3::new(x, -0.5, z);
+    tris.push([ground(ex - 100.0, ez + 0.5), ground(ex + 100.0, ez + 0.5), ground(ex + 100.0, ez - 30.0)]);
+    tris.push([ground(ex - 100.0, ez + 0.5), ground(ex + 100.0, ez - 30.0), ground(ex - 100.0, ez - 30.0)]);
+    let (w, h) = (64u32, 32u32);
+    let view = perspective(Vec3::new(ex, 0.0, ez), Vec3::new(ex, 0.0, 0.0), 90.0, 1.0, 1.0, 10.0);
+    let req = RectifiedRaster {
+        width: w,
+        height: h,
+        regions: vec![
+            RasterRegion { view_proj: Mat4::IDENTITY, columns: [0, 32] },
+            RasterRegion { view_proj: view, columns: [32, 64] },
+        ],
+    };
+    let margin = 0.6 / 16.0; // NDC: 0.6 texel of a 32-texel region
+    let inside = |v: f32, lo: f32, hi: f32| v > lo + margin && v < hi - margin;
+    let near_edge = |v: f32, e: f32| (v - e).abs() <= margin;
+    let mut expect = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let nx = ((x % 32) as f32 + 0.5) / 16.0 - 1.0;
+            let ny = 1.0 - (y as f32 + 0.5) / 16.0;
+            let e = if x < 32 {
+                if inside(nx, -0.75, -0.25) && inside(ny, 0.25, 0.75) {
+                    Some(0.0)
+                } else if inside(ny, -0.75, -0.25) {
+                    Some((0.5 + nx).clamp(0.0, 1.0))
+                } else if [-0.75, -0.25, 0.25, 0.75].iter().any(|&e| near_edge(nx, e) || near_edge(ny, e)) {
+                    None
+                } else {
+                    Some(1.0) // nothing, or the quad beyond the far plane
+                }
+            } else if inside(nx, -0.6, -0.2) && inside(ny, -0.2, 0.2) {
+                Some(0.0)
+            } else if [-0.6, -0.2].iter().any(|&e| near_edge(nx, e)) && ny.abs() < 0.2 + margin
+                || near_edge(ny, 0.2) && nx > -0.6 - margin && nx < -0.2 + margin
+            {
+                None
+            } else if ny < 0.0 {
+                // The ground, at view distance d: perspective_rh's depth, clamped.
+                let d = 0.5 / -ny as f64;
+                Some((10.0 * (d - 1.0) / (9.0 * d)).clamp(0.0, 1.0) as f32)
+            } else {
+                Some(1.0)
+            };
+            expect.push(e);
+        }
+    }
+    (geometry(&tris), req, expect)
+}
+
+/// Checks a rectified map of [`near_far_request`] against its expected depths: exactly 0
+/// where clamped to 0, within `tol` elsewhere in region 0 (clip w = 1, so the depth is exact
+/// up to rounding), within `tol_ground` elsewhere in region 1: there the ground crosses the eye
+/// plane, so its clipped vertices at the guard band have |z/w| ~ 10³, and their sub-pixel
+/// snapping moves the interpolated depth by ~10⁻⁴ (as on the GPU: depth clamping keeps
+/// these vertices where near clipping would have cut them away).
+fn check_near_far(what: &str, map: &[f32], expect: &[Option<f32>], tol: f32, tol_ground: f32) {
+    let (mut checked, mut zeros, mut ramp) = (0, 0, 0);
+    let mut worst = [0.0f32; 2];
+    for (i, (&d, e)) in map.iter().zip(expect).enumerate() {
+        let Some(e) = *e else { continue };
+        let region = (i % 64 >= 32) as usize;
+        let tol = if e == 0.0 {
+            0.0
+        } else if region == 0 {
+            tol
+        } else {
+            tol_ground
+        };
+        assert!((d - e).abs() <= tol, "{what}: texel {},{}: {d} vs {e}", i % 64, i / 64);
+        worst[region] = worst[region].max((d - e).abs());
+        checked += 1;
+        zeros += (e == 0.0) as usize;
+        ramp += (e > 0.0 && e < 1.0) as usize;
+    }
+    println!("{what}: {checked} texels checked, {zeros} clamped to 0, {ramp} inside (0, 1); largest error {worst:?}");
+    assert!(checked > 1500 && zeros > 200 && ramp > 300, "{what}: {checked} {zeros} {ramp}");
+}
+
+#[test]
+fn rectified_depth_is_clamped_not_clipped_on_the_cpu() {
+    let (g, req, expect) = near_far_request();
+    let map = rasterize_rectified(&g, &req);
+    check_near_far("CPU", &map, &expect, 1e-6, 1e-3);
+    // The ordinary (clipping) raster of each region drops what is in front of the near plane:
+    // it has no zeros where the clamped one has them.
+    for (r, region) in req.regions.iter().enumerate() {
+        let clipped = rasterize_depth_only(&g, region.view_proj, 32, 32);
+        let mut dropped = 0;
+        for (x, y) in region_texels(&req, r) {
+            if expect[(y * req.width + x) as usize] == Some(0.0) {
+                assert!(clipped[(y * 32 + x - 32 * r as u32) as usize] > 0.0, "region {r} texel {x},{y}");
+                dropped += 1;
+            }
+        }
+        assert!(dropped > 50, "region {r}: {dropped}");
+    }
+}
+
+#[test]
+fn rectified_depth_is_clamped_not_clipped_on_the_gpu() {
+    let Some(gpu) = crepuscular::gpu::test_gpu("rectified_depth_is_clamped_not_clipped_on_the_gpu") else { return };
+    let (g, req, expect) = near_far_request();
+    let host = GpuHost::new(&gpu, &g).unwrap();
+    let cpu = rasterize_rectified(&g, &req);
+    let mut paths = vec![true];
+    if hardware_depth_clamp(&gpu) {
+        paths.insert(0, false);
+    } else {
+        println!("the device has no DEPTH_CLIP_CONTROL: only the shader-clamp path runs");
+    }
+    for shader_clamp in paths {
+        let what = if shader_clamp { "GPU shader clamp" } else { "GPU unclipped_depth" };
+        let tex = host.render_rectified_with(&gpu, &req, shader_clamp).unwrap();
+        let map = gpu.read_texture_f32(&tex, 0).unwrap();
+        check_near_far(what, &map, &expect, 1e-5, 1e-3);
+        let (frac, max) = agreement(&map, &cpu, 1e-4);
+        println!("{what} vs CPU: {:.3}% of texels within 1e-4, largest difference {max}", 100.0 * frac);
+        assert!(frac >= 0.99, "{what}: {frac}");
+    }
+}
+
+#[test]
+fn rectified_shader_clamp_matches_unclipped_depth() {
+    let Some(gpu) = crepuscular::gpu::test_gpu("rectified_shader_clamp_matches_unclipped_depth") else { return };
+    if !hardware_depth_clamp(&gpu) {
+        println!("SKIPPED rectified_shader_clamp_matches_unclipped_depth: the device has no DEPTH_CLIP_CONTROL");
+        return;
+    }
+    let (g, req) = colonnade_request();
+    let host = GpuHost::new(&gpu, &g).unwrap();
+    let unclipped = gpu.read_texture_f32(&host.render_rectified_with(&gpu, &req, false).unwrap(), 0).unwrap();
+    let shader = gpu.read_texture_f32(&host.render_rectified_with(&gpu, &req, true).unwrap(), 0).unwrap();
+    assert_eq!(unclipped, gpu.read_texture_f32(&host.render_rectified(&gpu, &req).unwrap(), 0).unwrap());
+    let (frac, max) = agreement(&shader, &unclipped, 1e-4);
+    println!(
+        "ran unclipped_depth and shader clamp: {:.3}% of texels within 1e-4, largest difference {max}",
+        100.0 * frac
+    );
+    assert!(frac >= 0.999, "{frac}");
 }

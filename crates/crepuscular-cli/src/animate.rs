@@ -260,6 +260,7 @@ fn set_runner_settings(runner: &mut GpuRunner, choice: &TechniqueChoice) -> bool
         (GpuRunner::Interleaved(r), TechniqueChoice::Interleaved(s)) => r.settings = s.clone(),
         (GpuRunner::Subsampled(r), TechniqueChoice::Subsampled(s)) => r.settings = s.clone(),
         (GpuRunner::Epipolar(r), TechniqueChoice::Epipolar(s)) => r.settings = s.clone(),
+        (GpuRunner::Prefiltered(r), TechniqueChoice::Prefiltered(s)) => r.settings = s.clone(),
         _ => return false,
     }
     true

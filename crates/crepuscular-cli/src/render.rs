@@ -408,6 +408,16 @@ pub enum DebugView {
     /// coloured by its offset k of the M×M block (which of the N/M² terms of eq. 1 it
     /// marches), blended half and half over the final image.
     Pattern,
+    /// `prefiltered`: the rectified shadow map (Klehm et al. 2014, §2.2, §4) — one row per
+    /// epipolar slice, view rays left to right, grey = normalised occluder depth (white:
+    /// unoccluded).
+    RectifiedMap,
+    /// `prefiltered`: the first filtered-basis layer (bases 0–2 as RGB), the prefix-summed
+    /// Fourier bases as stored (§3.3, Appendix A).
+    Basis,
+    /// `prefiltered`: the prefiltered average visibility of every pixel's ray (Listing 4), the
+    /// ray-marched epipole disc (§5) in red.
+    Visibility,
 }
 
 impl DebugView {
@@ -417,6 +427,9 @@ impl DebugView {
             DebugView::Classification => "classification",
             DebugView::Radiance => "radiance",
             DebugView::Pattern => "pattern",
+            DebugView::RectifiedMap => "rectified-map",
+            DebugView::Basis => "basis",
+            DebugView::Visibility => "visibility",
         }
     }
 
@@ -425,6 +438,7 @@ impl DebugView {
         match technique {
             TechniqueChoice::Epipolar(_) => &[DebugView::Classification, DebugView::Radiance],
             TechniqueChoice::Interleaved(_) => &[DebugView::Pattern],
+            TechniqueChoice::Prefiltered(_) => &[DebugView::RectifiedMap, DebugView::Basis, DebugView::Visibility],
             _ => &[],
         }
     }
@@ -465,6 +479,9 @@ pub fn debug_view(
         }
         return Ok(img);
     }
+    if let TechniqueChoice::Prefiltered(s) = technique {
+        return prefiltered_debug_view(scene, gpu, s, view);
+    }
     let TechniqueChoice::Epipolar(settings) = technique else {
         bail!("--debug {}: not a debug view of `{}`", view.name(), technique.name());
     };
@@ -496,11 +513,56 @@ pub fn debug_view(
             let scale = 1024u32.div_ceil(debug.samples().max(1)).clamp(1, 16);
             epipolar::debug::radiance_view(&debug, scale)
         }
-        DebugView::Pattern => bail!("--debug pattern: not a debug view of `epipolar`"),
+        other => bail!("--debug {}: not a debug view of `epipolar`", other.name()),
+    })
+}
+
+/// `prefiltered`'s debug views: the frame rendered on the backend (with the host's rectified
+/// raster where the rectification is projective), its maps read back, and the view drawn.
+fn prefiltered_debug_view(
+    scene: &Scene,
+    gpu: Option<&GpuContext>,
+    settings: &PrefilteredSettings,
+    view: DebugView,
+) -> Result<Image> {
+    use prefiltered::debug;
+    let desc = frame_desc(scene);
+    let (passes, depth) = match gpu {
+        Some(gpu) => {
+            let spot = match &scene.light {
+                crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
+                _ => None,
+            };
+            let host = GpuHost::new(gpu, &scene.geometry)?;
+            let tex = host.render(gpu, &desc, spot)?;
+            let mut runner = GpuRunner::Prefiltered(Prefiltered::new(gpu, settings.clone())?);
+            let out = gpu.create_output_texture(desc.width, desc.height);
+            let views = tex.views();
+            runner.render(gpu, Some(&host), &views.frame(&desc), &out.create_view(&Default::default()))?;
+            let GpuRunner::Prefiltered(t) = runner else { unreachable!("built above") };
+            let rect = t.last_rectification().context("no frame rendered")?.clone();
+            (debug::passes_from_gpu(rect, t.read_maps(gpu)?), gpu.read_texture_f32(&tex.depth, 0)?)
+        }
+        None => {
+            let h = host_cpu::render(&scene.geometry, &desc);
+            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+            let rect = prefiltered::Rectification::new(&desc, &settings.rectify_options());
+            let raster = rect.raster().map(|r| crepuscular_scene::raster::rasterize_rectified(&scene.geometry, &r));
+            (prefiltered::cpu::passes(&frame, settings, raster.as_deref())?.0, h.depth)
+        }
+    };
+    Ok(match view {
+        DebugView::RectifiedMap => debug::rectified_map_view(&passes),
+        DebugView::Basis => debug::basis_view(&passes, 0),
+        DebugView::Visibility => {
+            let epipole = prefiltered::epipole_pixel(&desc, settings.epipole_radius);
+            debug::visibility_view(&passes, &desc, &depth, settings.bases, epipole, settings.epipole_radius)
+        }
+        other => bail!("--debug {}: not a debug view of `prefiltered`", other.name()),
     })
 }
 
 /// "epipolar: classification, radiance; interleaved: pattern" — for error messages and help.
 pub fn debug_view_list() -> &'static str {
-    "debug views: epipolar — classification, radiance; interleaved — pattern"
+    "debug views: epipolar — classification, radiance; interleaved — pattern; prefiltered — rectified-map, basis, visibility"
 }

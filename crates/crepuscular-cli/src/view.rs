@@ -100,12 +100,28 @@ const SETTING_DOCS: &[(&str, &str, &str)] = &[
     ("epipolar", "fallback_remarch", "Re-march pixels with no usable tap at full resolution."),
     ("epipolar", "epipole_radius", "Re-march pixels within this many pixels of the epipole (0 disables)."),
     ("epipolar", "spot_prefilter", "Spot texture prefilter: \"auto\", \"off\" or a level (TOML)."),
+    ("prefiltered", "bases", "Fourier bases M (multiple of 4, 4..=128): fewer ring more; cost and memory linear in M."),
+    ("prefiltered", "map_size", "Rectified shadow map [columns, rows]; prefilter cost and memory grow with it."),
+    ("prefiltered", "precision", "Filtered-basis storage: unorm8 (1 byte per basis) or float16 (2 bytes)."),
+    ("prefiltered", "rectification", "auto, projective (§4.2, sun off screen) or epipolar (§4.1, any light)."),
+    ("prefiltered", "max_projective_angle", "Widest projected frustum (degrees) that auto rectifies projectively."),
+    ("prefiltered", "regions", "Prefix-sum regions per row (1..=8): more prefilter threads, one lookup each."),
+    ("prefiltered", "split_lambda", "Region boundaries: 0 one projective map, 1 equal world extents (split maps)."),
+    ("prefiltered", "bases_per_thread", "Bases per prefilter thread (multiple of 4 dividing M)."),
+    ("prefiltered", "transmittance_weights", "Weight the prefix sum by transmittance (§3.2) instead of plain averaging."),
+    ("prefiltered", "reference_ray", "Reference ray of each slice for the weights: bisectrix or optimal."),
+    ("prefiltered", "epipole_radius", "Ray-march pixels within this many pixels of a visible light (§5; 0 off)."),
+    ("prefiltered", "epipole_steps", "Steps per pixel of the epipole disc."),
+    ("prefiltered", "light_steps", "Quadrature points of a local light's unoccluded in-scattering per pixel."),
 ];
 
 /// Known values of string-valued settings, for a combo box.
 const ENUM_VALUES: &[(&str, &[&str])] = &[
     ("spot_steps", &["fixed", "exact-cone", "appendix-b-constant", "appendix-b-smoothstep"]),
     ("weighting", &["gaussian", "shepard", "threshold"]),
+    ("precision", &["unorm8", "float16"]),
+    ("rectification", &["auto", "projective", "epipolar"]),
+    ("reference_ray", &["bisectrix", "optimal"]),
 ];
 
 /// The tooltip of a technique's setting, if the table has one.
@@ -917,7 +933,7 @@ impl Viewer {
                 let img = render::debug_view(&scene, Some(&self.gpu), &self.technique, view, &fin)?;
                 let rgb = ToneMap::new(self.exposure).to_rgb8(&img);
                 let caption = format!("{}×{}", img.width, img.height);
-                self.show_image(format!("epipolar: {}", view.name()), caption, img.width, img.height, &rgb);
+                self.show_image(format!("{}: {}", self.technique.name(), view.name()), caption, img.width, img.height, &rgb);
             }
             Action::ErrorView => {
                 let started = Instant::now();
@@ -1370,6 +1386,9 @@ impl Viewer {
                     DebugView::Classification => "epipolar: sample classification (Fig. 9)",
                     DebugView::Radiance => "epipolar: the lines × samples radiance texture",
                     DebugView::Pattern => "interleaved: each pixel's offset in the M×M block",
+                    DebugView::RectifiedMap => "prefiltered: the rectified shadow map (rows = epipolar slices)",
+                    DebugView::Basis => "prefiltered: filtered-basis layer 0 (bases 0–2 as RGB)",
+                    DebugView::Visibility => "prefiltered: average visibility per pixel (epipole disc red)",
                 };
                 if ui.button(view.name()).on_hover_text(tip).clicked() {
                     self.pending.push(Action::Debug(view));

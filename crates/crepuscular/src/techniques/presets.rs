@@ -33,6 +33,7 @@ use crate::error::Error;
 use crate::march::SpotSteps;
 use crate::techniques::brute_force::BruteForceSettings;
 use crate::techniques::epipolar::EpipolarSettings;
+use crate::techniques::prefiltered::PrefilteredSettings;
 use crate::techniques::interleaved::InterleavedSettings;
 use crate::techniques::reference::ReferenceSettings;
 use crate::techniques::subsampled::SubsampledSettings;
@@ -80,6 +81,7 @@ impl Preset {
             "interleaved" => TechniqueSettings::Interleaved(self.interleaved()),
             "subsampled" => TechniqueSettings::Subsampled(self.subsampled()),
             "epipolar" => TechniqueSettings::Epipolar(self.epipolar()),
+            "prefiltered" => TechniqueSettings::Prefiltered(self.prefiltered()),
             "reference" => TechniqueSettings::Reference(self.reference()),
             _ => return None,
         })
@@ -138,6 +140,26 @@ impl Preset {
         }
     }
 
+    /// `prefiltered`: a 512² map with M = 16 bases / the defaults (1024², M = 32) / a 2048² map
+    /// with M = 64 and a 16-pixel ray-marched epipole disc; the disc marches 32 / 64 / 256 steps.
+    pub fn prefiltered(self) -> PrefilteredSettings {
+        let d = PrefilteredSettings::default();
+        let (map, bases, radius) = match self {
+            Preset::Fast => (512, 16, d.epipole_radius),
+            Preset::Balanced => (d.map_size[0], d.bases, d.epipole_radius),
+            Preset::ReferenceLike => (2048, 64, 16),
+        };
+        PrefilteredSettings {
+            map_size: [map, map],
+            bases,
+            bases_per_thread: d.bases_per_thread.min(bases),
+            epipole_radius: radius,
+            epipole_steps: self.steps(),
+            spot_steps: SpotSteps::ExactCone,
+            ..d
+        }
+    }
+
     /// `reference`: 64 / 256 / 1024 stratified steps (a quick look, a fair comparison, the
     /// default ground truth).
     pub fn reference(self) -> ReferenceSettings {
@@ -163,6 +185,8 @@ pub enum TechniqueSettings {
     Subsampled(SubsampledSettings),
     /// `epipolar`.
     Epipolar(EpipolarSettings),
+    /// `prefiltered`.
+    Prefiltered(PrefilteredSettings),
     /// `reference`.
     Reference(ReferenceSettings),
 }
@@ -175,6 +199,7 @@ impl TechniqueSettings {
             TechniqueSettings::Interleaved(_) => "interleaved",
             TechniqueSettings::Subsampled(_) => "subsampled",
             TechniqueSettings::Epipolar(_) => "epipolar",
+            TechniqueSettings::Prefiltered(_) => "prefiltered",
             TechniqueSettings::Reference(_) => "reference",
         }
     }
@@ -186,6 +211,7 @@ impl TechniqueSettings {
             TechniqueSettings::Interleaved(s) => s.steps,
             TechniqueSettings::Subsampled(s) => s.steps,
             TechniqueSettings::Epipolar(s) => s.steps,
+            TechniqueSettings::Prefiltered(s) => s.epipole_steps,
             TechniqueSettings::Reference(s) => s.steps,
         }
     }
@@ -197,6 +223,7 @@ impl TechniqueSettings {
             TechniqueSettings::Interleaved(s) => s.validate(),
             TechniqueSettings::Subsampled(s) => s.validate(),
             TechniqueSettings::Epipolar(s) => s.validate(),
+            TechniqueSettings::Prefiltered(s) => s.validate(),
             TechniqueSettings::Reference(s) => {
                 if s.steps < 2 || s.steps % 2 != 0 || s.steps > 1 << 20 {
                     return Err(Error::invalid("reference.steps", s.steps, "must be even and in 2..=1048576"));

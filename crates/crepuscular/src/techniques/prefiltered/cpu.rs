@@ -46,6 +46,35 @@ pub fn basis4(z: f32, layer: u32) -> [f32; 4] {
     [(c0 * z).sin(), (c0 * z).cos(), (c1 * z).sin(), (c1 * z).cos()]
 }
 
+/// Eq. 8's bases layer after layer by rotation, as prefilter.wgsl computes them: sin and cos of
+/// c_k·z for k = 2·`layer`, 2·`layer` + 1, … from one sin/cos of the first harmonic and one of
+/// the step 2π·z (two sin/cos per texel instead of M). Equal to [`basis4`] up to f32 rounding.
+#[derive(Clone, Copy, Debug)]
+pub struct BasisRotor {
+    sc: [f32; 2],
+    step: [f32; 2],
+}
+
+/// The rotor of layer `layer` at depth `z` (basis domain).
+pub fn basis_rotor(z: f32, layer: u32) -> BasisRotor {
+    let a = PI * (4 * layer + 1) as f32 * z;
+    let s = 2.0 * PI * z;
+    BasisRotor { sc: [a.sin(), a.cos()], step: [s.sin(), s.cos()] }
+}
+
+impl BasisRotor {
+    fn rotate(sc: [f32; 2], st: [f32; 2]) -> [f32; 2] {
+        [sc[0] * st[1] + sc[1] * st[0], sc[1] * st[1] - sc[0] * st[0]]
+    }
+    /// The next layer's four bases.
+    pub fn next4(&mut self) -> [f32; 4] {
+        let sc2 = Self::rotate(self.sc, self.step);
+        let b = [self.sc[0], self.sc[1], sc2[0], sc2[1]];
+        self.sc = Self::rotate(sc2, self.step);
+        b
+    }
+}
+
 /// Eq. 8: the ray coefficients a_n(z_r) for the same n: a_{2k} = 2/c_k·cos(c_k z_r),
 /// a_{2k+1} = −2/c_k·sin(c_k z_r). Mirrors `coeff4`.
 pub fn coeff4(z: f32, layer: u32) -> [f32; 4] {
@@ -147,6 +176,7 @@ pub fn prefilter(
     let (w, h) = (rect.width as usize, rect.height as usize);
     let layers = settings.layers() as usize;
     let weighted = settings.transmittance_weights;
+    let group_layers = settings.bases_per_thread / 4;
     let rows: Vec<(Vec<[f32; 4]>, Vec<f32>)> = (0..h)
         .into_par_iter()
         .map(|row| {
@@ -162,8 +192,13 @@ pub fn prefilter(
                     sum += wt;
                     let f = if sum > 0.0 { wt / sum } else { 1.0 };
                     cumw[col as usize] = sum;
+                    let mut rotor = basis_rotor(z, 0);
                     for (l, fl) in filt.iter_mut().enumerate() {
-                        let b = basis4(z, l as u32);
+                        // Each thread group of prefilter.wgsl starts its own rotor.
+                        if l as u32 % group_layers == 0 {
+                            rotor = basis_rotor(z, l as u32);
+                        }
+                        let b = rotor.next4();
                         for c in 0..4 {
                             fl[c] += (b[c] - fl[c]) * f;
                         }

@@ -37,6 +37,22 @@ struct Column {
     col: f32,
 }
 
+// rectify.rs column_warp / column_unwarp: the epipolar map's columns, warped with knee k.
+fn column_warp(c: f32, c_max: f32, k: f32) -> f32 {
+    if k <= 0.0 {
+        return clamp(c / c_max, 0.0, 1.0);
+    }
+    return clamp(max(c, 0.0) / (max(c, 0.0) + k) * (c_max + k) / c_max, 0.0, 1.0);
+}
+
+fn column_unwarp(u: f32, c_max: f32, k: f32) -> f32 {
+    if k <= 0.0 {
+        return u * c_max;
+    }
+    let v = u * c_max / (c_max + k);
+    return k * v / max(1.0 - v, 1e-9);
+}
+
 fn column_of(p: Params, c: f32) -> Column {
     var out: Column;
     if p.ints.x == 0u {
@@ -52,7 +68,7 @@ fn column_of(p: Params, c: f32) -> Column {
         out.col = f32(ab.x) + u * f32(ab.y - ab.x);
         return out;
     }
-    let u = clamp(c / region_x(p, 1u), 0.0, 1.0);
+    let u = column_warp(c, region_x(p, 1u), region_x(p, 2u));
     let col = u * f32(p.ints.z);
     out.col = col;
     out.region = min(u32(col) * p.ints2.x / max(p.ints.z, 1u), p.ints2.x - 1u);
@@ -68,7 +84,7 @@ fn line_of_column(p: Params, col: f32) -> f32 {
         let x1 = region_x(p, r + 1u);
         return 1.0 / (1.0 / x0 - u * (1.0 / x0 - 1.0 / x1));
     }
-    return col / f32(p.ints.z) * region_x(p, 1u);
+    return column_unwarp(col / f32(p.ints.z), region_x(p, 1u), region_x(p, 2u));
 }
 
 const INF: f32 = 3.0e38;

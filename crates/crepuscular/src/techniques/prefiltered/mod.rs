@@ -17,6 +17,7 @@
 //!    visibility; a small disc around a visible light is ray-marched (§5, Fig. 8).
 
 pub mod cpu;
+pub mod debug;
 pub mod raster;
 pub mod rectify;
 pub mod settings;

@@ -81,8 +81,14 @@ fn prefilter(@builtin(global_invocation_id) id: vec3<u32>) {
         if group == 0u {
             textureStore(out_cumw, vec2<i32>(i32(col), i32(row)), vec4<f32>(sum, 0.0, 0.0, 0.0));
         }
+        // Eq. 8's bases of this group by rotation (cpu.rs basis_rotor): sin/cos of c_k·z for
+        // k = 2·l0 … from one sin/cos of the first harmonic and one of the step 2π·z.
+        var sc = vec2<f32>(sin(PI * f32(4u * l0 + 1u) * z), cos(PI * f32(4u * l0 + 1u) * z));
+        let step = vec2<f32>(sin(2.0 * PI * z), cos(2.0 * PI * z));
         for (var l = 0u; l < group_layers; l++) {
-            let b = basis4(z, l0 + l);
+            let sc2 = vec2<f32>(sc.x * step.y + sc.y * step.x, sc.y * step.y - sc.x * step.x);
+            let b = vec4<f32>(sc, sc2);
+            sc = vec2<f32>(sc2.x * step.y + sc2.y * step.x, sc2.y * step.y - sc2.x * step.x);
             filt[l] += (b - filt[l]) * fr;
             textureStore(out_basis, vec2<i32>(i32(col), i32(row)), i32(l0 + l), filt[l] * 0.5 + 0.5);
         }

@@ -353,7 +353,13 @@ impl Rectification {
             let cs = desc.camera.frustum_corners(desc.aspect(), desc.camera.near, desc.camera.far);
             cs.iter().map(|&p| (p - c).reject_from_normalized(a).length()).fold(1e-3, f32::max) * 1.001
         };
-        r.region_x = vec![0.0, c_max];
+        // Columns: for a directional light, warped so that half of them fall within the knee k
+        // — the side of the standard shadow map, i.e. the extent of the shadow casters — where
+        // the shafts are, instead of spreading evenly to the far plane (linear columns put the
+        // colonnade's whole shadow structure in its first 5 % of columns at far = 200 m). Our
+        // choice; §4.1 leaves the x parameterisation open. Local lights: ψ linear.
+        let knee = if r.local { 0.0 } else { (desc.shadow.texel_world * desc.shadow.size as f32).max(1e-3) };
+        r.region_x = vec![0.0, c_max, knee];
         // Per row: the θ interval of the slice inside the frustum, and its reference ray.
         let planes = frustum_side_normals(&corners);
         r.rows = (0..opt.height)
@@ -412,7 +418,7 @@ impl Rectification {
                 (r, a as f32 + u * (b - a) as f32)
             }
             Mode::Epipolar => {
-                let u = (c / self.region_x[1]).clamp(0.0, 1.0);
+                let u = column_warp(c, self.region_x[1], self.region_x[2]);
                 let col = u * self.width as f32;
                 let r = ((col as u32) * self.regions / self.width.max(1)).min(self.regions - 1);
                 (r, col)
@@ -431,7 +437,7 @@ impl Rectification {
                 let (x0, x1) = (self.region_x[r as usize], self.region_x[r as usize + 1]);
                 1.0 / (1.0 / x0 - u * (1.0 / x0 - 1.0 / x1))
             }
-            Mode::Epipolar => col / self.width as f32 * self.region_x[1],
+            Mode::Epipolar => column_unwarp(col / self.width as f32, self.region_x[1], self.region_x[2]),
         }
     }
 
@@ -584,6 +590,25 @@ impl Rectification {
             .collect();
         Some(RectifiedRaster { width: self.width, height: self.height, regions })
     }
+}
+
+/// The epipolar map's column coordinate u ∈ [0, 1] of the light line at `c` ∈ [0, c_max]:
+/// u = c/(c + k) · (c_max + k)/c_max, a projective warp with knee `k` (linear for k = 0).
+/// Mirrors `column_warp` in WGSL.
+pub fn column_warp(c: f32, c_max: f32, k: f32) -> f32 {
+    if k <= 0.0 {
+        return (c / c_max).clamp(0.0, 1.0);
+    }
+    (c.max(0.0) / (c.max(0.0) + k) * (c_max + k) / c_max).clamp(0.0, 1.0)
+}
+
+/// Inverse of [`column_warp`]. Mirrors `column_unwarp` in WGSL.
+pub fn column_unwarp(u: f32, c_max: f32, k: f32) -> f32 {
+    if k <= 0.0 {
+        return u * c_max;
+    }
+    let v = u * c_max / (c_max + k);
+    k * v / (1.0 - v).max(1e-9)
 }
 
 /// Inward normals of the frustum's four side planes from its corner rays (in order around it).

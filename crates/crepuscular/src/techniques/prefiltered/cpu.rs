@@ -356,6 +356,31 @@ pub fn evaluate(frame: &CpuFrame, settings: &PrefilteredSettings, p: &Passes, ep
     image
 }
 
+/// Pass `epipole` (the entry of that name in evaluate.wgsl): the pixels of the disc around a
+/// visible light, ray-marched with `epipole_steps` as `brute-force` marches them (§5).
+pub fn march_epipole(frame: &CpuFrame, settings: &PrefilteredSettings, epipole: Option<[f32; 2]>, image: &mut Image) {
+    let desc = frame.desc;
+    let inv = desc.camera.view_projection(desc.aspect()).inverse();
+    let cone = frame_cone(desc);
+    let march = PixelMarch {
+        steps: settings.epipole_steps,
+        jitter: false,
+        frame_index: 0,
+        spot_steps: settings.spot_steps,
+        spot_denominator: settings.spot_denominator,
+    };
+    for y in 0..desc.height {
+        for x in 0..desc.width {
+            if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
+                let dir = desc.pixel_ray(&inv, x, y);
+                let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
+                let l = march_pixel(frame, cone.as_ref(), &march, x, y, dir, s);
+                image.pixels[(y * desc.width + x) as usize] = [l.x, l.y, l.z, 1.0];
+            }
+        }
+    }
+}
+
 /// Mirrors `in_epipole_disc` in evaluate.wgsl.
 pub fn in_epipole_disc(epipole: Option<[f32; 2]>, radius: u32, x: u32, y: u32) -> bool {
     let Some([ex, ey]) = epipole else { return false };
@@ -388,8 +413,14 @@ pub fn passes(frame: &CpuFrame, settings: &PrefilteredSettings, host_depth: Opti
     timed("prefilter", t);
     let t = std::time::Instant::now();
     let mut p = Passes { rect, depth, basis, cumw, image: Image::new(1, 1) };
-    p.image = evaluate(frame, settings, &p, epipole_pixel(desc, settings.epipole_radius));
+    let epipole = epipole_pixel(desc, settings.epipole_radius);
+    p.image = evaluate(frame, settings, &p, None);
     timed("evaluate", t);
+    if epipole.is_some() {
+        let t = std::time::Instant::now();
+        march_epipole(frame, settings, epipole, &mut p.image);
+        timed("epipole", t);
+    }
     Ok((p, times))
 }
 

@@ -112,14 +112,29 @@ fn evaluate(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let px = id.xy;
+    // The epipole disc is the `epipole` pass's.
+    if in_epipole_disc(params, px) {
+        return;
+    }
     let dir = pixel_ray(frame, px);
     let s = view_distance(frame, textureLoad(depth_tex, vec2<i32>(px), 0).r, dir);
-    var l = vec3<f32>(0.0);
-    if in_epipole_disc(params, px) {
-        l = march_pixel(frame, shadow_map, spot_tex, px, dir, s, params.ints3.y, 0u, 0u, params.ints3.w, params.epipole.w);
-    } else {
-        let rp = rectify_point(params, frame.camera_pos.xyz + dir * s, dir);
-        l = unoccluded_inscatter(frame, params, dir, s) * prefiltered_visibility(params, rp.row, rp.col, rp.region, rp.z);
+    let rp = rectify_point(params, frame.camera_pos.xyz + dir * s, dir);
+    let l = unoccluded_inscatter(frame, params, dir, s) * prefiltered_visibility(params, rp.row, rp.col, rp.region, rp.z);
+    textureStore(out_tex, vec2<i32>(px), vec4<f32>(l, 1.0));
+}
+
+// The pixels of the epipole disc, ray-marched (§5): dispatched over the disc's bounding box only
+// (its first pixel is the disc's, see `Prefiltered::render_with`).
+@compute @workgroup_size(8, 8)
+fn epipole(@builtin(global_invocation_id) id: vec3<u32>) {
+    let r = f32(params.ints3.x);
+    let origin = vec2<u32>(max(floor(params.epipole.xy - r), vec2<f32>(0.0)));
+    let px = origin + id.xy;
+    if px.x >= frame.ints.x || px.y >= frame.ints.y || !in_epipole_disc(params, px) {
+        return;
     }
+    let dir = pixel_ray(frame, px);
+    let s = view_distance(frame, textureLoad(depth_tex, vec2<i32>(px), 0).r, dir);
+    let l = march_pixel(frame, shadow_map, spot_tex, px, dir, s, params.ints3.y, 0u, 0u, params.ints3.w, params.epipole.w);
     textureStore(out_tex, vec2<i32>(px), vec4<f32>(l, 1.0));
 }

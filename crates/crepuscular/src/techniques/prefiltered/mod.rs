@@ -14,7 +14,9 @@
 //! 2. `prefilter` (prefilter.wgsl): basis transform fused with the weighted prefix sum, one
 //!    thread per row × region × group of bases.
 //! 3. `evaluate` (evaluate.wgsl): per pixel, the unoccluded in-scattering times the prefiltered
-//!    visibility; a small disc around a visible light is ray-marched (§5, Fig. 8).
+//!    visibility.
+//! 4. `epipole` (evaluate.wgsl): a small disc around a visible light is ray-marched instead
+//!    (§5, Fig. 8), dispatched over the disc's bounding box only.
 
 pub mod cpu;
 pub mod debug;
@@ -44,11 +46,12 @@ pub const PREFILTER_WGSL: &str = include_str!("prefilter.wgsl");
 pub const EVALUATE_WGSL: &str = include_str!("evaluate.wgsl");
 
 /// The pass shaders: (name, source with the geometry prepended and the 8-bit format, entry).
-pub fn shaders() -> [(&'static str, String, &'static str); 3] {
+pub fn shaders() -> [(&'static str, String, &'static str); 4] {
     [
         ("prefiltered/rectify", pass_source(RECTIFY_WGSL, BasisPrecision::Unorm8), "rectify"),
         ("prefiltered/prefilter", pass_source(PREFILTER_WGSL, BasisPrecision::Unorm8), "prefilter"),
         ("prefiltered/evaluate", pass_source(EVALUATE_WGSL, BasisPrecision::Unorm8), "evaluate"),
+        ("prefiltered/epipole", pass_source(EVALUATE_WGSL, BasisPrecision::Unorm8), "epipole"),
     ]
 }
 
@@ -131,6 +134,7 @@ pub struct Prefiltered {
     rectify_pipeline: wgpu::ComputePipeline,
     prefilter_pipeline: wgpu::ComputePipeline,
     evaluate_pipeline: wgpu::ComputePipeline,
+    epipole_pipeline: wgpu::ComputePipeline,
     rectify_layout: wgpu::BindGroupLayout,
     prefilter_layout: wgpu::BindGroupLayout,
     evaluate_layout: wgpu::BindGroupLayout,
@@ -227,6 +231,7 @@ impl Prefiltered {
             let rectify_pipeline = pipe("prefiltered/rectify.wgsl", RECTIFY_WGSL, "rectify", &rectify_layout);
             let prefilter_pipeline = pipe("prefiltered/prefilter.wgsl", PREFILTER_WGSL, "prefilter", &prefilter_layout);
             let evaluate_pipeline = pipe("prefiltered/evaluate.wgsl", EVALUATE_WGSL, "evaluate", &evaluate_layout);
+            let epipole_pipeline = pipe("prefiltered/evaluate.wgsl", EVALUATE_WGSL, "epipole", &evaluate_layout);
             let sampler = |mode| {
                 device.create_sampler(&wgpu::SamplerDescriptor {
                     label: Some("prefiltered basis"),
@@ -243,6 +248,7 @@ impl Prefiltered {
                 rectify_pipeline,
                 prefilter_pipeline,
                 evaluate_pipeline,
+                epipole_pipeline,
                 rectify_layout,
                 prefilter_layout,
                 evaluate_layout,
@@ -382,7 +388,7 @@ impl Prefiltered {
             let evaluate = bind("prefiltered evaluate", &self.evaluate_layout, &entries);
             (rectify, prefilter, evaluate)
         })?;
-        let mut timer = PassTimer::new(gpu, 3);
+        let mut timer = PassTimer::new(gpu, 4);
         if host.is_none() {
             timer.pass(gpu, "rectify", |enc, ts| {
                 let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -414,6 +420,24 @@ impl Prefiltered {
             p.set_bind_group(0, &evaluate_bind, &[]);
             p.dispatch_workgroups(desc.width.div_ceil(8), desc.height.div_ceil(8), 1);
         })?;
+        if let (Some([ex, ey]), true) = (epipole, s.epipole_radius > 0) {
+            let r = s.epipole_radius as f32;
+            let (x0, y0) = ((ex - r).floor().max(0.0), (ey - r).floor().max(0.0));
+            let x1 = (ex + r).ceil().clamp(0.0, desc.width as f32);
+            let y1 = (ey + r).ceil().clamp(0.0, desc.height as f32);
+            if x1 > x0 && y1 > y0 {
+                let (bw, bh) = ((x1 - x0) as u32 + 1, (y1 - y0) as u32 + 1);
+                timer.pass(gpu, "epipole", |enc, ts| {
+                    let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                        label: Some("prefiltered epipole"),
+                        timestamp_writes: ts.map(|t| t.compute()),
+                    });
+                    p.set_pipeline(&self.epipole_pipeline);
+                    p.set_bind_group(0, &evaluate_bind, &[]);
+                    p.dispatch_workgroups(bw.div_ceil(8), bh.div_ceil(8), 1);
+                })?;
+            }
+        }
         let mode = timer.mode().to_string();
         let passes = timer.finish(gpu)?;
         let extra = stats_extra(&s, &rect, host.is_some());

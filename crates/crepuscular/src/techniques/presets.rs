@@ -140,18 +140,20 @@ impl Preset {
         }
     }
 
-    /// `prefiltered`: a 512² map with M = 16 bases / the defaults (1024², M = 32) / a 2048² map
-    /// with M = 64 and a 16-pixel ray-marched epipole disc; the disc marches 32 / 64 / 256 steps.
+    /// `prefiltered`: a 512² map, M = 16, one band (the paper's single reference ray) / the
+    /// defaults (1024², M = 32, 4 bands) / a 2048² map, M = 64, 8 bands and a 16-pixel
+    /// ray-marched epipole disc; the disc marches 32 / 64 / 256 steps.
     pub fn prefiltered(self) -> PrefilteredSettings {
         let d = PrefilteredSettings::default();
-        let (map, bases, radius) = match self {
-            Preset::Fast => (512, 16, d.epipole_radius),
-            Preset::Balanced => (d.map_size[0], d.bases, d.epipole_radius),
-            Preset::ReferenceLike => (2048, 64, 16),
+        let (map, bases, bands, radius) = match self {
+            Preset::Fast => (512, 16, 1, d.epipole_radius),
+            Preset::Balanced => (d.map_size[0], d.bases, d.bands, d.epipole_radius),
+            Preset::ReferenceLike => (2048, 64, 8, 16),
         };
         PrefilteredSettings {
             map_size: [map, map],
             bases,
+            bands,
             bases_per_thread: d.bases_per_thread.min(bases),
             epipole_radius: radius,
             epipole_steps: self.steps(),

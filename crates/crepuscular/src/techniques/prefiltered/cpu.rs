@@ -23,10 +23,13 @@ pub struct Passes {
     pub rect: Rectification,
     /// The rectified shadow map: normalised depths, `width × height`, row-major.
     pub depth: Vec<f32>,
-    /// The filtered bases as stored (in [0, 1]): `layers × height × width` RGBA texels.
+    /// The filtered bases as stored (in [0, 1]): `sets × layers × height × width` RGBA texels
+    /// (a set per band and colour channel, set = band·channels + channel).
     pub basis: Vec<[f32; 4]>,
-    /// The running weight sum of each region's prefix sum, `width × height`.
+    /// The running weight sum of each region's prefix sum, `sets × height × width`.
     pub cumw: Vec<f32>,
+    /// Colour channels with their own weights (1 or 3).
+    pub channels: u32,
     /// The in-scattering.
     pub image: Image,
 }
@@ -137,13 +140,23 @@ pub fn texel_depth(rect: &Rectification, stored: f32, col: u32, bias: Option<f32
 /// texel reaches back to the camera); for a local light that times the light's falloff, cone
 /// and phase function at the segment's midpoint (§3.2, "Angular-dependency").
 /// Mirrors `texel_weight` in prefilter.wgsl.
-pub fn texel_weight(desc: &FrameDesc, rect: &Rectification, weighted: bool, row: u32, col: u32) -> f32 {
+#[allow(clippy::too_many_arguments)]
+pub fn texel_weight(
+    desc: &FrameDesc,
+    rect: &Rectification,
+    weighted: bool,
+    row: u32,
+    band: u32,
+    channel: u32,
+    channels: u32,
+    col: u32,
+) -> f32 {
     if !weighted {
         return 1.0;
     }
     let sigma = mean_extinction(desc);
-    let ta = if col == 0 { 0.0 } else { rect.reference_distance(row, col as f32) };
-    let tb = rect.reference_distance(row, col as f32 + 1.0);
+    let ta = if col == 0 { 0.0 } else { rect.reference_distance(row, band, col as f32) };
+    let tb = rect.reference_distance(row, band, col as f32 + 1.0);
     if !ta.is_finite() {
         return 0.0;
     }
@@ -154,11 +167,12 @@ pub fn texel_weight(desc: &FrameDesc, rect: &Rectification, weighted: bool, row:
         return 0.0;
     }
     let tm = 0.5 * (ta + tb);
-    let dir = rect.reference_dir(row);
+    let dir = rect.reference_dir(row, band);
     let p = rect.camera + dir * tm;
     let (l_in, wl) = light_incident(&desc.light, &desc.medium, &desc.shadow.view_proj[0], p);
     let ph = desc.medium.phase.eval(wl.dot(-dir));
-    let lum = (l_in * ph).dot(Vec3::splat(1.0 / 3.0));
+    let c = l_in * ph;
+    let lum = if channels == 3 { c[channel as usize] } else { c.dot(Vec3::splat(1.0 / 3.0)) };
     lum * (-sigma * tm).exp() * (tb - ta)
 }
 
@@ -177,45 +191,54 @@ pub fn prefilter(
     let layers = settings.layers() as usize;
     let weighted = settings.transmittance_weights;
     let group_layers = settings.bases_per_thread / 4;
+    let channels = settings.channels(&desc.light);
+    let sets = (rect.bands * channels) as usize;
+    // Per row: (sets × layers × width bases, sets × width weight sums).
     let rows: Vec<(Vec<[f32; 4]>, Vec<f32>)> = (0..h)
         .into_par_iter()
         .map(|row| {
-            let mut basis = vec![[0.0f32; 4]; layers * w];
-            let mut cumw = vec![0.0f32; w];
-            for region in 0..rect.regions {
-                let [c0, c1] = rect.region_columns(region);
-                let mut filt = vec![[0.0f32; 4]; layers];
-                let mut sum = 0.0f32;
-                for col in c0..c1 {
-                    let z = basis_z(texel_depth(rect, depth[row * w + col as usize], col, host_bias));
-                    let wt = texel_weight(desc, rect, weighted, row as u32, col);
-                    sum += wt;
-                    let f = if sum > 0.0 { wt / sum } else { 1.0 };
-                    cumw[col as usize] = sum;
-                    let mut rotor = basis_rotor(z, 0);
-                    for (l, fl) in filt.iter_mut().enumerate() {
-                        // Each thread group of prefilter.wgsl starts its own rotor.
-                        if l as u32 % group_layers == 0 {
-                            rotor = basis_rotor(z, l as u32);
+            let mut basis = vec![[0.0f32; 4]; sets * layers * w];
+            let mut cumw = vec![0.0f32; sets * w];
+            for set in 0..sets {
+                let (band, channel) = (set as u32 / channels, set as u32 % channels);
+                for region in 0..rect.regions {
+                    let [c0, c1] = rect.region_columns(region);
+                    let mut filt = vec![[0.0f32; 4]; layers];
+                    let mut sum = 0.0f32;
+                    for col in c0..c1 {
+                        let z = basis_z(texel_depth(rect, depth[row * w + col as usize], col, host_bias));
+                        let wt = texel_weight(desc, rect, weighted, row as u32, band, channel, channels, col);
+                        sum += wt;
+                        let f = if sum > 0.0 { wt / sum } else { 1.0 };
+                        cumw[set * w + col as usize] = sum;
+                        let mut rotor = basis_rotor(z, 0);
+                        for (l, fl) in filt.iter_mut().enumerate() {
+                            // Each thread group of prefilter.wgsl starts its own rotor.
+                            if l as u32 % group_layers == 0 {
+                                rotor = basis_rotor(z, l as u32);
+                            }
+                            let b = rotor.next4();
+                            for c in 0..4 {
+                                fl[c] += (b[c] - fl[c]) * f;
+                            }
+                            basis[(set * layers + l) * w + col as usize] =
+                                fl.map(|v| settings.precision.quantise(v * 0.5 + 0.5));
                         }
-                        let b = rotor.next4();
-                        for c in 0..4 {
-                            fl[c] += (b[c] - fl[c]) * f;
-                        }
-                        basis[l * w + col as usize] = fl.map(|v| settings.precision.quantise(v * 0.5 + 0.5));
                     }
                 }
             }
             (basis, cumw)
         })
         .collect();
-    let mut basis = vec![[0.0f32; 4]; layers * w * h];
-    let mut cumw = vec![0.0f32; w * h];
+    let mut basis = vec![[0.0f32; 4]; sets * layers * w * h];
+    let mut cumw = vec![0.0f32; sets * w * h];
     for (row, (b, c)) in rows.into_iter().enumerate() {
-        for l in 0..layers {
-            basis[(l * h + row) * w..(l * h + row + 1) * w].copy_from_slice(&b[l * w..(l + 1) * w]);
+        for sl in 0..sets * layers {
+            basis[(sl * h + row) * w..(sl * h + row + 1) * w].copy_from_slice(&b[sl * w..(sl + 1) * w]);
         }
-        cumw[row * w..(row + 1) * w].copy_from_slice(&c);
+        for set in 0..sets {
+            cumw[(set * h + row) * w..(set * h + row + 1) * w].copy_from_slice(&c[set * w..(set + 1) * w]);
+        }
     }
     (basis, cumw)
 }
@@ -247,17 +270,18 @@ fn bilinear<T: Copy>(get: impl Fn(usize, usize) -> T, lerp: impl Fn(T, T, f32) -
 /// The prefiltered average visibility of a ray of depth `z` (normalised) ending at column `col`,
 /// row `row`, region `region` (Listing 4; with regions, the weight-sum-weighted mean of one
 /// lookup per region, §3.3). Clamped to [0, 1] (Appendix A). Mirrors `prefiltered_visibility`.
-pub fn prefiltered_visibility(p: &Passes, bases: u32, row: f32, col: f32, region: u32, z: f32) -> f32 {
+pub fn prefiltered_visibility(p: &Passes, bases: u32, set: u32, row: f32, col: f32, region: u32, z: f32) -> f32 {
     let rect = &p.rect;
     let (w, h) = (rect.width as usize, rect.height as usize);
     let zs = basis_z(z);
     let layers = bases / 4;
+    let first = (set * layers) as usize;
     let coeffs: Vec<[f32; 4]> = (0..layers).map(|l| coeff4(zs, l)).collect();
     let lerp4 = |a: [f32; 4], b: [f32; 4], t: f32| [0, 1, 2, 3].map(|i| a[i] + (b[i] - a[i]) * t);
     let vis_at = |fp| {
         let mut v = 0.5;
         for (l, a) in coeffs.iter().enumerate() {
-            let b = bilinear(|x, y| p.basis[(l * h + y) * w + x], lerp4, fp);
+            let b = bilinear(|x, y| p.basis[((first + l) * h + y) * w + x], lerp4, fp);
             for c in 0..4 {
                 v += a[c] * (2.0 * b[c] - 1.0);
             }
@@ -275,7 +299,7 @@ pub fn prefiltered_visibility(p: &Passes, bases: u32, row: f32, col: f32, region
         if rect.regions == 1 {
             return v.clamp(0.0, 1.0);
         }
-        let wt = bilinear(|x, y| p.cumw[y * w + x], lerp1, fp);
+        let wt = bilinear(|x, y| p.cumw[(set as usize * h + y) * w + x], lerp1, fp);
         num += wt * v;
         den += wt;
     }
@@ -322,6 +346,24 @@ pub fn unoccluded_inscatter(desc: &FrameDesc, settings: &PrefilteredSettings, di
     sum
 }
 
+/// The prefiltered visibility of a view ray (unit `dir`) ending at `pt`, per colour channel:
+/// [`prefiltered_visibility`] of the two bands around the ray, blended (one value for all
+/// channels unless the light has per-channel weights). Mirrors `ray_visibility`.
+pub fn ray_visibility(p: &Passes, bases: u32, pt: Vec3, dir: Vec3) -> Vec3 {
+    let (row, col, region, z) = p.rect.rectify_point(pt, dir);
+    let (b0, b1, f) = p.rect.band_bracket(row, dir);
+    let ch = p.channels;
+    let vis = |c: u32| {
+        let v0 = prefiltered_visibility(p, bases, b0 * ch + c, row, col, region, z);
+        if b1 == b0 {
+            return v0;
+        }
+        let v1 = prefiltered_visibility(p, bases, b1 * ch + c, row, col, region, z);
+        v0 + (v1 - v0) * f
+    };
+    if ch == 3 { Vec3::new(vis(0), vis(1), vis(2)) } else { Vec3::splat(vis(0)) }
+}
+
 /// Pass `evaluate` (Listing 4): per pixel, the unoccluded in-scattering times the prefiltered
 /// visibility; pixels within `epipole_radius` of the visible light are ray-marched instead (§5).
 /// Mirrors evaluate.wgsl.
@@ -346,9 +388,8 @@ pub fn evaluate(frame: &CpuFrame, settings: &PrefilteredSettings, p: &Passes, ep
             let l = if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
                 march_pixel(frame, cone.as_ref(), &march, x, y, dir, s)
             } else {
-                let (row, col, region, z) = p.rect.rectify_point(desc.camera.position + dir * s, dir);
                 unoccluded_inscatter(desc, settings, dir, s)
-                    * prefiltered_visibility(p, settings.bases, row, col, region, z)
+                    * ray_visibility(p, settings.bases, desc.camera.position + dir * s, dir)
             };
             *out = [l.x, l.y, l.z, 1.0];
         }
@@ -412,7 +453,8 @@ pub fn passes(frame: &CpuFrame, settings: &PrefilteredSettings, host_depth: Opti
     let (basis, cumw) = prefilter(desc, &rect, settings, &depth, host.map(|_| desc.shadow_bias));
     timed("prefilter", t);
     let t = std::time::Instant::now();
-    let mut p = Passes { rect, depth, basis, cumw, image: Image::new(1, 1) };
+    let channels = settings.channels(&desc.light);
+    let mut p = Passes { rect, depth, basis, cumw, channels, image: Image::new(1, 1) };
     let epipole = epipole_pixel(desc, settings.epipole_radius);
     p.image = evaluate(frame, settings, &p, None);
     timed("evaluate", t);

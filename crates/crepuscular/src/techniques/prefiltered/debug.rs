@@ -3,15 +3,15 @@
 //! CPU's, or the GPU's maps read back with [`super::Prefiltered::read_maps`] and put into a
 //! [`Passes`] by [`passes_from_gpu`]).
 
-use super::cpu::{Passes, in_epipole_disc, prefiltered_visibility};
+use super::cpu::{Passes, in_epipole_disc, ray_visibility};
 use super::rectify::Rectification;
 use crate::frame::FrameDesc;
 use crate::image::Image;
 
 /// A [`Passes`] from the maps the GPU read back (the in-scattering left empty).
-pub fn passes_from_gpu(rect: Rectification, maps: (Vec<f32>, Vec<[f32; 4]>, Vec<f32>)) -> Passes {
+pub fn passes_from_gpu(rect: Rectification, channels: u32, maps: (Vec<f32>, Vec<[f32; 4]>, Vec<f32>)) -> Passes {
     let (depth, basis, cumw) = maps;
-    Passes { rect, depth, basis, cumw, image: Image::new(1, 1) }
+    Passes { rect, depth, basis, cumw, channels, image: Image::new(1, 1) }
 }
 
 /// The rectified shadow map: one row per epipolar slice, view rays running left to right,
@@ -37,7 +37,8 @@ pub fn basis_view(p: &Passes, layer: u32) -> Image {
     img
 }
 
-/// The prefiltered average visibility of every pixel's view ray (Listing 4's `avgVis`), grey;
+/// The prefiltered average visibility of every pixel's view ray (Listing 4's `avgVis`; per
+/// channel with RGB spot weights);
 /// pixels of the epipole disc, which are ray-marched instead, in red.
 pub fn visibility_view(p: &Passes, desc: &FrameDesc, depth: &[f32], bases: u32, epipole: Option<[f32; 2]>, radius: u32) -> Image {
     let inv = desc.camera.view_projection(desc.aspect()).inverse();
@@ -51,9 +52,8 @@ pub fn visibility_view(p: &Passes, desc: &FrameDesc, depth: &[f32], bases: u32, 
             }
             let dir = desc.pixel_ray(&inv, x, y);
             let s = desc.view_distance(depth[i], dir);
-            let (row, col, region, z) = p.rect.rectify_point(desc.camera.position + dir * s, dir);
-            let v = prefiltered_visibility(p, bases, row, col, region, z);
-            img.pixels[i] = [v, v, v, 1.0];
+            let v = ray_visibility(p, bases, desc.camera.position + dir * s, dir);
+            img.pixels[i] = [v.x, v.y, v.z, 1.0];
         }
     }
     img

@@ -13,14 +13,18 @@
 @group(0) @binding(6) var<storage, read> rows: array<f32>;
 @group(0) @binding(7) var basis_tex: texture_2d_array<f32>;
 @group(0) @binding(8) var basis_sampler: sampler;
-@group(0) @binding(9) var cumw_tex: texture_2d<f32>;
+@group(0) @binding(9) var cumw_tex: texture_2d_array<f32>;
+
+fn band_value(i: u32) -> f32 {
+    return rows[i];
+}
 
 // cpu.rs footprint: the lookup position (texel space) of the prefix ending at column `col`.
 fn lookup_pos(p: Params, col: f32, row: f32, c0: u32, c1: u32) -> vec2<f32> {
     return vec2<f32>(clamp(col - 1.0, f32(c0), f32(c1 - 1u)), row - 0.5);
 }
 
-fn load_cumw(p: Params, pos: vec2<f32>) -> f32 {
+fn load_cumw(p: Params, wset: u32, pos: vec2<f32>) -> f32 {
     let x0 = floor(pos.x);
     let y0 = floor(pos.y);
     let fr = pos - vec2<f32>(x0, y0);
@@ -36,22 +40,24 @@ fn load_cumw(p: Params, pos: vec2<f32>) -> f32 {
         ya = clamp(ya, 0, h - 1);
         yb = clamp(yb, 0, h - 1);
     }
-    let a = mix(textureLoad(cumw_tex, vec2<i32>(xa, ya), 0).r, textureLoad(cumw_tex, vec2<i32>(xb, ya), 0).r, fr.x);
-    let b = mix(textureLoad(cumw_tex, vec2<i32>(xa, yb), 0).r, textureLoad(cumw_tex, vec2<i32>(xb, yb), 0).r, fr.x);
+    let s = i32(wset);
+    let a = mix(textureLoad(cumw_tex, vec2<i32>(xa, ya), s, 0).r, textureLoad(cumw_tex, vec2<i32>(xb, ya), s, 0).r, fr.x);
+    let b = mix(textureLoad(cumw_tex, vec2<i32>(xa, yb), s, 0).r, textureLoad(cumw_tex, vec2<i32>(xb, yb), s, 0).r, fr.x);
     return mix(a, b, fr.y);
 }
 
-fn vis_at(p: Params, pos: vec2<f32>, zs: f32) -> f32 {
+fn vis_at(p: Params, wset: u32, pos: vec2<f32>, zs: f32) -> f32 {
     let uv = (pos + 0.5) / vec2<f32>(f32(p.ints.z), f32(p.ints.w));
     var v = 0.5;
-    for (var l = 0u; l < p.ints2.y / 4u; l++) {
-        let b = textureSampleLevel(basis_tex, basis_sampler, uv, i32(l), 0.0);
+    let layers = p.ints2.y / 4u;
+    for (var l = 0u; l < layers; l++) {
+        let b = textureSampleLevel(basis_tex, basis_sampler, uv, i32(wset * layers + l), 0.0);
         v += dot(coeff4(zs, l), 2.0 * b - 1.0);
     }
     return v;
 }
 
-fn prefiltered_visibility(p: Params, row: f32, col: f32, region: u32, z: f32) -> f32 {
+fn prefiltered_visibility(p: Params, wset: u32, row: f32, col: f32, region: u32, z: f32) -> f32 {
     let zs = basis_z(z);
     var num = 0.0;
     var den = 0.0;
@@ -62,11 +68,11 @@ fn prefiltered_visibility(p: Params, row: f32, col: f32, region: u32, z: f32) ->
             at = col;
         }
         let pos = lookup_pos(p, at, row, cols.x, cols.y);
-        let v = vis_at(p, pos, zs);
+        let v = vis_at(p, wset, pos, zs);
         if p.ints2.x == 1u {
             return clamp(v, 0.0, 1.0);
         }
-        let wt = load_cumw(p, pos);
+        let wt = load_cumw(p, wset, pos);
         num += wt * v;
         den += wt;
     }
@@ -75,6 +81,27 @@ fn prefiltered_visibility(p: Params, row: f32, col: f32, region: u32, z: f32) ->
         v = num / den;
     }
     return clamp(v, 0.0, 1.0);
+}
+
+// cpu.rs ray_visibility: the two bands around the ray, blended; per channel with RGB weights.
+fn ray_visibility(p: Params, pt: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
+    let rp = rectify_point(p, pt, dir);
+    let row = min(u32(max(rp.row, 0.0)), p.ints.w - 1u);
+    let br = band_bracket(p, row, dir);
+    let ch = p.ints4.y;
+    var out = vec3<f32>(0.0);
+    for (var c = 0u; c < ch; c++) {
+        var v = prefiltered_visibility(p, br.b0 * ch + c, rp.row, rp.col, rp.region, rp.z);
+        if br.b1 != br.b0 {
+            let v1 = prefiltered_visibility(p, br.b1 * ch + c, rp.row, rp.col, rp.region, rp.z);
+            v = v + (v1 - v) * br.f;
+        }
+        out[c] = v;
+    }
+    if ch == 1u {
+        return vec3<f32>(out.x);
+    }
+    return out;
 }
 
 fn unoccluded_inscatter(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> vec3<f32> {
@@ -118,8 +145,7 @@ fn evaluate(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let dir = pixel_ray(frame, px);
     let s = view_distance(frame, textureLoad(depth_tex, vec2<i32>(px), 0).r, dir);
-    let rp = rectify_point(params, frame.camera_pos.xyz + dir * s, dir);
-    let l = unoccluded_inscatter(frame, params, dir, s) * prefiltered_visibility(params, rp.row, rp.col, rp.region, rp.z);
+    let l = unoccluded_inscatter(frame, params, dir, s) * ray_visibility(params, frame.camera_pos.xyz + dir * s, dir);
     textureStore(out_tex, vec2<i32>(px), vec4<f32>(l, 1.0));
 }
 

@@ -11,6 +11,7 @@ struct Params {
     ranges: vec4<f32>, // projective (q0, q1, r0, r1); epipolar (phi0, phi1, theta0, theta1)
     epipole: vec4<f32>, // epipole pixel xy, volume bias, App. B denominator
     region_x: array<vec4<f32>, 3>,
+    ints4: vec4<u32>,  // bands, channels, 0, 0
 }
 
 const Z_MARGIN: f32 = 0.0625;
@@ -180,4 +181,50 @@ fn coeff4(z: f32, layer: u32) -> vec4<f32> {
     let c0 = PI * f32(2u * k0 + 1u);
     let c1 = PI * f32(2u * k0 + 3u);
     return vec4<f32>(2.0 / c0 * cos(c0 * z), -2.0 / c0 * sin(c0 * z), 2.0 / c1 * cos(c1 * z), -2.0 / c1 * sin(c1 * z));
+}
+
+struct Bracket {
+    b0: u32,
+    b1: u32,
+    f: f32,
+}
+
+// rectify.rs Rectification::band_bracket: the bands around a view ray, from the nearest row's.
+fn band_bracket(p: Params, rows_row: u32, dir: vec3<f32>) -> Bracket {
+    var br: Bracket;
+    br.b0 = 0u;
+    br.b1 = 0u;
+    br.f = 0.0;
+    let nb = p.ints4.x;
+    if nb == 1u {
+        return br;
+    }
+    var param = 0.0;
+    let geometric = p.ints.x == 1u;
+    if geometric {
+        param = acos(clamp(dot(dir, p.axes[2].xyz), -1.0, 1.0));
+    } else {
+        param = dot(dir, p.axes[2].xyz) / max(dot(dir, p.axes[0].xyz), 1e-6);
+    }
+    let base = rows_row * nb;
+    if param <= band_value(base) {
+        return br;
+    }
+    for (var b = 0u; b + 1u < nb; b++) {
+        let a = band_value(base + b);
+        let c = band_value(base + b + 1u);
+        if param < c {
+            br.b0 = b;
+            br.b1 = b + 1u;
+            if geometric {
+                br.f = clamp(log(max(param, 1e-6) / a) / log(c / a), 0.0, 1.0);
+            } else {
+                br.f = clamp((param - a) / (c - a), 0.0, 1.0);
+            }
+            return br;
+        }
+    }
+    br.b0 = nb - 1u;
+    br.b1 = nb - 1u;
+    return br;
 }

@@ -125,6 +125,7 @@ struct Maps {
     basis_sample: wgpu::TextureView,
     cumw_view: wgpu::TextureView,
     key: (u32, u32, u32, BasisPrecision),
+    sets: u32,
 }
 
 /// The GPU side of `prefiltered`: three pipelines, buffers, samplers and the map textures.
@@ -169,7 +170,7 @@ fn prefilter_layout(device: &wgpu::Device, precision: BasisPrecision) -> wgpu::B
             pass::storage_buffer_entry(3, true, None),
             pass::texture_entry(4, D::D2),
             storage_entry(5, precision.format(), D::D2Array),
-            storage_entry(6, wgpu::TextureFormat::R32Float, D::D2),
+            storage_entry(6, wgpu::TextureFormat::R32Float, D::D2Array),
         ],
     })
 }
@@ -222,7 +223,7 @@ impl Prefiltered {
                         ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                         count: None,
                     },
-                    pass::texture_entry(9, D::D2),
+                    pass::texture_entry(9, D::D2Array),
                 ],
             );
             let pipe = |label: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
@@ -281,17 +282,21 @@ impl Prefiltered {
     pub fn gpu_memory_bytes(&self) -> u64 {
         let maps = self.maps.as_ref().map_or(0, |m| {
             let (w, h, layers, p) = m.key;
-            w as u64 * h as u64 * (layers as u64 * 4 * p.bytes() + 8)
+            w as u64 * h as u64 * (layers as u64 * 4 * p.bytes() + 4 + 4 * m.sets as u64)
         });
         maps + self.rows_buffer.as_ref().map_or(0, |b| b.size()) + self.frame_buffer.size() + self.params_buffer.size() + 16
     }
 
-    /// Reads back the last frame's maps for tests and debug views: the rectified depth
-    /// (`width × height`), the stored bases (`layers × height × width` RGBA) and the weight sums.
+    /// Reads back the last frame's maps for tests and debug views, laid out as
+    /// [`cpu::Passes`]: the rectified depth (`width × height`), the stored bases
+    /// (`sets × layers × height × width` RGBA) and the weight sums (`sets × height × width`).
     pub fn read_maps(&self, gpu: &GpuContext) -> Result<(Vec<f32>, Vec<[f32; 4]>, Vec<f32>), Error> {
         let m = self.maps.as_ref().ok_or_else(|| Error::invalid("prefiltered maps", "none", "render a frame first"))?;
         let depth = gpu.read_texture_f32(&m.depth, 0)?;
-        let cumw = gpu.read_texture_f32(&m.cumw, 0)?;
+        let mut cumw = Vec::new();
+        for set in 0..m.sets {
+            cumw.extend(gpu.read_texture_f32(&m.cumw, set)?);
+        }
         let (w, h, layers, p) = m.key;
         let mut basis = Vec::with_capacity((w * h * layers) as usize);
         for l in 0..layers {
@@ -327,11 +332,12 @@ impl Prefiltered {
         }
         let rect = Rectification::new(desc, &s.rectify_options());
         let host = host_depth.filter(|_| rect.mode == Mode::Projective);
-        let key = (w, h, s.layers(), s.precision);
-        if self.maps.as_ref().is_none_or(|m| m.key != key) {
-            self.maps = Some(gpu.scoped("allocating the prefiltered maps", || allocate_maps(&gpu.device, key))?);
+        let sets = s.sets(&desc.light);
+        let key = (w, h, s.layers() * sets, s.precision);
+        if self.maps.as_ref().is_none_or(|m| m.key != key || m.sets != sets) {
+            self.maps = Some(gpu.scoped("allocating the prefiltered maps", || allocate_maps(&gpu.device, key, sets))?);
         }
-        let rows_size = (h as u64 * 4).max(16);
+        let rows_size = (rect.rows.len() as u64 * 4).max(16);
         if self.rows_buffer.as_ref().is_none_or(|b| b.size() != rows_size) {
             self.rows_buffer = Some(gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("prefiltered rows"),
@@ -343,7 +349,9 @@ impl Prefiltered {
         let rows = self.rows_buffer.as_ref().expect("allocated above");
         gpu.queue.write_buffer(rows, 0, bytemuck::cast_slice(&rect.rows));
         let epipole = epipole_pixel(desc, s.epipole_radius);
-        let params = PrefilteredParams::new(&s, &rect, mean_extinction(desc), desc.shadow_bias, epipole, host.is_some());
+        let channels = s.channels(&desc.light);
+        let params =
+            PrefilteredParams::new(&s, &rect, mean_extinction(desc), desc.shadow_bias, epipole, host.is_some(), channels);
         gpu.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&desc.uniforms()));
         gpu.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
         let maps = self.maps.as_ref().expect("allocated above");
@@ -400,7 +408,7 @@ impl Prefiltered {
                 p.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
             })?;
         }
-        let threads = h * s.regions * (s.bases / s.bases_per_thread);
+        let threads = h * s.regions * (s.bases / s.bases_per_thread) * sets;
         timer.pass(gpu, "prefilter", |enc, ts| {
             let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("prefiltered prefilter"),
@@ -454,30 +462,36 @@ impl Prefiltered {
     }
 }
 
-fn allocate_maps(device: &wgpu::Device, key: (u32, u32, u32, BasisPrecision)) -> Maps {
+fn allocate_maps(device: &wgpu::Device, key: (u32, u32, u32, BasisPrecision), sets: u32) -> Maps {
     let (w, h, layers, precision) = key;
     let depth = crate::gpu::storage_texture(device, "prefiltered rectified depth", wgpu::TextureFormat::R32Float, w, h);
-    let cumw = crate::gpu::storage_texture(device, "prefiltered weight sums", wgpu::TextureFormat::R32Float, w, h);
-    let basis = device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("prefiltered filtered bases"),
-        size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: layers },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: precision.format(),
-        usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    });
+    let array_texture = |label, format, layers| {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: layers },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        })
+    };
+    let cumw = array_texture("prefiltered weight sums", wgpu::TextureFormat::R32Float, sets);
+    let basis = array_texture("prefiltered filtered bases", precision.format(), layers);
     let array = wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() };
     Maps {
         depth_view: depth.create_view(&Default::default()),
-        cumw_view: cumw.create_view(&Default::default()),
+        cumw_view: cumw.create_view(&array),
         basis_store: basis.create_view(&array),
         basis_sample: basis.create_view(&array),
         depth,
         basis,
         cumw,
         key,
+        sets,
     }
 }
 

@@ -9,7 +9,11 @@
 @group(0) @binding(3) var<storage, read> rows: array<f32>;
 @group(0) @binding(4) var depth_map: texture_2d<f32>;
 @group(0) @binding(5) var out_basis: texture_storage_2d_array<BASIS_FORMAT, write>;
-@group(0) @binding(6) var out_cumw: texture_storage_2d<r32float, write>;
+@group(0) @binding(6) var out_cumw: texture_storage_2d_array<r32float, write>;
+
+fn band_value(i: u32) -> f32 {
+    return rows[i];
+}
 
 fn texel_depth(p: Params, stored: f32, col: u32) -> f32 {
     if (p.ints2.w & 4u) != 0u && p.ints.x == 0u {
@@ -19,12 +23,12 @@ fn texel_depth(p: Params, stored: f32, col: u32) -> f32 {
     return stored;
 }
 
-fn texel_weight(f: Frame, p: Params, row: u32, col: u32) -> f32 {
+fn texel_weight(f: Frame, p: Params, row: u32, band: u32, channel: u32, col: u32) -> f32 {
     if (p.ints2.w & 1u) == 0u {
         return 1.0;
     }
     let sigma = p.camera.w;
-    let rr = rows[row];
+    let rr = rows[row * p.ints4.x + band];
     var ta = 0.0;
     if col > 0u {
         ta = reference_distance(p, rr, row, f32(col));
@@ -43,7 +47,11 @@ fn texel_weight(f: Frame, p: Params, row: u32, col: u32) -> f32 {
     let dir = reference_dir(p, rr, row);
     let inc = light_incident(f, spot_tex, p.camera.xyz + dir * tm);
     let ph = phase(f, dot(inc.dir, -dir));
-    let lum = dot(inc.radiance * ph, vec3<f32>(1.0 / 3.0));
+    let c = inc.radiance * ph;
+    var lum = dot(c, vec3<f32>(1.0 / 3.0));
+    if p.ints4.y == 3u {
+        lum = c[channel];
+    }
     return lum * exp(-sigma * tm) * (tb - ta);
 }
 
@@ -55,14 +63,20 @@ fn prefilter(@builtin(global_invocation_id) id: vec3<u32>) {
     let regions = params.ints2.x;
     let group_layers = params.ints2.z / 4u;
     let groups = params.ints2.y / params.ints2.z;
+    let channels = params.ints4.y;
+    let sets = params.ints4.x * channels;
     let i = id.x + id.y * 65535u * 64u;
-    if i >= h * regions * groups {
+    if i >= h * regions * groups * sets {
         return;
     }
     let row = i % h;
     let region = (i / h) % regions;
-    let group = i / (h * regions);
+    let group = (i / (h * regions)) % groups;
+    let wset = i / (h * regions * groups);
+    let band = wset / channels;
+    let channel = wset % channels;
     let l0 = group * group_layers;
+    let first_layer = wset * (params.ints2.y / 4u);
     let cols = region_columns(params, region);
     var filt: array<vec4<f32>, MAX_GROUP_LAYERS>;
     for (var l = 0u; l < group_layers; l++) {
@@ -72,14 +86,14 @@ fn prefilter(@builtin(global_invocation_id) id: vec3<u32>) {
     for (var col = cols.x; col < cols.y; col++) {
         let stored = textureLoad(depth_map, vec2<i32>(i32(col), i32(row)), 0).r;
         let z = basis_z(texel_depth(params, stored, col));
-        let wt = texel_weight(frame, params, row, col);
+        let wt = texel_weight(frame, params, row, band, channel, col);
         sum += wt;
         var fr = 1.0;
         if sum > 0.0 {
             fr = wt / sum;
         }
         if group == 0u {
-            textureStore(out_cumw, vec2<i32>(i32(col), i32(row)), vec4<f32>(sum, 0.0, 0.0, 0.0));
+            textureStore(out_cumw, vec2<i32>(i32(col), i32(row)), i32(wset), vec4<f32>(sum, 0.0, 0.0, 0.0));
         }
         // Eq. 8's bases of this group by rotation (cpu.rs basis_rotor): sin/cos of c_k·z for
         // k = 2·l0 … from one sin/cos of the first harmonic and one of the step 2π·z.
@@ -90,7 +104,7 @@ fn prefilter(@builtin(global_invocation_id) id: vec3<u32>) {
             let b = vec4<f32>(sc, sc2);
             sc = vec2<f32>(sc2.x * step.y + sc2.y * step.x, sc2.y * step.y - sc2.x * step.x);
             filt[l] += (b - filt[l]) * fr;
-            textureStore(out_basis, vec2<i32>(i32(col), i32(row)), i32(l0 + l), filt[l] * 0.5 + 0.5);
+            textureStore(out_basis, vec2<i32>(i32(col), i32(row)), i32(first_layer + l0 + l), filt[l] * 0.5 + 0.5);
         }
     }
 }

@@ -113,9 +113,14 @@ pub struct RectifyOptions {
     pub choice: RectificationChoice,
     /// Largest full angle (degrees) of the projected frustum for `Auto` to go projective.
     pub max_projective_angle: f32,
-    /// Reference ray per slice.
+    /// Reference ray per slice (with one band).
     pub reference: ReferenceRay,
+    /// Reference rays (bands) per slice, 1..=[`MAX_BANDS`].
+    pub bands: u32,
 }
+
+/// Largest number of reference rays (bands) per slice.
+pub const MAX_BANDS: u32 = 8;
 
 /// The per-frame rectification: every number the passes need, computed once on the CPU.
 #[derive(Clone, Debug)]
@@ -147,7 +152,10 @@ pub struct Rectification {
     pub full_circle: bool,
     /// Distance from the camera to a local light.
     pub light_distance: f32,
-    /// Per row: the reference ray's r = z/x (projective) or θ (epipolar).
+    /// Reference rays (bands) per row.
+    pub bands: u32,
+    /// Per row and band (`row·bands + band`): the reference ray's r = z/x (projective) or θ
+    /// (epipolar), ascending within a row.
     pub rows: Vec<f32>,
     /// The projected frustum's full angle around the bisectrix, degrees (projective; for the stats).
     pub frustum_angle: f32,
@@ -200,6 +208,7 @@ impl Rectification {
             region_x: vec![],
             full_circle: false,
             light_distance: (light - desc.camera.position).length(),
+            bands: opt.bands.clamp(1, MAX_BANDS),
             rows: vec![],
             frustum_angle: 0.0,
         }
@@ -272,7 +281,15 @@ impl Rectification {
                 (1.0 - lam) * proj + lam * lin
             })
             .collect();
-        r.rows = (0..opt.height).map(|j| r.projective_reference(r.row_q(j as f32 + 0.5), opt.reference)).collect();
+        let (r0, r1, nb) = (r.ranges.z, r.ranges.w, r.bands);
+        let rows: Vec<f32> = (0..opt.height)
+            .flat_map(|j| {
+                let single = r.projective_reference(r.row_q(j as f32 + 0.5), opt.reference);
+                // Several bands: the centres of equal cells of r (ascending).
+                (0..nb).map(move |b| if nb == 1 { single } else { r0 + (b as f32 + 0.5) / nb as f32 * (r1 - r0) })
+            })
+            .collect();
+        r.rows = rows;
         Some(r)
     }
 
@@ -362,8 +379,9 @@ impl Rectification {
         r.region_x = vec![0.0, c_max, knee];
         // Per row: the θ interval of the slice inside the frustum, and its reference ray.
         let planes = frustum_side_normals(&corners);
-        r.rows = (0..opt.height)
-            .map(|j| {
+        let nb = r.bands;
+        let rows: Vec<f32> = (0..opt.height)
+            .flat_map(|j| {
                 let w = r.slice_dir(r.row_phi(j as f32 + 0.5));
                 let inside = |t: f32| {
                     let d = a * t.cos() + w * t.sin();
@@ -381,9 +399,17 @@ impl Rectification {
                 if lo > hi {
                     (lo, hi) = (t0, t1);
                 }
-                epipolar_reference(lo, hi, if r.local { ReferenceRay::Bisectrix } else { opt.reference })
+                let single = epipolar_reference(lo, hi, if r.local { ReferenceRay::Bisectrix } else { opt.reference });
+                // Several bands: the centres of equal cells of ln θ over [max(lo, hi/32), hi]
+                // (ascending): rays near the epipole, where the world step per column changes
+                // fastest with θ, get bands of their own.
+                let lo = lo.max(hi / 32.0).max(1e-4);
+                (0..nb).map(move |b| {
+                    if nb == 1 { single } else { lo * (hi / lo).powf((b as f32 + 0.5) / nb as f32) }
+                })
             })
             .collect();
+        r.rows = rows;
         r
     }
 
@@ -444,9 +470,9 @@ impl Rectification {
     /// World distance along row `row`'s reference ray to where it crosses the light line of
     /// column coordinate `col`; infinite when it never does (a local light's line behind the
     /// ray). Mirrors `reference_distance` in WGSL.
-    pub fn reference_distance(&self, row: u32, col: f32) -> f32 {
+    pub fn reference_distance(&self, row: u32, band: u32, col: f32) -> f32 {
         let c = self.line_of_column(col);
-        let rr = self.rows[row as usize];
+        let rr = self.rows[(row * self.bands + band) as usize];
         match self.mode {
             Mode::Projective => {
                 let q = self.row_q(row as f32 + 0.5);
@@ -462,9 +488,9 @@ impl Rectification {
         }
     }
 
-    /// The reference ray's unit direction for row `row`.
-    pub fn reference_dir(&self, row: u32) -> Vec3 {
-        let rr = self.rows[row as usize];
+    /// The reference ray's unit direction for row `row`, band `band`.
+    pub fn reference_dir(&self, row: u32, band: u32) -> Vec3 {
+        let rr = self.rows[(row * self.bands + band) as usize];
         match self.mode {
             Mode::Projective => {
                 let q = self.row_q(row as f32 + 0.5);
@@ -473,6 +499,37 @@ impl Rectification {
             }
             Mode::Epipolar => self.axes[2] * rr.cos() + self.slice_dir(self.row_phi(row as f32 + 0.5)) * rr.sin(),
         }
+    }
+
+    /// The bands that bracket the view ray of unit direction `dir` at row coordinate `row`, and
+    /// the weight of the second: its r = z/x (projective; linear between bands) or θ (epipolar;
+    /// linear in ln θ) against the bands of the nearest row; clamped to the end bands.
+    /// Mirrors `band_bracket` in WGSL.
+    pub fn band_bracket(&self, row: f32, dir: Vec3) -> (u32, u32, f32) {
+        if self.bands == 1 {
+            return (0, 0, 0.0);
+        }
+        let j = (row.max(0.0) as u32).min(self.height - 1);
+        let band = |b: u32| self.rows[(j * self.bands + b) as usize];
+        let (param, geometric) = match self.mode {
+            Mode::Projective => {
+                let [ex, _, ez] = self.axes;
+                (dir.dot(ez) / dir.dot(ex).max(1e-6), false)
+            }
+            Mode::Epipolar => (dir.dot(self.axes[2]).clamp(-1.0, 1.0).acos(), true),
+        };
+        let f = |a: f32, b: f32| {
+            if geometric { (param.max(1e-6) / a).ln() / (b / a).ln() } else { (param - a) / (b - a) }
+        };
+        if param <= band(0) {
+            return (0, 0, 0.0);
+        }
+        for b in 0..self.bands - 1 {
+            if param < band(b + 1) {
+                return (b, b + 1, f(band(b), band(b + 1)).clamp(0.0, 1.0));
+            }
+        }
+        (self.bands - 1, self.bands - 1, 0.0)
     }
 
     /// Where a world point `p` (on the view ray of unit direction `dir`) falls: (row coordinate in
@@ -701,6 +758,7 @@ mod tests {
             choice,
             max_projective_angle: 150.0,
             reference: ReferenceRay::Bisectrix,
+            bands: 2,
         }
     }
 
@@ -777,13 +835,13 @@ mod tests {
         ] {
             let d = desc(light, cam.clone());
             let r = Rectification::new(&d, &opts(choice, 2, 0.0));
-            for row in [0, 40, 127] {
+            for (row, band) in [(0, 0), (40, 1), (127, 0)] {
                 for col in [3.0f32, 64.0, 130.0, 200.0] {
-                    let t = r.reference_distance(row, col);
+                    let t = r.reference_distance(row, band, col);
                     if !t.is_finite() || t > 180.0 {
                         continue;
                     }
-                    let dir = r.reference_dir(row);
+                    let dir = r.reference_dir(row, band);
                     let (row2, col2, _, _) = r.rectify_point(r.camera + dir * t, dir);
                     assert!((col2 - col).abs() < 0.05, "{:?} row {row}: column {col} → t {t} → {col2}", r.mode);
                     assert!((row2 - (row as f32 + 0.5)).abs() < 0.05, "{:?}: row {row} → {row2}", r.mode);

@@ -10,6 +10,10 @@
 @group(0) @binding(3) var<storage, read> rows: array<f32>;
 @group(0) @binding(4) var out_depth: texture_storage_2d<r32float, write>;
 
+fn band_value(i: u32) -> f32 {
+    return rows[i];
+}
+
 struct Line {
     p: vec3<f32>,
     dir: vec3<f32>,

@@ -60,10 +60,19 @@ fn view_renders_frames_under_xvfb_and_saves_the_scene_image() {
         return;
     }
     let d = tmp("shot");
-    for (technique, scene) in [("brute-force", "colonnade"), ("epipolar", "cage")] {
+    // prefiltered with a small map, so the software adapter's prefilter stays quick.
+    for (technique, scene, set) in [
+        ("brute-force", "colonnade", None),
+        ("epipolar", "cage", None),
+        ("prefiltered", "forest", Some("map_size=[256, 256]")),
+    ] {
         let png = d.join(format!("{technique}.png"));
-        let out = under_xvfb(&xvfb)
-            .args(["view", scene, "--technique", technique, "--size", "320x180", "--scale", "1"])
+        let mut cmd = under_xvfb(&xvfb);
+        cmd.args(["view", scene, "--technique", technique, "--size", "320x180", "--scale", "1"]);
+        if let Some(kv) = set {
+            cmd.args(["--set", kv]);
+        }
+        let out = cmd
             .args(["--screenshot-after", "3", "--output"])
             .arg(&png)
             .output()

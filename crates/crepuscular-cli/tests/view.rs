@@ -72,11 +72,7 @@ fn view_renders_frames_under_xvfb_and_saves_the_scene_image() {
         if let Some(kv) = set {
             cmd.args(["--set", kv]);
         }
-        let out = cmd
-            .args(["--screenshot-after", "3", "--output"])
-            .arg(&png)
-            .output()
-            .unwrap();
+        let out = cmd.args(["--screenshot-after", "3", "--output"]).arg(&png).output().unwrap();
         let log = text(&out);
         assert!(out.status.success(), "{test}: view {technique} failed under xvfb-run: {log}");
         assert!(!log.contains("panicked"), "{log}");

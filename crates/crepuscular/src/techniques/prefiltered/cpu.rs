@@ -34,10 +34,13 @@ pub struct Passes {
     pub image: Image,
 }
 
-/// Mirrors `depth_to_basis_z` in WGSL: a [0, 1] depth into the Fourier domain [m, 1 − m]
-/// ([`Z_MARGIN`]).
+/// Mirrors `basis_z` in WGSL: a [0, 1) depth into the Fourier domain [m, 1 − m], an unoccluded
+/// texel (depth ≥ 1) to 1 ([`Z_MARGIN`]).
 pub fn basis_z(z: f32) -> f32 {
-    Z_MARGIN + (1.0 - 2.0 * Z_MARGIN) * z.clamp(0.0, 1.0)
+    if z >= 1.0 {
+        return 1.0;
+    }
+    Z_MARGIN + (1.0 - 2.0 * Z_MARGIN) * z.max(0.0)
 }
 
 /// Eq. 8: the basis values B_n(z) for n = 4·layer … 4·layer + 3: B_{2k} = sin(c_k z),
@@ -260,7 +263,11 @@ fn footprint(rect: &Rectification, col: f32, row: f32, c0: u32, c1: u32) -> ([us
     ([x0, x1], [wrap(y0i) as usize, wrap(y0i + 1) as usize], fx, fy)
 }
 
-fn bilinear<T: Copy>(get: impl Fn(usize, usize) -> T, lerp: impl Fn(T, T, f32) -> T, fp: ([usize; 2], [usize; 2], f32, f32)) -> T {
+fn bilinear<T: Copy>(
+    get: impl Fn(usize, usize) -> T,
+    lerp: impl Fn(T, T, f32) -> T,
+    fp: ([usize; 2], [usize; 2], f32, f32),
+) -> T {
     let ([x0, x1], [y0, y1], fx, fy) = fp;
     let a = lerp(get(x0, y0), get(x1, y0), fx);
     let b = lerp(get(x0, y1), get(x1, y1), fx);
@@ -431,11 +438,17 @@ pub fn in_epipole_disc(epipole: Option<[f32; 2]>, radius: u32, x: u32, y: u32) -
 
 /// Every pass of a frame; `host_depth` is a rectified map the host rasterized with
 /// [`Rectification::raster`] (projective frames only), else the shadow map is resampled.
-pub fn passes(frame: &CpuFrame, settings: &PrefilteredSettings, host_depth: Option<&[f32]>) -> Result<(Passes, Vec<PassTime>), Error> {
+pub fn passes(
+    frame: &CpuFrame,
+    settings: &PrefilteredSettings,
+    host_depth: Option<&[f32]>,
+) -> Result<(Passes, Vec<PassTime>), Error> {
     settings.validate()?;
     let desc = frame.desc;
     let mut times = vec![];
-    let mut timed = |name: &str, t: std::time::Instant| times.push(PassTime { name: name.into(), ms: t.elapsed().as_secs_f64() * 1e3 });
+    let mut timed = |name: &str, t: std::time::Instant| {
+        times.push(PassTime { name: name.into(), ms: t.elapsed().as_secs_f64() * 1e3 })
+    };
     let t = std::time::Instant::now();
     let rect = Rectification::new(desc, &settings.rectify_options());
     let host = host_depth.filter(|_| rect.mode == Mode::Projective);
@@ -473,7 +486,11 @@ pub fn render(frame: &CpuFrame, settings: &PrefilteredSettings) -> Result<(Image
 }
 
 /// [`render`] with a host-rasterized rectified map (see [`passes`]).
-pub fn render_with(frame: &CpuFrame, settings: &PrefilteredSettings, host_depth: Option<&[f32]>) -> Result<(Image, TechniqueStats), Error> {
+pub fn render_with(
+    frame: &CpuFrame,
+    settings: &PrefilteredSettings,
+    host_depth: Option<&[f32]>,
+) -> Result<(Image, TechniqueStats), Error> {
     let (p, times) = passes(frame, settings, host_depth)?;
     let epipole = epipole_pixel(frame.desc, settings.epipole_radius);
     let stats = TechniqueStats {

@@ -40,7 +40,14 @@ pub fn basis_view(p: &Passes, layer: u32) -> Image {
 /// The prefiltered average visibility of every pixel's view ray (Listing 4's `avgVis`; per
 /// channel with RGB spot weights);
 /// pixels of the epipole disc, which are ray-marched instead, in red.
-pub fn visibility_view(p: &Passes, desc: &FrameDesc, depth: &[f32], bases: u32, epipole: Option<[f32; 2]>, radius: u32) -> Image {
+pub fn visibility_view(
+    p: &Passes,
+    desc: &FrameDesc,
+    depth: &[f32],
+    bases: u32,
+    epipole: Option<[f32; 2]>,
+    radius: u32,
+) -> Image {
     let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let mut img = Image::new(desc.width, desc.height);
     for y in 0..desc.height {

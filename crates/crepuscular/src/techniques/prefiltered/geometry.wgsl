@@ -29,6 +29,11 @@ fn slice_dir(p: Params, phi: f32) -> vec3<f32> {
     return p.axes[0].xyz * cos(phi) + p.axes[1].xyz * sin(phi);
 }
 
+// rectify.rs Rectification::region_of_column.
+fn region_of_column(p: Params, c: u32) -> u32 {
+    return min(((min(c, p.ints.z - 1u) + 1u) * p.ints2.x - 1u) / p.ints.z, p.ints2.x - 1u);
+}
+
 fn region_columns(p: Params, region: u32) -> vec2<u32> {
     return vec2<u32>(region * p.ints.z / p.ints2.x, (region + 1u) * p.ints.z / p.ints2.x);
 }
@@ -72,13 +77,13 @@ fn column_of(p: Params, c: f32) -> Column {
     let u = column_warp(c, region_x(p, 1u), region_x(p, 2u));
     let col = u * f32(p.ints.z);
     out.col = col;
-    out.region = min(u32(col) * p.ints2.x / max(p.ints.z, 1u), p.ints2.x - 1u);
+    out.region = region_of_column(p, u32(col));
     return out;
 }
 
 fn line_of_column(p: Params, col: f32) -> f32 {
     if p.ints.x == 0u {
-        let r = min(u32(max(col, 0.0)) * p.ints2.x / p.ints.z, p.ints2.x - 1u);
+        let r = region_of_column(p, u32(max(col, 0.0)));
         let ab = region_columns(p, r);
         let u = (col - f32(ab.x)) / f32(ab.y - ab.x);
         let x0 = region_x(p, r);
@@ -166,7 +171,10 @@ fn rectify_point(p: Params, pt: vec3<f32>, dir: vec3<f32>) -> Rectified {
 
 // Fourier basis, eq. 8 (cpu.rs basis_z, basis4, coeff4).
 fn basis_z(z: f32) -> f32 {
-    return Z_MARGIN + (1.0 - 2.0 * Z_MARGIN) * clamp(z, 0.0, 1.0);
+    if z >= 1.0 {
+        return 1.0;
+    }
+    return Z_MARGIN + (1.0 - 2.0 * Z_MARGIN) * max(z, 0.0);
 }
 
 fn basis4(z: f32, layer: u32) -> vec4<f32> {

@@ -150,11 +150,19 @@ pub struct Prefiltered {
     last: Option<Rectification>,
 }
 
-fn storage_entry(binding: u32, format: wgpu::TextureFormat, dim: wgpu::TextureViewDimension) -> wgpu::BindGroupLayoutEntry {
+fn storage_entry(
+    binding: u32,
+    format: wgpu::TextureFormat,
+    dim: wgpu::TextureViewDimension,
+) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::StorageTexture { access: wgpu::StorageTextureAccess::WriteOnly, format, view_dimension: dim },
+        ty: wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format,
+            view_dimension: dim,
+        },
         count: None,
     }
 }
@@ -253,8 +261,16 @@ impl Prefiltered {
                 rectify_layout,
                 prefilter_layout,
                 evaluate_layout,
-                frame_buffer: pass::uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64),
-                params_buffer: pass::uniform_buffer(device, "prefiltered params", std::mem::size_of::<PrefilteredParams>() as u64),
+                frame_buffer: pass::uniform_buffer(
+                    device,
+                    "frame uniforms",
+                    std::mem::size_of::<crate::FrameUniforms>() as u64,
+                ),
+                params_buffer: pass::uniform_buffer(
+                    device,
+                    "prefiltered params",
+                    std::mem::size_of::<PrefilteredParams>() as u64,
+                ),
                 rows_buffer: None,
                 clamp_sampler: sampler(wgpu::AddressMode::ClampToEdge),
                 wrap_sampler: sampler(wgpu::AddressMode::Repeat),
@@ -284,7 +300,10 @@ impl Prefiltered {
             let (w, h, layers, p) = m.key;
             w as u64 * h as u64 * (layers as u64 * 4 * p.bytes() + 4 + 4 * m.sets as u64)
         });
-        maps + self.rows_buffer.as_ref().map_or(0, |b| b.size()) + self.frame_buffer.size() + self.params_buffer.size() + 16
+        maps + self.rows_buffer.as_ref().map_or(0, |b| b.size())
+            + self.frame_buffer.size()
+            + self.params_buffer.size()
+            + 16
     }
 
     /// Reads back the last frame's maps for tests and debug views, laid out as
@@ -307,7 +326,12 @@ impl Prefiltered {
 
     /// Renders the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of the
     /// frame's size), resampling the rectified map from the shadow map.
-    pub fn render(&mut self, gpu: &GpuContext, frame: &GpuFrame, output: &wgpu::TextureView) -> Result<TechniqueStats, Error> {
+    pub fn render(
+        &mut self,
+        gpu: &GpuContext,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<TechniqueStats, Error> {
         self.render_with(gpu, frame, None, output)
     }
 
@@ -350,8 +374,15 @@ impl Prefiltered {
         gpu.queue.write_buffer(rows, 0, bytemuck::cast_slice(&rect.rows));
         let epipole = epipole_pixel(desc, s.epipole_radius);
         let channels = s.channels(&desc.light);
-        let params =
-            PrefilteredParams::new(&s, &rect, mean_extinction(desc), desc.shadow_bias, epipole, host.is_some(), channels);
+        let params = PrefilteredParams::new(
+            &s,
+            &rect,
+            mean_extinction(desc),
+            desc.shadow_bias,
+            epipole,
+            host.is_some(),
+            channels,
+        );
         gpu.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&desc.uniforms()));
         gpu.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
         let maps = self.maps.as_ref().expect("allocated above");
@@ -481,7 +512,8 @@ fn allocate_maps(device: &wgpu::Device, key: (u32, u32, u32, BasisPrecision), se
     };
     let cumw = array_texture("prefiltered weight sums", wgpu::TextureFormat::R32Float, sets);
     let basis = array_texture("prefiltered filtered bases", precision.format(), layers);
-    let array = wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() };
+    let array =
+        wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() };
     Maps {
         depth_view: depth.create_view(&Default::default()),
         cumw_view: cumw.create_view(&array),
@@ -496,7 +528,12 @@ fn allocate_maps(device: &wgpu::Device, key: (u32, u32, u32, BasisPrecision), se
 }
 
 /// Reads one layer of an `Rgba8Unorm` / `Rgba16Float` array texture as f32 RGBA.
-fn read_rgba_layer(gpu: &GpuContext, tex: &wgpu::Texture, layer: u32, p: BasisPrecision) -> Result<Vec<[f32; 4]>, Error> {
+fn read_rgba_layer(
+    gpu: &GpuContext,
+    tex: &wgpu::Texture,
+    layer: u32,
+    p: BasisPrecision,
+) -> Result<Vec<[f32; 4]>, Error> {
     let (w, h) = (tex.width(), tex.height());
     let bpp = 4 * p.bytes() as u32;
     let row = w * bpp;
@@ -509,7 +546,12 @@ fn read_rgba_layer(gpu: &GpuContext, tex: &wgpu::Texture, layer: u32, p: BasisPr
     });
     let mut enc = gpu.device.create_command_encoder(&Default::default());
     enc.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo { texture: tex, mip_level: 0, origin: wgpu::Origin3d { x: 0, y: 0, z: layer }, aspect: wgpu::TextureAspect::All },
+        wgpu::TexelCopyTextureInfo {
+            texture: tex,
+            mip_level: 0,
+            origin: wgpu::Origin3d { x: 0, y: 0, z: layer },
+            aspect: wgpu::TextureAspect::All,
+        },
         wgpu::TexelCopyBufferInfo {
             buffer: &buffer,
             layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded), rows_per_image: Some(h) },
@@ -522,7 +564,9 @@ fn read_rgba_layer(gpu: &GpuContext, tex: &wgpu::Texture, layer: u32, p: BasisPr
         for y in 0..h as usize {
             let r = &data[y * padded as usize..y * padded as usize + row as usize];
             match p {
-                BasisPrecision::Unorm8 => out.extend(r.chunks_exact(4).map(|c| [0, 1, 2, 3].map(|i| c[i] as f32 / 255.0))),
+                BasisPrecision::Unorm8 => {
+                    out.extend(r.chunks_exact(4).map(|c| [0, 1, 2, 3].map(|i| c[i] as f32 / 255.0)))
+                }
                 BasisPrecision::Float16 => out.extend(r.chunks_exact(8).map(|c| {
                     let hv = |i: usize| f16_to_f32(u16::from_le_bytes([c[2 * i], c[2 * i + 1]]));
                     [hv(0), hv(1), hv(2), hv(3)]

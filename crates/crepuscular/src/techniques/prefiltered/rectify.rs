@@ -35,12 +35,17 @@ use super::raster::{RasterRegion, RectifiedRaster};
 /// Largest number of regions per row (column partitions with their own prefix sums).
 pub const MAX_REGIONS: u32 = 8;
 
-/// Fraction of the [0, 1] depth range kept free at each end when depths enter the Fourier basis:
-/// depths are mapped to [m, 1 − m]. With the full range, a ray at depth 0 against an unoccluded
-/// texel (depth 1) sits at |Δz| = 1, exactly on the jump of the periodic square wave that the
-/// series of eq. 9 approximates, where it converges to ½ instead of 1; the margin keeps every
-/// |Δz| ≤ 1 − 2m, away from it. Our finding, not in the paper.
-pub const Z_MARGIN: f32 = 1.0 / 16.0;
+/// Where depths enter the Fourier basis (eq. 8–9): a depth z ∈ [0, 1] goes to m + (1 − 2m)·z,
+/// and a texel with no occluder in the rays' range (stored depth ≥ 1: nothing drawn, or beyond
+/// every ray) goes to exactly 1. The series of eq. 9 is periodic in z_r − z_i with its jumps at
+/// 0 and ±1, so an unoccluded texel at 1 is at least m from every ray on both sides (rays lie in
+/// [m, 1 − m]). The paper's full [0, 1] range put a ray at depth 0 exactly on the jump (½), and
+/// storing "unoccluded" as depth 1 (the top of the rays' range) darkened the deepest lit rays by
+/// up to 16 % (the test `an_empty_map_leaves_every_ray_lit`); with the sentinel the worst lit
+/// ray of an empty map reads 0.974 at M = 32, the series' own ripple. A larger m was tried
+/// (0.1, with more depth padding): it costs depth resolution, stained-glass 49.2 → 45.4 dB.
+/// Our finding.
+pub const Z_MARGIN: f32 = 0.0625;
 
 /// Which rectification to use.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -117,7 +122,16 @@ pub struct RectifyOptions {
     pub reference: ReferenceRay,
     /// Reference rays (bands) per slice, 1..=[`MAX_BANDS`].
     pub bands: u32,
+    /// Largest ratio of the far to the near x of the projective map for `Auto` to go
+    /// projective.
+    pub max_projective_depth_ratio: f32,
 }
+
+/// The fraction of the rays' depth range added at each end before normalising to [0, 1], so
+/// that no ray sits on a range end: 1 %. (Occluders between the light and the frustum clamp to
+/// depth 0; wider padding keeps the lowest rays further from them but costs the depth
+/// resolution every shadow edge needs — 2.5/M and 5/M lost 2–6 dB on stained-glass.)
+pub const DEPTH_PADDING: f32 = 0.01;
 
 /// Largest number of reference rays (bands) per slice.
 pub const MAX_BANDS: u32 = 8;
@@ -187,8 +201,11 @@ impl Rectification {
         let projective = if local || opt.choice == RectificationChoice::Epipolar {
             None
         } else {
-            Self::projective(desc, opt)
-                .filter(|r| opt.choice == RectificationChoice::Projective || r.frustum_angle <= opt.max_projective_angle)
+            Self::projective(desc, opt).filter(|r| {
+                opt.choice == RectificationChoice::Projective
+                    || (r.frustum_angle <= opt.max_projective_angle
+                        && r.region_x[r.regions as usize] / r.region_x[0] <= opt.max_projective_depth_ratio)
+            })
         };
         projective.unwrap_or_else(|| Self::epipolar(desc, opt))
     }
@@ -264,7 +281,7 @@ impl Rectification {
         }
         // Half a row / a little depth of margin so the frustum edges land inside the map.
         let dq = (q1 - q0).max(1e-6) * 0.5 / opt.height as f32;
-        let dr = (r1 - r0).max(1e-6) * 0.01;
+        let dr = (r1 - r0).max(1e-6) * DEPTH_PADDING;
         r.ranges = Vec4::new(q0 - dq, q1 + dq, r0 - dr, r1 + dr);
         // Near / far along x: the frustum corners (Fig. 4, bottom left).
         let corners = desc.camera.frustum_corners(desc.aspect(), desc.camera.near, desc.camera.far);
@@ -352,9 +369,11 @@ impl Rectification {
         if direction_on_screen(desc, -a, 0.0) {
             t1 = std::f32::consts::PI;
         }
-        let pad = (t1 - t0).max(1e-4) * 0.01;
-        t0 = (t0 - pad).max(0.0);
-        t1 = (t1 + pad).min(std::f32::consts::PI);
+        // Padding in θ: not clamped to [0, π] — an occluder beyond the padded range clamps to
+        // it, and θ only names a depth here.
+        let pad = (t1 - t0).max(1e-4) * DEPTH_PADDING;
+        t0 -= pad;
+        t1 += pad;
         let (p0, p1) = if r.full_circle {
             (-std::f32::consts::PI, std::f32::consts::PI)
         } else {
@@ -365,7 +384,7 @@ impl Rectification {
         };
         r.ranges = Vec4::new(p0, p1, t0, t1);
         let c_max = if r.local {
-            (std::f32::consts::PI - t0).max(1e-3)
+            (std::f32::consts::PI - t0.max(0.0)).max(1e-3)
         } else {
             let cs = desc.camera.frustum_corners(desc.aspect(), desc.camera.near, desc.camera.far);
             cs.iter().map(|&p| (p - c).reject_from_normalized(a).length()).fold(1e-3, f32::max) * 1.001
@@ -404,9 +423,7 @@ impl Rectification {
                 // (ascending): rays near the epipole, where the world step per column changes
                 // fastest with θ, get bands of their own.
                 let lo = lo.max(hi / 32.0).max(1e-4);
-                (0..nb).map(move |b| {
-                    if nb == 1 { single } else { lo * (hi / lo).powf((b as f32 + 0.5) / nb as f32) }
-                })
+                (0..nb).map(move |b| if nb == 1 { single } else { lo * (hi / lo).powf((b as f32 + 0.5) / nb as f32) })
             })
             .collect();
         r.rows = rows;
@@ -421,6 +438,13 @@ impl Rectification {
     /// The unit direction of slice φ perpendicular to the axis: w(φ) = cos φ·e₁ + sin φ·e₂.
     pub fn slice_dir(&self, phi: f32) -> Vec3 {
         self.axes[0] * phi.cos() + self.axes[1] * phi.sin()
+    }
+
+    /// The region of column `c`: the r with ⌊r·W/R⌋ ≤ c < ⌊(r+1)·W/R⌋, i.e.
+    /// ⌊((c + 1)·R − 1)/W⌋, as [`Rectification::region_columns`] cuts them. Mirrors
+    /// `region_of_column` in WGSL.
+    pub fn region_of_column(&self, c: u32) -> u32 {
+        (((c.min(self.width - 1) + 1) * self.regions - 1) / self.width).min(self.regions - 1)
     }
 
     /// Columns per region.
@@ -446,8 +470,7 @@ impl Rectification {
             Mode::Epipolar => {
                 let u = column_warp(c, self.region_x[1], self.region_x[2]);
                 let col = u * self.width as f32;
-                let r = ((col as u32) * self.regions / self.width.max(1)).min(self.regions - 1);
-                (r, col)
+                (self.region_of_column(col as u32), col)
             }
         }
     }
@@ -457,7 +480,7 @@ impl Rectification {
     pub fn line_of_column(&self, col: f32) -> f32 {
         match self.mode {
             Mode::Projective => {
-                let r = ((col.max(0.0) as u32) * self.regions / self.width).min(self.regions - 1);
+                let r = self.region_of_column(col.max(0.0) as u32);
                 let [a, b] = self.region_columns(r);
                 let u = (col - a as f32) / (b - a) as f32;
                 let (x0, x1) = (self.region_x[r as usize], self.region_x[r as usize + 1]);
@@ -759,6 +782,7 @@ mod tests {
             max_projective_angle: 150.0,
             reference: ReferenceRay::Bisectrix,
             bands: 2,
+            max_projective_depth_ratio: f32::INFINITY,
         }
     }
 
@@ -771,7 +795,10 @@ mod tests {
             (sun(Vec3::new(1.0, -0.6, 0.2)), RectificationChoice::Projective),
             (sun(Vec3::new(1.0, -0.6, 0.2)), RectificationChoice::Epipolar),
             (sun(Vec3::new(0.1, -0.3, 1.0)), RectificationChoice::Epipolar),
-            (Light::Point { position: Vec3::new(1.0, 3.0, 0.0), color: Vec3::ONE, intensity: 1.0 }, RectificationChoice::Auto),
+            (
+                Light::Point { position: Vec3::new(1.0, 3.0, 0.0), color: Vec3::ONE, intensity: 1.0 },
+                RectificationChoice::Auto,
+            ),
         ] {
             for regions in [1, 3] {
                 let d = desc(light.clone(), cam.clone());
@@ -831,7 +858,10 @@ mod tests {
         for (light, choice) in [
             (sun(Vec3::new(1.0, -0.6, 0.2)), RectificationChoice::Projective),
             (sun(Vec3::new(1.0, -0.6, 0.2)), RectificationChoice::Epipolar),
-            (Light::Point { position: Vec3::new(1.0, 3.0, 0.0), color: Vec3::ONE, intensity: 1.0 }, RectificationChoice::Auto),
+            (
+                Light::Point { position: Vec3::new(1.0, 3.0, 0.0), color: Vec3::ONE, intensity: 1.0 },
+                RectificationChoice::Auto,
+            ),
         ] {
             let d = desc(light, cam.clone());
             let r = Rectification::new(&d, &opts(choice, 2, 0.0));

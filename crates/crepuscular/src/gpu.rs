@@ -175,6 +175,13 @@ impl GpuContext {
     /// Reads back a whole single-layer 2D texture of a 4-byte-per-texel (`R32Float`,
     /// `Depth32Float`) or 16-byte-per-texel (`Rgba32Float`) format as f32s.
     pub fn read_texture_f32(&self, texture: &wgpu::Texture, layer: u32) -> Result<Vec<f32>, Error> {
+        let bytes = self.read_texture_bytes(texture, layer)?;
+        Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+    }
+
+    /// Reads back layer `layer` of a 2D (array) texture as its raw texels, rows tightly packed
+    /// (the copy's row padding removed).
+    pub fn read_texture_bytes(&self, texture: &wgpu::Texture, layer: u32) -> Result<Vec<u8>, Error> {
         let (w, h) = (texture.width(), texture.height());
         let bpp = texture.format().block_copy_size(Some(wgpu::TextureAspect::All)).unwrap_or(4);
         let aspect = if texture.format().is_depth_stencil_format() {
@@ -206,10 +213,10 @@ impl GpuContext {
         );
         self.queue.submit([enc.finish()]);
         self.read_mapped(&buffer, "reading back a texture", |data| {
-            let mut out = Vec::with_capacity((w * h * bpp / 4) as usize);
+            let mut out = Vec::with_capacity((w * h * bpp) as usize);
             for y in 0..h {
                 let start = (y * padded) as usize;
-                out.extend_from_slice(bytemuck::cast_slice(&data[start..start + row as usize]));
+                out.extend_from_slice(&data[start..start + row as usize]);
             }
             out
         })

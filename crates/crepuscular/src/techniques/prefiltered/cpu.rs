@@ -372,35 +372,27 @@ pub fn ray_visibility(p: &Passes, bases: u32, pt: Vec3, dir: Vec3) -> Vec3 {
 }
 
 /// Pass `evaluate` (Listing 4): per pixel, the unoccluded in-scattering times the prefiltered
-/// visibility; pixels within `epipole_radius` of the visible light are ray-marched instead (§5).
-/// Mirrors evaluate.wgsl.
+/// visibility; then, when `epipole` is given, pass `epipole` over the disc around the visible
+/// light ([`march_epipole`], §5). Mirrors evaluate.wgsl.
 pub fn evaluate(frame: &CpuFrame, settings: &PrefilteredSettings, p: &Passes, epipole: Option<[f32; 2]>) -> Image {
     let desc = frame.desc;
     let inv = desc.camera.view_projection(desc.aspect()).inverse();
-    let cone = frame_cone(desc);
-    let march = PixelMarch {
-        steps: settings.epipole_steps,
-        jitter: false,
-        frame_index: 0,
-        spot_steps: settings.spot_steps,
-        spot_denominator: settings.spot_denominator,
-    };
     let w = desc.width as usize;
     let mut image = Image::new(desc.width, desc.height);
     image.pixels.par_chunks_mut(w).enumerate().for_each(|(y, line)| {
         for (x, out) in line.iter_mut().enumerate() {
             let (x, y) = (x as u32, y as u32);
+            if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
+                continue;
+            }
             let dir = desc.pixel_ray(&inv, x, y);
             let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
-            let l = if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
-                march_pixel(frame, cone.as_ref(), &march, x, y, dir, s)
-            } else {
-                unoccluded_inscatter(desc, settings, dir, s)
-                    * ray_visibility(p, settings.bases, desc.camera.position + dir * s, dir)
-            };
+            let l = unoccluded_inscatter(desc, settings, dir, s)
+                * ray_visibility(p, settings.bases, desc.camera.position + dir * s, dir);
             *out = [l.x, l.y, l.z, 1.0];
         }
     });
+    march_epipole(frame, settings, epipole, &mut image);
     image
 }
 

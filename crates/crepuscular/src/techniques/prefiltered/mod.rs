@@ -534,46 +534,13 @@ fn read_rgba_layer(
     layer: u32,
     p: BasisPrecision,
 ) -> Result<Vec<[f32; 4]>, Error> {
-    let (w, h) = (tex.width(), tex.height());
-    let bpp = 4 * p.bytes() as u32;
-    let row = w * bpp;
-    let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("basis readback"),
-        size: (padded * h) as u64,
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
-    let mut enc = gpu.device.create_command_encoder(&Default::default());
-    enc.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo {
-            texture: tex,
-            mip_level: 0,
-            origin: wgpu::Origin3d { x: 0, y: 0, z: layer },
-            aspect: wgpu::TextureAspect::All,
-        },
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded), rows_per_image: Some(h) },
-        },
-        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
-    );
-    gpu.queue.submit([enc.finish()]);
-    gpu.read_mapped(&buffer, "reading back the filtered bases", |data| {
-        let mut out = Vec::with_capacity((w * h) as usize);
-        for y in 0..h as usize {
-            let r = &data[y * padded as usize..y * padded as usize + row as usize];
-            match p {
-                BasisPrecision::Unorm8 => {
-                    out.extend(r.chunks_exact(4).map(|c| [0, 1, 2, 3].map(|i| c[i] as f32 / 255.0)))
-                }
-                BasisPrecision::Float16 => out.extend(r.chunks_exact(8).map(|c| {
-                    let hv = |i: usize| f16_to_f32(u16::from_le_bytes([c[2 * i], c[2 * i + 1]]));
-                    [hv(0), hv(1), hv(2), hv(3)]
-                })),
-            }
-        }
-        out
+    let data = gpu.read_texture_bytes(tex, layer)?;
+    Ok(match p {
+        BasisPrecision::Unorm8 => data.chunks_exact(4).map(|c| [0, 1, 2, 3].map(|i| c[i] as f32 / 255.0)).collect(),
+        BasisPrecision::Float16 => data
+            .chunks_exact(8)
+            .map(|c| [0, 1, 2, 3].map(|i| f16_to_f32(u16::from_le_bytes([c[2 * i], c[2 * i + 1]]))))
+            .collect(),
     })
 }
 

@@ -27,9 +27,15 @@ const H: u32 = 36;
 /// agree): brute-force 0.25 (dense medium, σt = 5 m⁻¹, 64 steps over 200 m), interleaved
 /// 0.95 and subsampled 0.86 (the g = 0.99 halo: both spread one pixel's phase peak over their
 /// 4×4 neighbourhood), epipolar 0.22 (the dense medium; it re-marches the pixels around the
-/// epipole, so the halo costs it nothing). docs/ROBUSTNESS.md has the full table.
+/// epipole, so the halo costs it nothing), prefiltered 0.66 on llvmpipe and 0.52 on the CPU
+/// (the 0.5° field of view centred on the sun: every pixel is near the epipole, where the
+/// rectification has no precision (Klehm et al. §5, Fig. 8) and only the 8-pixel disc is
+/// ray-marched; the reference there is under the 10⁻³ floor, so the error is invisible; the
+/// two backends differ in f32 rounding there). The sweep found prefiltered taking the projective
+/// map with the sun on a screen corner (NMAE 1.00 CPU, 2.94 llvmpipe); the projective map is now
+/// refused within 0.1 NDC of the screen (0.09 there). docs/ROBUSTNESS.md has the full table.
 const MAX_NMAE: &[(&str, f64)] =
-    &[("brute-force", 0.35), ("interleaved", 1.1), ("subsampled", 1.1), ("epipolar", 0.35)];
+    &[("brute-force", 0.35), ("interleaved", 1.1), ("subsampled", 1.1), ("epipolar", 0.35), ("prefiltered", 0.85)];
 
 fn bound(technique: &str) -> f64 {
     MAX_NMAE

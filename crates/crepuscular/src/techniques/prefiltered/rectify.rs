@@ -236,6 +236,14 @@ impl Rectification {
     fn projective(desc: &FrameDesc, opt: &RectifyOptions) -> Option<Self> {
         let Light::Directional { direction, .. } = &desc.light else { return None };
         let wl = direction.normalize();
+        // The epipole (or its opposite) on or near the screen: view rays (nearly) parallel to
+        // the light, the construction is impossible or degenerate (§4.2). A margin of 0.1 in NDC:
+        // with the sun exactly on a screen corner the corner ray's projection onto the light
+        // plane vanishes, its angle is noise, and the depth range blew up to [−3·10⁵, 3·10³]
+        // (found by the robustness sweep).
+        if direction_on_screen(desc, wl, 0.1) || direction_on_screen(desc, -wl, 0.1) {
+            return None;
+        }
         // Standard light view with any up: the plane ⊥ the light, spanned by (p1, p2).
         let p1 = perpendicular(wl);
         let p2 = wl.cross(p1);
@@ -278,6 +286,9 @@ impl Rectification {
             q1 = q1.max(l.y / l.x);
             r0 = r0.min(l.z / l.x);
             r1 = r1.max(l.z / l.x);
+        }
+        if !(q1 - q0).is_finite() || !(r1 - r0).is_finite() || (q1 - q0).max(r1 - r0) > 1e3 {
+            return None;
         }
         // Half a row / a little depth of margin so the frustum edges land inside the map.
         let dq = (q1 - q0).max(1e-6) * 0.5 / opt.height as f32;

@@ -136,6 +136,42 @@ pub const PRESETS: &[(&str, &str)] = &[
         "wyman-steps",
         "Wyman & Ramsey 2008 App. B: the four spot-step policies at equal N (16, 32, 64 steps), spot light",
     ),
+    (
+        "klehm-table1",
+        "Klehm, Seidel & Eisemann 2014 Table 1: prefiltered's regions per slice (1–4) × bases per thread (4, 8, 16; 32 = naive) → prefix-sum and scattering time, M = 32, map 1024×1024, 1920×1080",
+    ),
+    (
+        "klehm-table2",
+        "Klehm, Seidel & Eisemann 2014 Table 2: prefiltered's shadow-map size (512–4096 × 1024, 1024 × 512–1536) and bases M (16–128) → prefix-sum and scattering time and memory, 1920×1080",
+    ),
+    (
+        "klehm-scenes",
+        "Klehm, Seidel & Eisemann 2014 §5: scene independence and speed — prefiltered (defaults) on every built-in scene against brute-force at 256 steps, 1920×1080",
+    ),
+];
+
+/// The scene of the Klehm et al. 2014 presets: their San Miguel is a sun through a tree's
+/// leaves (a complex shadow map), which `forest` is.
+const KLEHM_SCENE: &str = "forest";
+
+/// Table 1 of Klehm et al. 2014: (regions per slice, bases per thread), in the paper's row
+/// order, with the naive parallelisation (one region, one thread per slice for all 32 bases,
+/// the reference of the paper's last column) added after the one-region rows.
+pub const KLEHM_TABLE1: &[(u32, u32)] =
+    &[(1, 4), (1, 8), (1, 16), (1, 32), (2, 4), (2, 8), (2, 16), (3, 4), (3, 8), (3, 16), (4, 4), (4, 8), (4, 16)];
+
+/// Table 2 of Klehm et al. 2014: (map columns, map rows, bases M), in the paper's row order.
+pub const KLEHM_TABLE2: &[(u32, u32, u32)] = &[
+    (512, 1024, 32),
+    (1024, 1024, 32),
+    (2048, 1024, 32),
+    (4096, 1024, 32),
+    (1024, 512, 32),
+    (1024, 768, 32),
+    (1024, 1536, 32),
+    (1024, 1024, 16),
+    (1024, 1024, 64),
+    (1024, 1024, 128),
 ];
 
 /// A named preset.
@@ -257,6 +293,100 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
             repeat: 3,
             warmup: 1,
             reference_steps: 0,
+        },
+        "klehm-table1" => {
+            let variants = KLEHM_TABLE1
+                .iter()
+                .map(|&(r, b)| {
+                    let (o1, o2) = (format!("regions={r}"), format!("bases_per_thread={b}"));
+                    Variant::new(
+                        "prefiltered",
+                        &["bases=32", "map_size=[1024, 1024]", "bands=1", &o1, &o2],
+                        &format!("{r} region{} per slice", if r == 1 { "" } else { "s" }),
+                        Some(("bases_per_thread", b as f64)),
+                    )
+                })
+                .collect();
+            BenchPlan {
+                name: name.into(),
+                description: "Klehm, Seidel & Eisemann 2014, §3.3 and Table 1: the two parallelisations of the \
+                              prefilter (the fused basis transform and weighted prefix sum, Listing 3) — rows \
+                              split into 1–4 regions per slice, each prefix-summed by its own threads, and 4, 8 \
+                              or 16 of the M = 32 bases per thread — against the naive one (1 region, 32 bases \
+                              per thread: one thread per slice), at 1920×1080 with a 1024×1024 rectified map \
+                              on `forest` (the paper's San Miguel: sun through foliage) and the paper's one \
+                              reference ray per slice (`bands = 1`; the default 4 bands run the prefix sum 4 \
+                              times). Prefix sum = the `prefilter` pass, scattering = `evaluate` + `epipole` \
+                              (more regions: one more lookup per region in front of the surface); the map's \
+                              creation (`rasterize (host)` or `rectify`) is excluded, as in the paper. Paper \
+                              (NVIDIA Titan): 3 regions × 8 bases per thread best, about 20 % faster than \
+                              naive; the best split is hardware dependent. bench.md's `Paper table` gives the \
+                              +% column as t_naive / t − 1."
+                    .into(),
+                scenes: vec![KLEHM_SCENE.into()],
+                sizes: vec![(1920, 1080)],
+                variants,
+                repeat: 3,
+                warmup: 1,
+                reference_steps: 0,
+            }
+        }
+        "klehm-table2" => {
+            let variants = KLEHM_TABLE2
+                .iter()
+                .map(|&(w, h, m)| {
+                    let (o1, o2) = (format!("map_size=[{w}, {h}]"), format!("bases={m}"));
+                    let o = [o1.as_str(), o2.as_str(), "bands=1"];
+                    let texels = w as f64 * h as f64 / 1048576.0;
+                    let (series, sweep) = match (m, h) {
+                        (32, 1024) => ("map columns × 1024 rows, M = 32", ("map_mtexels", texels)),
+                        (32, _) => ("1024 columns × map rows, M = 32", ("map_mtexels", texels)),
+                        _ => ("M bases, map 1024×1024", ("bases", m as f64)),
+                    };
+                    Variant::new("prefiltered", &o, series, Some(sweep))
+                })
+                .collect();
+            BenchPlan {
+                name: name.into(),
+                description: "Klehm, Seidel & Eisemann 2014, §5 and Table 2: prefiltered's cost and memory against \
+                              the rectified shadow map's size (columns along the view rays × rows, one per \
+                              epipolar slice: 512–4096 × 1024 and 1024 × 512–1536 at M = 32) and the number of \
+                              Fourier bases M (16, 64, 128 at 1024×1024), at 1920×1080 on `forest` (the \
+                              paper's San Miguel) with the paper's one reference ray per slice (`bands = 1`; \
+                              the default 4 bands hold 4 sets of bases). Prefix sum = `prefilter`, scattering \
+                              = `evaluate` + `epipole`; memory = the filtered bases (`basis_bytes`, \
+                              columns·rows·M bytes at 8 bits) and all the technique holds (GPU memory). Paper \
+                              (NVIDIA Titan): the prefix sum linear in the map's texels, the scattering \
+                              constant in map size, both sub-linear in M; 32 MB at 1024×1024, M = 32. Quality \
+                              vs `reference` shows what M and the map buy."
+                    .into(),
+                scenes: vec![KLEHM_SCENE.into()],
+                sizes: vec![(1920, 1080)],
+                variants,
+                repeat: 3,
+                warmup: 1,
+                reference_steps: 256,
+            }
+        }
+        "klehm-scenes" => BenchPlan {
+            name: name.into(),
+            description: "Klehm, Seidel & Eisemann 2014, §5: \"our method shows constant performance\" — its cost is \
+                          O(wh + ad) (w×h pixels, a slices, d columns) against brute-force ray marching's \
+                          O(whd) — and \"below 3 ms\" at 1920×1080 where ray marching is far slower. \
+                          prefiltered at its defaults (M = 32, 1024×1024 map, 4 bands, auto rectification) on every \
+                          built-in scene, and brute-force at 256 steps per pixel on the same frames. \
+                          bench.md's `Paper table` gives each scene's times, the speed-up and the spread of \
+                          prefiltered's time over the scenes."
+                .into(),
+            scenes: crepuscular_scene::builtin::builtin_names().iter().map(|(n, _)| n.to_string()).collect(),
+            sizes: vec![(1920, 1080)],
+            variants: vec![
+                Variant::new("prefiltered", &[], "prefiltered", None),
+                Variant::new("brute-force", &["steps=256"], "brute-force, 256 steps", None),
+            ],
+            repeat: 3,
+            warmup: 1,
+            reference_steps: 256,
         },
         other => {
             let names: Vec<_> = PRESETS.iter().map(|p| p.0).collect();
@@ -790,6 +920,185 @@ pub fn markdown(r: &BenchReport) -> String {
             if fl { format!(" {} |", fmt_opt(x.flicker.map(|f| 100.0 * f.relative), 3)) } else { String::new() },
         );
     }
+    s += &paper_table(r);
+    s
+}
+
+/// `klehm-scenes`: per scene and size, prefiltered's passes and whole time against brute-force's,
+/// and the spread of prefiltered's time over the scenes; times as "median (fastest frame)".
+fn scenes_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "\n## Paper table\n\nprefiltered: map = `rasterize (host)` or `rectify`, prefix sum = `prefilter`, scattering = \
+         `evaluate` + `epipole`, total = the whole technique; ms as median (fastest frame); speed-up = brute-force \
+         total / prefiltered total (of medians, and of fastest frames).\n\n\
+         | scene | size | rectification | map | prefix sum | scattering | prefiltered total | prefiltered PSNR dB | brute-force total | brute-force PSNR dB | speed-up |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut spread: BTreeMap<[u32; 2], Vec<[f64; 2]>> = BTreeMap::new();
+    let mut seen: Vec<(&str, [u32; 2])> = Vec::new();
+    for x in &r.records {
+        if !seen.contains(&(x.scene.as_str(), x.size)) {
+            seen.push((x.scene.as_str(), x.size));
+        }
+    }
+    let cell = |x: Option<&BenchRecord>, names: &[&str]| {
+        x.map_or("–".into(), |x| {
+            let med: f64 = names.iter().map(|n| pass_ms(x, n)).sum();
+            let min: f64 = names.iter().map(|n| pass_min_ms(x, n)).sum();
+            format!("{med:.1} ({min:.1})")
+        })
+    };
+    let total =
+        |x: Option<&BenchRecord>| x.map_or("–".into(), |x| format!("{:.1} ({:.1})", x.total_ms[0], x.total_ms[1]));
+    for (scene, size) in seen {
+        let row = |t: &str| r.records.iter().find(|x| x.technique == t && x.scene == scene && x.size == size);
+        let (pf, bf) = (row("prefiltered"), row("brute-force"));
+        let mode = match pf.and_then(|x| x.extra.get("projective")) {
+            Some(&p) if p > 0.5 => "projective",
+            Some(_) => "epipolar",
+            None => "–",
+        };
+        if let Some(x) = pf {
+            spread.entry(size).or_default().push([x.total_ms[0], x.total_ms[1]]);
+        }
+        let speedup = match (pf, bf) {
+            (Some(p), Some(b)) if p.total_ms[0] > 0.0 && p.total_ms[1] > 0.0 => {
+                format!("{:.1}× ({:.1}×)", b.total_ms[0] / p.total_ms[0], b.total_ms[1] / p.total_ms[1])
+            }
+            _ => "–".into(),
+        };
+        s += &format!(
+            "| {scene} | {}×{} | {mode} | {} | {} | {} | {} | {} | {} | {} | {speedup} |\n",
+            size[0],
+            size[1],
+            cell(pf, &["rasterize (host)", "rectify"]),
+            cell(pf, &["prefilter"]),
+            cell(pf, &["evaluate", "epipole"]),
+            total(pf),
+            fmt_opt(pf.and_then(|x| x.psnr_db), 2),
+            total(bf),
+            fmt_opt(bf.and_then(|x| x.psnr_db), 2),
+        );
+    }
+    for (size, v) in spread {
+        for (k, what) in [(0, "medians"), (1, "fastest frames")] {
+            let (lo, hi) = v.iter().fold((f64::MAX, f64::MIN), |a, t| (a.0.min(t[k]), a.1.max(t[k])));
+            let mean = v.iter().map(|t| t[k]).sum::<f64>() / v.len() as f64;
+            s += &format!(
+                "\nprefiltered at {}×{} over {} scenes ({what}): {lo:.1}–{hi:.1} ms, max/min − 1 = {:.1} %, \
+                 (max − min)/mean = {:.1} %\n",
+                size[0],
+                size[1],
+                v.len(),
+                100.0 * (hi / lo - 1.0),
+                100.0 * (hi - lo) / mean,
+            );
+        }
+    }
+    s
+}
+
+/// Median ms of the pass `name` of a row (0 when it has none).
+fn pass_ms(x: &BenchRecord, name: &str) -> f64 {
+    x.passes.iter().filter(|p| p.name == name).map(|p| p.median_ms).sum()
+}
+
+/// Fastest frame's ms of the pass `name` of a row (0 when it has none).
+fn pass_min_ms(x: &BenchRecord, name: &str) -> f64 {
+    x.passes.iter().filter(|p| p.name == name).map(|p| p.min_ms).sum()
+}
+
+/// The rows of a `klehm-*` preset laid out as the paper's table: prefix sum (`prefilter`),
+/// scattering (`evaluate` + `epipole`), their sum, and the change against the naive
+/// configuration (Table 1) or the memory (Table 2), each time as "median (fastest frame)": on a
+/// shared or software device the fastest frame is the one least disturbed by other work. The
+/// map's creation (`rasterize (host)` or `rectify`), which the paper excludes, is given
+/// separately. Empty for other plans.
+fn paper_table(r: &BenchReport) -> String {
+    use crepuscular::techniques::prefiltered::PrefilteredSettings;
+    if r.plan.name == "klehm-scenes" {
+        return scenes_table(r);
+    }
+    let table1 = r.plan.name == "klehm-table1";
+    if !table1 && r.plan.name != "klehm-table2" {
+        return String::new();
+    }
+    let settings = |x: &BenchRecord| -> Option<PrefilteredSettings> {
+        match &x.settings {
+            TechniqueChoice::Prefiltered(p) => Some(p.clone()),
+            _ => None,
+        }
+    };
+    // [median, fastest] of the map's creation, the prefix sum, the scattering (the per-pixel
+    // evaluation with the epipole disc it ray-marches, §5) and the paper's sum.
+    let times = |x: &BenchRecord| -> [[f64; 2]; 4] {
+        let both = |n: &str| [pass_ms(x, n), pass_min_ms(x, n)];
+        let (raster, rectify, pre, eval, epi) =
+            (both("rasterize (host)"), both("rectify"), both("prefilter"), both("evaluate"), both("epipole"));
+        let scatter = [eval[0] + epi[0], eval[1] + epi[1]];
+        [[raster[0] + rectify[0], raster[1] + rectify[1]], pre, scatter, [pre[0] + scatter[0], pre[1] + scatter[1]]]
+    };
+    let cell = |v: [f64; 2]| format!("{:.1} ({:.1})", v[0], v[1]);
+    let mut s = String::from(
+        "\n## Paper table\n\nPrefix sum = `prefilter`, scattering = `evaluate` + `epipole`, sum = both, ms as median \
+         (fastest frame); map = the rectified map's creation (`rasterize (host)` or `rectify`), excluded from the \
+         sum as in the paper.",
+    );
+    if table1 {
+        s += " +% = t_naive / t − 1 against the naive row (1 region, 32 bases per thread) of the same scene and \
+              size, positive = faster (of medians, and of fastest frames).\n\n\
+              | scene | size | regions per slice | bases per thread | prefix sum | scattering | sum | +% | map |\n\
+              |---|---|---|---|---|---|---|---|---|\n";
+    } else {
+        s += " Filtered bases = columns·rows·M bytes at 8 bits (`basis_bytes`, the paper's Memory column, MiB, \
+              one set: `bands` × more are held); GPU memory = all the technique holds.\n\n\
+              | scene | size | map size | bases M | prefix sum | scattering | sum | filtered bases MiB | GPU memory MiB | map | PSNR dB |\n\
+              |---|---|---|---|---|---|---|---|---|---|---|\n";
+    }
+    for x in &r.records {
+        let Some(p) = settings(x) else { continue };
+        let (w, h) = (x.size[0], x.size[1]);
+        let [map, pre, scatter, sum] = times(x);
+        if table1 {
+            let naive = r.records.iter().find(|n| {
+                n.scene == x.scene
+                    && n.size == x.size
+                    && settings(n).is_some_and(|q| q.regions == 1 && q.bases_per_thread == q.bases)
+            });
+            let change = match naive.map(|n| times(n)[3]) {
+                Some(n) if sum[0] > 0.0 && sum[1] > 0.0 => {
+                    format!("{:+.0} % ({:+.0} %)", 100.0 * (n[0] / sum[0] - 1.0), 100.0 * (n[1] / sum[1] - 1.0))
+                }
+                _ => "–".into(),
+            };
+            s += &format!(
+                "| {} | {w}×{h} | {} | {} | {} | {} | {} | {change} | {} |\n",
+                x.scene,
+                p.regions,
+                p.bases_per_thread,
+                cell(pre),
+                cell(scatter),
+                cell(sum),
+                cell(map),
+            );
+        } else {
+            let basis = x.extra.get("basis_bytes").copied().unwrap_or(p.basis_bytes() as f64);
+            s += &format!(
+                "| {} | {w}×{h} | {}×{} | {} | {} | {} | {} | {:.1} | {:.1} | {} | {} |\n",
+                x.scene,
+                p.map_size[0],
+                p.map_size[1],
+                p.bases,
+                cell(pre),
+                cell(scatter),
+                cell(sum),
+                basis / 1048576.0,
+                x.gpu_memory_bytes as f64 / 1048576.0,
+                cell(map),
+                fmt_opt(x.psnr_db, 2),
+            );
+        }
+    }
     s
 }
 
@@ -1080,6 +1389,50 @@ pub fn write(r: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
         )? {
             written.push(p.with_extension("png"));
             written.push(p);
+        }
+    }
+    // Time vs a swept setting: one plot per scene, size and setting, each series a curve.
+    let mut keys: Vec<&str> = Vec::new();
+    for v in &r.plan.variants {
+        if let Some((k, _)) = &v.sweep
+            && !keys.contains(&k.as_str())
+        {
+            keys.push(k);
+        }
+    }
+    for key in keys {
+        for scene in &r.plan.scenes {
+            for &(w, h) in &r.plan.sizes {
+                let mut curves: Curves = Vec::new();
+                for x in r.records.iter().filter(|x| load_name_matches(scene, &x.scene) && x.size == [w, h]) {
+                    let Some((k, v)) = &x.sweep else { continue };
+                    if k != key {
+                        continue;
+                    }
+                    let pt = (*v, x.total_ms[0]);
+                    match curves.iter_mut().find(|c| c.0 == x.series) {
+                        Some(c) => c.1.push(pt),
+                        None => curves.push((x.series.clone(), vec![pt])),
+                    }
+                }
+                if curves.iter().map(|c| c.1.len()).sum::<usize>() < 2 {
+                    continue;
+                }
+                let name: String =
+                    scene.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
+                let p = dir.join(format!("time_vs_{key}_{name}_{w}x{h}.svg"));
+                if line_plot(
+                    &p,
+                    &format!("time vs {key} — {name} {w}×{h} — {dev}"),
+                    key,
+                    "technique time per frame, ms (median)",
+                    false,
+                    &curves,
+                )? {
+                    written.push(p.with_extension("png"));
+                    written.push(p);
+                }
+            }
         }
     }
     // Time vs resolution.

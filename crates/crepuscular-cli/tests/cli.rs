@@ -213,10 +213,57 @@ fn bench_writes_json_markdown_and_plots_with_the_device() {
     }
     // Presets are listed, and an unknown one fails with the list.
     let out = bin().args(["bench", "--list-presets"]).output().unwrap();
-    assert!(String::from_utf8_lossy(&out.stdout).contains("toth-interleaving"));
+    let list = String::from_utf8_lossy(&out.stdout);
+    for preset in ["toth-interleaving", "klehm-table1", "klehm-table2", "klehm-scenes"] {
+        assert!(list.lines().any(|l| l.starts_with(preset)), "{preset} not listed: {list}");
+    }
     let out = bin().args(["bench", "--preset", "nope", "--backend", "cpu"]).output().unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("wyman-steps"));
+}
+
+/// The Klehm et al. 2014 presets run at a small screen size (their maps keep the paper's sizes)
+/// and lay their rows out as the paper's tables.
+#[test]
+fn klehm_presets_run_small_and_write_the_papers_tables() {
+    let d = tmp("klehm");
+    for (preset, rows) in [("klehm-table1", 13), ("klehm-table2", 10), ("klehm-scenes", 10)] {
+        let out = bin()
+            .args(["bench", "--preset", preset, "--backend", "cpu", "--sizes", "32x18", "--repeat", "1"])
+            .args(["--warmup", "0", "--reference-steps", "0", "--output"])
+            .arg(d.join(preset))
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{preset}: {}", String::from_utf8_lossy(&out.stderr));
+        let r: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(d.join(preset).join("bench.json")).unwrap()).unwrap();
+        let recs = r["records"].as_array().unwrap();
+        assert_eq!(recs.len(), rows, "{preset}");
+        let md = std::fs::read_to_string(d.join(preset).join("bench.md")).unwrap();
+        let table = md.split("## Paper table").nth(1).unwrap_or_else(|| panic!("{preset}: no paper table\n{md}"));
+        let lines = table.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| scene")).count();
+        assert_eq!(lines, if preset == "klehm-scenes" { 5 } else { rows }, "{preset}: {table}");
+        if preset == "klehm-table2" {
+            // The paper's Memory column: columns · rows · M bytes.
+            for x in recs {
+                let s = &x["settings"];
+                let (w, h, m) = (
+                    s["map_size"][0].as_f64().unwrap(),
+                    s["map_size"][1].as_f64().unwrap(),
+                    s["bases"].as_f64().unwrap(),
+                );
+                assert_eq!(x["extra"]["basis_bytes"].as_f64().unwrap(), w * h * m, "{x}");
+            }
+            assert!(table.contains("| 4096×1024 | 32 |") && table.contains("| 128.0 |"), "{table}");
+        }
+        if preset == "klehm-table1" {
+            assert!(
+                table.contains("| 1 | 32 |") && table.contains("+0 % (+0 %)"),
+                "the naive row is the reference: {table}"
+            );
+            assert!(d.join(preset).join("time_vs_bases_per_thread_forest_32x18.svg").exists());
+        }
+    }
 }
 
 #[test]

@@ -541,7 +541,10 @@ fn prefiltered_debug_view(
             runner.render(gpu, Some(&host), &views.frame(&desc), &out.create_view(&Default::default()))?;
             let GpuRunner::Prefiltered(t) = runner else { unreachable!("built above") };
             let rect = t.last_rectification().context("no frame rendered")?.clone();
-            (debug::passes_from_gpu(rect, settings.channels(&desc.light), t.read_maps(gpu)?), gpu.read_texture_f32(&tex.depth, 0)?)
+            (
+                debug::passes_from_gpu(rect, settings.channels(&desc.light), t.read_maps(gpu)?),
+                gpu.read_texture_f32(&tex.depth, 0)?,
+            )
         }
         None => {
             let h = host_cpu::render(&scene.geometry, &desc);

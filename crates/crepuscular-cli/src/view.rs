@@ -108,7 +108,11 @@ const SETTING_DOCS: &[(&str, &str, &str)] = &[
     ("prefiltered", "regions", "Prefix-sum regions per row (1..=8): more prefilter threads, one lookup each."),
     ("prefiltered", "split_lambda", "Region boundaries: 0 one projective map, 1 equal world extents (split maps)."),
     ("prefiltered", "bases_per_thread", "Bases per prefilter thread (multiple of 4 dividing M)."),
-    ("prefiltered", "transmittance_weights", "Weight the prefix sum by transmittance (§3.2) instead of plain averaging."),
+    (
+        "prefiltered",
+        "transmittance_weights",
+        "Weight the prefix sum by transmittance (§3.2) instead of plain averaging.",
+    ),
     ("prefiltered", "reference_ray", "Reference ray of each slice for the weights: bisectrix or optimal."),
     ("prefiltered", "epipole_radius", "Ray-march pixels within this many pixels of a visible light (§5; 0 off)."),
     ("prefiltered", "epipole_steps", "Steps per pixel of the epipole disc."),
@@ -933,7 +937,13 @@ impl Viewer {
                 let img = render::debug_view(&scene, Some(&self.gpu), &self.technique, view, &fin)?;
                 let rgb = ToneMap::new(self.exposure).to_rgb8(&img);
                 let caption = format!("{}×{}", img.width, img.height);
-                self.show_image(format!("{}: {}", self.technique.name(), view.name()), caption, img.width, img.height, &rgb);
+                self.show_image(
+                    format!("{}: {}", self.technique.name(), view.name()),
+                    caption,
+                    img.width,
+                    img.height,
+                    &rgb,
+                );
             }
             Action::ErrorView => {
                 let started = Instant::now();

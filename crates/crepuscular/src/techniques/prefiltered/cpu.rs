@@ -402,13 +402,7 @@ pub fn march_epipole(frame: &CpuFrame, settings: &PrefilteredSettings, epipole: 
     let desc = frame.desc;
     let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let cone = frame_cone(desc);
-    let march = PixelMarch {
-        steps: settings.epipole_steps,
-        jitter: false,
-        frame_index: 0,
-        spot_steps: settings.spot_steps,
-        spot_denominator: settings.spot_denominator,
-    };
+    let march = PixelMarch::from(settings);
     for y in 0..desc.height {
         for x in 0..desc.width {
             if in_epipole_disc(epipole, settings.epipole_radius, x, y) {

@@ -86,10 +86,7 @@ pub fn epipole_pixel(desc: &FrameDesc, radius: u32) -> Option<[f32; 2]> {
 
 /// Ray-marched samples of a frame: the pixels of the epipole disc times their steps.
 pub fn epipole_samples(desc: &FrameDesc, settings: &PrefilteredSettings, epipole: Option<[f32; 2]>) -> u64 {
-    let Some([ex, ey]) = epipole else { return 0 };
-    let r = settings.epipole_radius as f32;
-    let (x0, x1) = ((ex - r).floor().max(0.0) as u32, ((ex + r).ceil().max(0.0) as u32).min(desc.width));
-    let (y0, y1) = ((ey - r).floor().max(0.0) as u32, ((ey + r).ceil().max(0.0) as u32).min(desc.height));
+    let Some([x0, y0, x1, y1]) = epipole_box(desc, settings.epipole_radius, epipole) else { return 0 };
     let mut n = 0u64;
     for y in y0..y1 {
         for x in x0..x1 {
@@ -97,6 +94,19 @@ pub fn epipole_samples(desc: &FrameDesc, settings: &PrefilteredSettings, epipole
         }
     }
     n * settings.epipole_steps as u64
+}
+
+/// The pixels [x0, x1) × [y0, y1) of the image that hold the epipole disc of `radius` around
+/// `epipole`; None when there is no disc or it misses the image. Its corner is the first pixel
+/// of the `epipole` pass (`origin` in evaluate.wgsl).
+pub fn epipole_box(desc: &FrameDesc, radius: u32, epipole: Option<[f32; 2]>) -> Option<[u32; 4]> {
+    let [ex, ey] = epipole?;
+    let r = radius as f32;
+    let x0 = (ex - r).floor().max(0.0) as u32;
+    let y0 = (ey - r).floor().max(0.0) as u32;
+    let x1 = ((ex + r).ceil().max(0.0) as u32 + 1).min(desc.width);
+    let y1 = ((ey + r).ceil().max(0.0) as u32 + 1).min(desc.height);
+    (radius > 0 && x1 > x0 && y1 > y0).then_some([x0, y0, x1, y1])
 }
 
 /// `TechniqueStats::extra` of a frame: the rectification chosen (`projective` 1/0), the
@@ -459,23 +469,17 @@ impl Prefiltered {
             p.set_bind_group(0, &evaluate_bind, &[]);
             p.dispatch_workgroups(desc.width.div_ceil(8), desc.height.div_ceil(8), 1);
         })?;
-        if let (Some([ex, ey]), true) = (epipole, s.epipole_radius > 0) {
-            let r = s.epipole_radius as f32;
-            let (x0, y0) = ((ex - r).floor().max(0.0), (ey - r).floor().max(0.0));
-            let x1 = (ex + r).ceil().clamp(0.0, desc.width as f32);
-            let y1 = (ey + r).ceil().clamp(0.0, desc.height as f32);
-            if x1 > x0 && y1 > y0 {
-                let (bw, bh) = ((x1 - x0) as u32 + 1, (y1 - y0) as u32 + 1);
-                timer.pass(gpu, "epipole", |enc, ts| {
-                    let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                        label: Some("prefiltered epipole"),
-                        timestamp_writes: ts.map(|t| t.compute()),
-                    });
-                    p.set_pipeline(&self.epipole_pipeline);
-                    p.set_bind_group(0, &evaluate_bind, &[]);
-                    p.dispatch_workgroups(bw.div_ceil(8), bh.div_ceil(8), 1);
-                })?;
-            }
+        if let Some([x0, y0, x1, y1]) = epipole_box(desc, s.epipole_radius, epipole) {
+            let (bw, bh) = (x1 - x0, y1 - y0);
+            timer.pass(gpu, "epipole", |enc, ts| {
+                let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("prefiltered epipole"),
+                    timestamp_writes: ts.map(|t| t.compute()),
+                });
+                p.set_pipeline(&self.epipole_pipeline);
+                p.set_bind_group(0, &evaluate_bind, &[]);
+                p.dispatch_workgroups(bw.div_ceil(8), bh.div_ceil(8), 1);
+            })?;
         }
         let mode = timer.mode().to_string();
         let passes = timer.finish(gpu)?;

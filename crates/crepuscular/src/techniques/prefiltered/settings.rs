@@ -157,6 +157,19 @@ pub struct PrefilteredSettings {
     pub spot_denominator: f32,
 }
 
+/// How the epipole disc's pixels are ray-marched (§5): `epipole_steps`, step midpoints.
+impl From<&PrefilteredSettings> for crate::march::PixelMarch {
+    fn from(s: &PrefilteredSettings) -> Self {
+        Self {
+            steps: s.epipole_steps,
+            jitter: false,
+            frame_index: 0,
+            spot_steps: s.spot_steps,
+            spot_denominator: s.spot_denominator,
+        }
+    }
+}
+
 impl Default for PrefilteredSettings {
     fn default() -> Self {
         Self {

@@ -75,6 +75,26 @@ pub enum GpuRunner {
 }
 
 impl GpuRunner {
+    /// Applies the settings of `choice` to this runner in place when it is the same technique,
+    /// and returns whether it did. Each technique keeps its pipelines and rebuilds on its next
+    /// render only what the changed settings need: `interleaved` its phase table (on
+    /// `phase_lut_size`), `subsampled` and `epipolar` their textures (on the grid, slice or
+    /// sample counts), `prefiltered` its maps (on `map_size`, `bases`, `bands`) and, on
+    /// `precision`, its pipelines (the storage format is in their layout). Everything else is
+    /// a uniform, written every frame. Returns false, changing nothing, for another technique
+    /// (build a new runner with [`TechniqueChoice::gpu_runner`]).
+    pub fn update(&mut self, choice: &TechniqueChoice) -> bool {
+        match (self, choice) {
+            (GpuRunner::BruteForce(t), TechniqueChoice::BruteForce(s)) => t.settings = s.clone(),
+            (GpuRunner::Interleaved(t), TechniqueChoice::Interleaved(s)) => t.settings = s.clone(),
+            (GpuRunner::Subsampled(t), TechniqueChoice::Subsampled(s)) => t.settings = s.clone(),
+            (GpuRunner::Epipolar(t), TechniqueChoice::Epipolar(s)) => t.settings = s.clone(),
+            (GpuRunner::Prefiltered(t), TechniqueChoice::Prefiltered(s)) => t.settings = s.clone(),
+            _ => return false,
+        }
+        true
+    }
+
     /// Renders the in-scattering of `frame` into `output` (Rgba32Float storage, frame size).
     /// `host` is the renderer that drew the frame's textures: `prefiltered` asks it to
     /// rasterize its projective rectified shadow map (Klehm et al. 2014, §4.2); without one it

@@ -581,6 +581,10 @@ struct Viewer {
     scale: f32,
     technique: TechniqueChoice,
     runner: Option<GpuRunner>,
+    /// How many times a technique's pipelines were built (a settings change does not rebuild
+    /// them; a technique switch or a new scene does), and how long the last build took.
+    runner_builds: u32,
+    runner_build_ms: f64,
     /// The settings as edited (serde_json object of the technique's fields).
     fields: serde_json::Map<String, serde_json::Value>,
     /// TOML text of the fields that are unset options or not scalars.
@@ -675,7 +679,9 @@ impl Viewer {
         let renderer = egui_wgpu::Renderer::new(&gpu.device, format, egui_wgpu::RendererOptions::default());
         let host = GpuHost::new(&gpu, &scene.geometry)?;
         let composite = Composite::new(&gpu.device);
+        let built = Instant::now();
         let runner = technique.gpu_runner(&gpu)?;
+        let runner_build_ms = built.elapsed().as_secs_f64() * 1e3;
         let scale = opts.scale.unwrap_or(if gpu.software { 0.5 } else { 1.0 });
         let fields = settings_fields(&technique);
         eprintln!("view: `{}` with {} on {}", scene.name, technique.name(), gpu.describe());
@@ -700,6 +706,8 @@ impl Viewer {
             scale,
             technique,
             runner,
+            runner_builds: 1,
+            runner_build_ms,
             settings_error: None,
             render_error: None,
             preset: opts.preset,
@@ -866,7 +874,10 @@ impl Viewer {
     fn render_scene(&mut self) -> Result<()> {
         let start = Instant::now();
         if self.runner.is_none() {
+            let built = Instant::now();
             self.runner = self.technique.gpu_runner(&self.gpu)?;
+            self.runner_builds += 1;
+            self.runner_build_ms = built.elapsed().as_secs_f64() * 1e3;
         }
         let scene = self.current_scene();
         let desc = render::frame_desc(&scene);
@@ -1097,8 +1108,12 @@ impl Viewer {
         match parsed {
             Ok(t) => {
                 let switched = t.name() != self.technique.name();
+                // Same technique: the runner keeps its pipelines (GpuRunner::update); another
+                // technique: a new runner on the next frame.
+                if !self.runner.as_mut().is_some_and(|r| r.update(&t)) {
+                    self.runner = None;
+                }
                 self.technique = t;
-                self.runner = None;
                 self.settings_error = None;
                 self.dirty = true;
                 if switched || refresh {
@@ -1373,6 +1388,10 @@ impl Viewer {
             let tech: f64 =
                 last.passes.iter().filter(|p| !p.name.starts_with("host") && p.name != "composite").map(|p| p.ms).sum();
             ui.label(format!("frame {:.1} ms (technique {:.1} ms); {}", last.wall_ms, tech, self.gpu.info.name));
+            ui.small(format!(
+                "technique pipelines built {}× (last {:.0} ms); settings changes reuse them",
+                self.runner_builds, self.runner_build_ms
+            ));
         }
         // Stacked bars per frame over the last seconds, one colour per pass.
         let width = ui.available_width().clamp(200.0, 420.0);

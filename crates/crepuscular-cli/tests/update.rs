@@ -1,0 +1,97 @@
+//! Settings changed in place (`GpuRunner::update`, what the viewer does when a setting is
+//! edited) render exactly what a runner built fresh with the new settings renders: a technique
+//! that kept a stale table, texture or pipeline across the change would differ here.
+
+use crepuscular::gpu::{GpuContext, test_gpu};
+use crepuscular_cli::render::{GpuRunner, TechniqueChoice, frame_desc};
+use crepuscular_scene::{GpuHost, Scene, builtin};
+
+fn small(name: &str) -> Scene {
+    let mut s = builtin::builtin(name).expect("built-in scene");
+    s.render.width = 96;
+    s.render.height = 54;
+    s.render.shadow.size = 256;
+    s
+}
+
+/// One frame of `scene` through `runner`, read back as raw f32 bits.
+fn render(gpu: &GpuContext, scene: &Scene, host: &GpuHost, runner: &mut GpuRunner) -> Vec<u32> {
+    let desc = frame_desc(scene);
+    let spot = match &scene.light {
+        crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
+        _ => None,
+    };
+    let tex = host.render(gpu, &desc, spot).unwrap();
+    let out = gpu.create_output_texture(desc.width, desc.height);
+    let views = tex.views();
+    runner.render(gpu, Some(host), &views.frame(&desc), &out.create_view(&Default::default())).unwrap();
+    gpu.read_texture_f32(&out, 0).unwrap().into_iter().map(f32::to_bits).collect()
+}
+
+fn parse(technique: &str, scene: &Scene, set: &[&str]) -> TechniqueChoice {
+    let set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
+    TechniqueChoice::parse(technique, scene, &set).unwrap_or_else(|e| panic!("{technique} {set:?}: {e:#}"))
+}
+
+#[test]
+fn settings_changed_in_place_render_what_a_fresh_runner_renders() {
+    let Some(gpu) = test_gpu("settings_changed_in_place_render_what_a_fresh_runner_renders") else { return };
+    // Each technique walks through a chain of settings; every step changes something a
+    // technique sizes or builds from its settings (tables, textures, pipelines) as well as
+    // plain uniforms.
+    let chains: &[(&str, &[&[&str]])] = &[
+        ("brute-force", &[&["steps=32"], &["steps=17", "jitter=true", "frame_index=3"], &["steps=32"]]),
+        (
+            "interleaved",
+            &[
+                &["steps=64"],
+                &["steps=64", "block=2", "phase_lut=true", "phase_lut_size=64"],
+                &["steps=64", "block=4", "phase_lut=true", "phase_lut_size=128", "depth_aware=false"],
+                &["steps=64"],
+            ],
+        ),
+        ("subsampled", &[&["factor=4"], &["factor=2"], &["grid=[40, 30]", "edge_remarch=false"], &["factor=4"]]),
+        (
+            "epipolar",
+            &[
+                &["slices=64", "samples=64"],
+                &["slices=128", "samples=32", "taps=3"],
+                &["slices=64", "samples=96", "initial_samples=8"],
+            ],
+        ),
+        (
+            "prefiltered",
+            &[
+                &["map_size=[128, 128]"],
+                &["map_size=[96, 64]", "bases=16", "bands=2"],
+                &["map_size=[128, 128]", "precision=\"float16\"", "regions=2"],
+                &["map_size=[128, 128]"],
+            ],
+        ),
+    ];
+    for scene_name in ["colonnade", "stained-glass"] {
+        let scene = small(scene_name);
+        let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+        for (technique, chain) in chains {
+            let first = parse(technique, &scene, chain[0]);
+            let mut runner = first.gpu_runner(&gpu).unwrap().expect("a GPU technique");
+            let mut previous = render(&gpu, &scene, &host, &mut runner);
+            for set in &chain[1..] {
+                let next = parse(technique, &scene, set);
+                assert!(runner.update(&next), "{technique}: update refused its own settings");
+                let in_place = render(&gpu, &scene, &host, &mut runner);
+                let mut fresh_runner = next.gpu_runner(&gpu).unwrap().expect("a GPU technique");
+                let fresh = render(&gpu, &scene, &host, &mut fresh_runner);
+                let differ = in_place.iter().zip(&fresh).filter(|(a, b)| a != b).count();
+                eprintln!("{scene_name} {technique} → {set:?}: {differ} of {} values differ", fresh.len());
+                assert_eq!(differ, 0, "{scene_name} {technique}: in place after {set:?} differs from a fresh runner");
+                // The change did change the image (so the comparison above can fail).
+                assert_ne!(in_place, previous, "{scene_name} {technique}: {set:?} changed nothing");
+                previous = in_place;
+            }
+            // Another technique's settings are refused and change nothing.
+            let other = parse(if *technique == "brute-force" { "epipolar" } else { "brute-force" }, &scene, &[]);
+            assert!(!runner.update(&other), "{technique} accepted another technique's settings");
+        }
+    }
+}

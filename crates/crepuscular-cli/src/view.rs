@@ -358,13 +358,18 @@ pub(crate) struct InputOutcome {
     pub(crate) keys_down: bool,
     /// F12 or P was pressed.
     pub(crate) screenshot: bool,
+    /// N / shift+N: open the next / previous built-in scene (+1 / −1).
+    pub(crate) cycle_scene: i32,
+    /// T / shift+T: switch to the next / previous GPU technique (+1 / −1).
+    pub(crate) cycle_technique: i32,
 }
 
 impl Controls {
     /// Reads one frame's pointer and keyboard input over `rect` (the scene area, behind the
     /// panels): left drag orbits, shift/middle drag pans, the wheel dollies, W A S D Q E fly
     /// (shift: 4× faster), right or ctrl drag moves the light ([`Controls::drag_light`]),
-    /// F12 or P asks for a screenshot. Keys are ignored while a text field has focus.
+    /// F12 or P asks for a screenshot, N / T (shift: backwards) cycle the built-in scenes and
+    /// the techniques. Keys are ignored while a text field has focus.
     pub(crate) fn input(&mut self, ui: &mut egui::Ui, rect: egui::Rect, dt: f32) -> InputOutcome {
         let resp = ui.interact(rect, egui::Id::unique("scene view"), egui::Sense::click_and_drag());
         let (modifiers, scroll) = ui.input(|i| (i.modifiers, i.smooth_scroll_delta.y));
@@ -411,6 +416,13 @@ impl Controls {
                 }
                 if i.key_pressed(Key::F12) || i.key_pressed(Key::P) {
                     out.screenshot = true;
+                }
+                let step = if modifiers.shift { -1 } else { 1 };
+                if i.key_pressed(Key::N) {
+                    out.cycle_scene = step;
+                }
+                if i.key_pressed(Key::T) {
+                    out.cycle_technique = step;
                 }
             });
             if m != Vec3::ZERO {
@@ -585,6 +597,10 @@ struct Viewer {
     /// them; a technique switch or a new scene does), and how long the last build took.
     runner_builds: u32,
     runner_build_ms: f64,
+    /// `--shadow-map-size`, kept for scenes opened in the window.
+    shadow_map_size: Option<u32>,
+    /// The scene-file field of the scene panel.
+    scene_path: String,
     /// The settings as edited (serde_json object of the technique's fields).
     fields: serde_json::Map<String, serde_json::Value>,
     /// TOML text of the fields that are unset options or not scalars.
@@ -708,6 +724,8 @@ impl Viewer {
             runner,
             runner_builds: 1,
             runner_build_ms,
+            shadow_map_size: opts.shadow_map_size,
+            scene_path: String::new(),
             settings_error: None,
             render_error: None,
             preset: opts.preset,
@@ -1014,6 +1032,51 @@ impl Viewer {
         output::write_png_rgb8(path, texture.width(), texture.height(), &rgb)
     }
 
+    /// What a screenshot shows, beside it as JSON: the scene, camera, light, medium, exposure,
+    /// technique and settings (as `--set` takes them), the render size and the frame's
+    /// statistics, so the view can be reproduced with `render` and compared.
+    fn view_state_json(&self) -> Result<String> {
+        let scene = self.current_scene();
+        let v3 = |v: Vec3| [v.x, v.y, v.z];
+        let light = match &scene.light {
+            Light::Directional { direction, color, intensity } => serde_json::json!({
+                "kind": "directional", "direction": v3(*direction), "color": v3(*color), "intensity": intensity,
+            }),
+            Light::Spot {
+                position,
+                direction,
+                outer_angle_degrees,
+                inner_angle_degrees,
+                color,
+                intensity,
+                texture,
+            } => {
+                serde_json::json!({
+                    "kind": "spot", "position": v3(*position), "direction": v3(*direction),
+                    "outer_angle_degrees": outer_angle_degrees, "inner_angle_degrees": inner_angle_degrees,
+                    "color": v3(*color), "intensity": intensity, "textured": texture.is_some(),
+                })
+            }
+            Light::Point { position, color, intensity } => serde_json::json!({
+                "kind": "point", "position": v3(*position), "color": v3(*color), "intensity": intensity,
+            }),
+        };
+        let state = serde_json::json!({
+            "scene": scene.name,
+            "technique": self.technique.name(),
+            "preset": self.preset.map(|p| p.name()),
+            "settings": settings_fields(&self.technique),
+            "size": [scene.render.width, scene.render.height],
+            "camera": scene.camera,
+            "light": light,
+            "medium": scene.medium,
+            "exposure": scene.render.exposure,
+            "stats": self.last_stats,
+            "adapter": self.gpu.describe(),
+        });
+        Ok(serde_json::to_string_pretty(&state)?)
+    }
+
     fn save_screenshot(&self, path: &std::path::Path) -> Result<()> {
         let (w, h, rgb) = self.read_display()?;
         output::write_png_rgb8(path, w, h, &rgb)
@@ -1045,7 +1108,8 @@ impl Viewer {
                 self.screenshots += 1;
                 let path = self.output.with_file_name(format!("{stem}-{}.png", self.screenshots));
                 self.save_screenshot(&path)?;
-                self.status = format!("wrote {}", path.display());
+                output::write_atomic(&path.with_extension("json"), self.view_state_json()?.as_bytes())?;
+                self.status = format!("wrote {} and its .json", path.display());
                 eprintln!("{}", self.status);
             }
             Action::Debug(view) => {
@@ -1088,6 +1152,30 @@ impl Viewer {
                 self.show_image(format!("FLIP error: {}", self.technique.name()), caption, w, h, &rgb);
             }
         }
+        Ok(())
+    }
+
+    /// Opens another scene (a built-in name or a scene file) in the window: new geometry for
+    /// the host renderer, the scene's camera, light, medium and exposure, and the current
+    /// technique with the scene's own `[render.<technique>]` settings and the current preset,
+    /// as `crepuscular view SCENE --technique T --preset P` would start. On error nothing
+    /// changes.
+    fn open_scene(&mut self, spec: &str) -> Result<()> {
+        let mut scene = render::load_scene(spec)?;
+        if let Some(s) = self.shadow_map_size {
+            scene.render.shadow.size = s;
+        }
+        let technique = parse_technique(self.technique.name(), &scene, self.preset, &[])?;
+        let host = GpuHost::new(&self.gpu, &scene.geometry)?;
+        self.host = host;
+        self.controls = Controls { orbit: Orbit::from_camera(&scene.camera), light: scene.light.clone() };
+        self.medium = scene.medium.clone();
+        self.exposure = scene.render.exposure;
+        self.scene = scene;
+        self.last_host = None;
+        self.last_stats = None;
+        self.set_technique(Ok(technique), true);
+        eprintln!("view: opened `{}`", self.scene.name);
         Ok(())
     }
 
@@ -1139,20 +1227,27 @@ impl Viewer {
         }
         self.camera_input(ui, rect, dt);
 
-        egui::Window::new("technique").default_pos(egui::pos2(8.0, 8.0)).vscroll(true).show(&ctx, |ui| {
-            self.technique_panel(ui);
-        });
-        egui::Window::new("scene").default_pos(egui::pos2(rect.right() - 330.0, 8.0)).vscroll(true).show(&ctx, |ui| {
-            self.scene_panel(ui);
-            ui.separator();
-            self.tools_panel(ui);
-        });
-        egui::Window::new("timings")
-            .default_pos(egui::pos2(rect.right() - 330.0, rect.bottom() - 260.0))
-            .default_open(true)
+        // Anchored to the corners, clear of the middle of the picture (where the camera and
+        // light are dragged): technique top left, timings bottom left, scene top right.
+        let h = rect.height();
+        egui::Window::new("technique")
+            .anchor(egui::Align2::LEFT_TOP, [8.0, 8.0])
+            .max_height((h - 340.0).max(120.0))
+            .vscroll(true)
+            .show(&ctx, |ui| self.technique_panel(ui));
+        egui::Window::new("scene")
+            .anchor(egui::Align2::RIGHT_TOP, [-8.0, 8.0])
+            .max_height((h - 60.0).max(120.0))
+            .vscroll(true)
             .show(&ctx, |ui| {
-                self.stats_panel(ui);
+                self.scene_panel(ui);
+                ui.separator();
+                self.tools_panel(ui);
             });
+        egui::Window::new("timings")
+            .anchor(egui::Align2::LEFT_BOTTOM, [8.0, -8.0])
+            .default_open(true)
+            .show(&ctx, |ui| self.stats_panel(ui));
         for s in &mut self.shown {
             egui::Window::new(&s.title).open(&mut s.open).vscroll(true).show(&ctx, |ui| {
                 ui.label(&s.caption);
@@ -1170,6 +1265,22 @@ impl Viewer {
         self.keys_down = o.keys_down;
         if o.screenshot {
             self.pending.push(Action::Screenshot);
+        }
+        if o.cycle_scene != 0 {
+            let names = crepuscular_scene::builtin::builtin_names();
+            let at = names.iter().position(|(n, _)| *n == self.scene.name).map_or(0, |k| k as i32 + o.cycle_scene);
+            let next = names[at.rem_euclid(names.len() as i32) as usize].0;
+            match self.open_scene(next) {
+                Ok(()) => self.status = format!("opened {next}"),
+                Err(e) => self.status = format!("error: {}", format!("{e:#}").replace('\n', " ")),
+            }
+        }
+        if o.cycle_technique != 0 {
+            let gpu: Vec<&str> = crepuscular::techniques::TECHNIQUES.iter().filter(|t| t.gpu).map(|t| t.name).collect();
+            let at = gpu.iter().position(|n| *n == self.technique.name()).map_or(0, |k| k as i32 + o.cycle_technique);
+            let next = gpu[at.rem_euclid(gpu.len() as i32) as usize];
+            let parsed = parse_technique(next, &self.scene, self.preset, &[]);
+            self.set_technique(parsed, true);
         }
         if o.changed {
             self.dirty = true;
@@ -1302,6 +1413,38 @@ impl Viewer {
 
     fn scene_panel(&mut self, ui: &mut egui::Ui) {
         let mut changed = false;
+        let mut open: Option<String> = None;
+        ui.horizontal(|ui| {
+            ui.label(egui::RichText::new("scene").strong());
+            egui::ComboBox::from_id_salt("scene").selected_text(self.scene.name.as_str()).show_ui(ui, |ui| {
+                for (name, summary) in crepuscular_scene::builtin::builtin_names() {
+                    if ui.selectable_label(self.scene.name == *name, *name).on_hover_text(*summary).clicked() {
+                        open = Some(name.to_string());
+                    }
+                }
+            });
+        });
+        ui.horizontal(|ui| {
+            let r = ui.add(
+                egui::TextEdit::singleline(&mut self.scene_path)
+                    .hint_text("scene file (.toml), or drop one on the window")
+                    .desired_width(200.0),
+            );
+            let enter = r.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+            if (ui.button("open").clicked() || enter) && !self.scene_path.trim().is_empty() {
+                open = Some(self.scene_path.trim().to_string());
+            }
+        });
+        if let Some(path) = ui.input(|i| i.raw.dropped_files.first().map(|f| f.path().to_path_buf())) {
+            self.scene_path = path.display().to_string();
+            open = Some(self.scene_path.clone());
+        }
+        if let Some(spec) = open {
+            match self.open_scene(&spec) {
+                Ok(()) => self.status = format!("opened {spec}"),
+                Err(e) => self.status = format!("error: {}", format!("{e:#}").replace('\n', " ")),
+            }
+        }
         ui.label(egui::RichText::new("medium").strong());
         let rgb = |ui: &mut egui::Ui, label: &str, v: &mut Vec3, tip: &str| {
             let mut c = false;
@@ -1315,38 +1458,39 @@ impl Viewer {
         };
         changed |= rgb(ui, "σs", &mut self.medium.scattering, "scattering coefficient, 1/m, RGB");
         changed |= rgb(ui, "σa", &mut self.medium.absorption, "absorption coefficient, 1/m, RGB");
-        ui.horizontal(|ui| {
-            match &mut self.medium.phase {
-                Phase::HenyeyGreenstein { g } | Phase::HoffmanPreetham { g, .. } => {
-                    ui.label("phase g").on_hover_text("Henyey–Greenstein asymmetry; > 0 scatters forward");
-                    changed |= ui.add(egui::Slider::new(g, -0.99..=0.99)).changed();
-                }
-                Phase::Isotropic => {
-                    ui.label("phase: isotropic");
-                    if ui.button("use Henyey–Greenstein").clicked() {
-                        self.medium.phase = Phase::HenyeyGreenstein { g: 0.0 };
-                        changed = true;
-                    }
-                }
-                Phase::Rayleigh => {
-                    ui.label("phase: Rayleigh");
-                }
-            };
-        });
+        changed |= phase_editor(ui, &mut self.medium.phase);
         ui.label(egui::RichText::new("light & view").strong());
         match &mut self.controls.light {
-            Light::Directional { intensity, direction, .. } => {
+            Light::Directional { intensity, direction, color } => {
                 ui.label(format!("sun, travelling along ({:.2}, {:.2}, {:.2})", direction.x, direction.y, direction.z));
                 ui.horizontal(|ui| {
-                    ui.label("intensity");
+                    ui.label("intensity").on_hover_text("irradiance scale E of the colour");
                     changed |= ui.add(egui::DragValue::new(intensity).speed(0.05).range(0.0..=1e6)).changed();
+                    changed |= color_editor(ui, color);
                 });
             }
-            Light::Spot { intensity, position, .. } | Light::Point { intensity, position, .. } => {
-                ui.label(format!("light at ({:.2}, {:.2}, {:.2}) m", position.x, position.y, position.z));
+            Light::Spot { intensity, position, color, outer_angle_degrees, inner_angle_degrees, .. } => {
+                ui.label(format!("spot at ({:.2}, {:.2}, {:.2}) m", position.x, position.y, position.z));
                 ui.horizontal(|ui| {
-                    ui.label("intensity");
+                    ui.label("intensity").on_hover_text("intensity I per steradian of the colour");
                     changed |= ui.add(egui::DragValue::new(intensity).speed(1.0).range(0.0..=1e9)).changed();
+                    changed |= color_editor(ui, color);
+                });
+                ui.horizontal(|ui| {
+                    ui.label("cone °").on_hover_text("outer half-angle (falls to 0), inner half-angle (full strength)");
+                    changed |= ui.add(egui::DragValue::new(outer_angle_degrees).speed(0.2).range(0.5..=89.0)).changed();
+                    let outer = *outer_angle_degrees;
+                    changed |=
+                        ui.add(egui::DragValue::new(inner_angle_degrees).speed(0.2).range(0.0..=outer)).changed();
+                    *inner_angle_degrees = inner_angle_degrees.min(outer);
+                });
+            }
+            Light::Point { intensity, position, color } => {
+                ui.label(format!("point light at ({:.2}, {:.2}, {:.2}) m", position.x, position.y, position.z));
+                ui.horizontal(|ui| {
+                    ui.label("intensity").on_hover_text("intensity I per steradian of the colour");
+                    changed |= ui.add(egui::DragValue::new(intensity).speed(1.0).range(0.0..=1e9)).changed();
+                    changed |= color_editor(ui, color);
                 });
             }
         }
@@ -1365,7 +1509,7 @@ impl Viewer {
             }
             ui.checkbox(&mut self.continuous, "continuous").on_hover_text("re-render every frame (for timing)");
         });
-        ui.small("left drag orbit · shift/middle drag pan · wheel dolly · WASD QE fly · right (ctrl) drag light, + shift moves spot/point · F12/P screenshot");
+        ui.small("left drag orbit · shift/middle drag pan · wheel dolly · WASD QE fly · right (ctrl) drag light, + shift moves spot/point · F12/P screenshot · N scene · T technique");
         if changed {
             self.dirty = true;
         }
@@ -1466,15 +1610,86 @@ impl Viewer {
                 self.pending.push(Action::ErrorView);
             }
             ui.label("steps");
-            let mut s = self.reference_steps / 2;
-            if ui.add(egui::DragValue::new(&mut s).range(1..=2048)).changed() {
-                self.reference_steps = s * 2;
-            }
+            ui.add(egui::DragValue::new(&mut self.reference_steps).range(8..=4096))
+                .on_hover_text("ray-marching steps of the CPU reference; cost linear");
         });
         if !self.status.is_empty() {
-            ui.small(&self.status);
+            if self.status.starts_with("error") {
+                ui.colored_label(egui::Color32::from_rgb(255, 110, 90), &self.status);
+            } else {
+                ui.small(&self.status);
+            }
         }
     }
+}
+
+/// A linear-RGB colour picker; returns whether it changed.
+fn color_editor(ui: &mut egui::Ui, color: &mut Vec3) -> bool {
+    let mut c = color.to_array();
+    let changed = egui::color_picker::color_edit_button_rgb(ui, &mut c).on_hover_text("colour, linear RGB").changed();
+    if changed {
+        *color = Vec3::from_array(c).max(Vec3::ZERO);
+    }
+    changed
+}
+
+/// The phase function's kind (isotropic, Henyey–Greenstein, Rayleigh, Hoffman–Preetham) and
+/// its parameters; returns whether it changed. A new kind starts from the scene file's
+/// defaults for it, keeping the asymmetry g when both kinds have one.
+fn phase_editor(ui: &mut egui::Ui, phase: &mut Phase) -> bool {
+    const KINDS: [(&str, &str); 4] = [
+        ("isotropic", "p = 1/4π"),
+        ("henyey-greenstein", "Henyey–Greenstein: one lobe of asymmetry g"),
+        ("rayleigh", "Rayleigh: 3/16π (1 + cos²θ), small particles"),
+        ("hoffman-preetham", "Hoffman & Preetham 2002: per-channel mix of Rayleigh and a Mie lobe"),
+    ];
+    let kind = |p: &Phase| match p {
+        Phase::Isotropic => KINDS[0].0,
+        Phase::HenyeyGreenstein { .. } => KINDS[1].0,
+        Phase::Rayleigh => KINDS[2].0,
+        Phase::HoffmanPreetham { .. } => KINDS[3].0,
+    };
+    let mut changed = false;
+    let mut picked = kind(phase);
+    ui.horizontal(|ui| {
+        ui.label("phase").on_hover_text("phase function p(θ), θ = 0 looking into the light");
+        egui::ComboBox::from_id_salt("phase").selected_text(picked).show_ui(ui, |ui| {
+            for (k, tip) in KINDS {
+                ui.selectable_value(&mut picked, k, k).on_hover_text(tip);
+            }
+        });
+    });
+    if picked != kind(phase) {
+        let old_g = match phase {
+            Phase::HenyeyGreenstein { g } | Phase::HoffmanPreetham { g, .. } => Some(*g),
+            _ => None,
+        };
+        if let Ok(mut p) = serde_json::from_value::<Phase>(serde_json::json!({ "kind": picked })) {
+            if let (Phase::HenyeyGreenstein { g } | Phase::HoffmanPreetham { g, .. }, Some(old)) = (&mut p, old_g) {
+                *g = old;
+            }
+            *phase = p;
+            changed = true;
+        }
+    }
+    match phase {
+        Phase::HenyeyGreenstein { g } | Phase::HoffmanPreetham { g, .. } => {
+            ui.horizontal(|ui| {
+                ui.label("g").on_hover_text("asymmetry of the (Mie) lobe; > 0 scatters forward");
+                changed |= ui.add(egui::Slider::new(g, -0.99..=0.99)).changed();
+            });
+        }
+        Phase::Isotropic | Phase::Rayleigh => {}
+    }
+    if let Phase::HoffmanPreetham { rayleigh_fraction: f, .. } = phase {
+        ui.horizontal(|ui| {
+            ui.label("Rayleigh fraction").on_hover_text("share of σs that is Rayleigh, per RGB channel, in [0, 1]");
+            for x in [&mut f.x, &mut f.y, &mut f.z] {
+                changed |= ui.add(egui::DragValue::new(x).speed(0.005).range(0.0..=1.0).max_decimals(3)).changed();
+            }
+        });
+    }
+    changed
 }
 
 fn ctx_wants_keyboard(ui: &egui::Ui) -> bool {

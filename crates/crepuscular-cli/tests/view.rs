@@ -100,6 +100,121 @@ fn view_renders_frames_under_xvfb_and_saves_the_scene_image() {
     assert!(mean < 0.25 && over * 1000 < diff.len(), "view vs render: mean {mean} levels, {over} channels > 2");
 }
 
+fn xdotool() -> Option<PathBuf> {
+    let paths = std::env::var_os("PATH")?;
+    std::env::split_paths(&paths).map(|p| p.join("xdotool")).find(|p| p.is_file())
+}
+
+/// Drives the viewer in a real window with X input events (xdotool: the X server's XTEST
+/// extension, the same path a physical mouse and keyboard take through winit and egui-winit).
+/// After each gesture F12 saves a screenshot and its JSON view state.
+const DRIVE_SCRIPT: &str = r#"
+set -u
+bin="$1"; d="$2"
+"$bin" view colonnade --size 960x540 --scale 0.25 --output "$d/shot.png" >"$d/log" 2>&1 &
+pid=$!
+trap 'kill $pid 2>/dev/null; wait $pid 2>/dev/null' EXIT
+wid=$(timeout 120 xdotool search --sync --onlyvisible --name '^crepuscular' | head -1)
+[ -n "$wid" ] || { echo "no viewer window appeared"; cat "$d/log"; exit 1; }
+xdotool windowfocus --sync "$wid" 2>/dev/null || true
+n=0
+shot() {
+    n=$((n + 1))
+    xdotool key F12
+    for _ in $(seq 1 1200); do
+        [ -s "$d/shot-$n.json" ] && return 0
+        kill -0 $pid 2>/dev/null || { echo "viewer exited"; cat "$d/log"; exit 1; }
+        sleep 0.1
+    done
+    echo "screenshot $n never came"; cat "$d/log"; exit 1
+}
+# drag BUTTON DX DY: press in the middle of the scene (clear of the panels), move in steps.
+drag() {
+    xdotool mousemove --window "$wid" 480 300; sleep 0.3
+    xdotool mousedown "$1"; sleep 0.3
+    for k in 1 2 3 4 5 6; do
+        xdotool mousemove --window "$wid" $((480 + $2 * k / 6)) $((300 + $3 * k / 6)); sleep 0.2
+    done
+    xdotool mouseup "$1"; sleep 0.5
+}
+shot                                  # 1: as loaded
+drag 1 60 0; shot                     # 2: left drag right: orbit
+drag 3 60 -40; shot                   # 3: right drag: the sun turns
+xdotool keydown w; sleep 0.6; xdotool keyup w; sleep 0.5; shot     # 4: fly forward
+xdotool mousemove --window "$wid" 480 300
+for _ in 1 2 3 4 5; do xdotool click 4; sleep 0.2; done; sleep 0.5; shot   # 5: wheel: dolly in
+xdotool key n; sleep 1; shot          # 6: next built-in scene
+xdotool key t; sleep 1; shot          # 7: next technique
+cat "$d/log"
+"#;
+
+#[test]
+fn view_follows_real_mouse_and_keyboard_events_under_xvfb() {
+    let test = "view_follows_real_mouse_and_keyboard_events_under_xvfb";
+    let (Some(xvfb), Some(_)) = (xvfb_run(), xdotool()) else {
+        eprintln!("SKIPPED {test}: xvfb-run or xdotool is not installed (apt-get install xvfb xdotool)");
+        return;
+    };
+    if let Err(e) = has_adapter() {
+        assert!(!require_gpu(), "{test}: CREPUSCULAR_REQUIRE_GPU=1 but no adapter: {e}");
+        eprintln!("SKIPPED {test}: no GPU adapter ({e})");
+        return;
+    }
+    let d = tmp("drive");
+    let mut c = Command::new(xvfb);
+    c.args(["-a", "-s", "-screen 0 1280x720x24", "timeout", "600", "bash", "-c", DRIVE_SCRIPT, "drive"])
+        .arg(env!("CARGO_BIN_EXE_crepuscular"))
+        .arg(&d);
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        let x = std::env::temp_dir().join(format!("crepuscular-xdg-{}", std::process::id()));
+        let _ = std::fs::create_dir_all(&x);
+        c.env("XDG_RUNTIME_DIR", x);
+    }
+    let out = c.output().unwrap();
+    let log = text(&out);
+    assert!(out.status.success(), "{test}: {log}");
+    assert!(!log.contains("panicked"), "{log}");
+    let state = |n: u32| -> serde_json::Value {
+        let p = d.join(format!("shot-{n}.json"));
+        serde_json::from_slice(&std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}\n{log}", p.display()))).unwrap()
+    };
+    let v = |j: &serde_json::Value| -> [f64; 3] {
+        let a = j.as_array().unwrap_or_else(|| panic!("not a vector: {j}"));
+        [0, 1, 2].map(|k| a[k].as_f64().unwrap())
+    };
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let len = |a: [f64; 3]| dot(a, a).sqrt();
+    let s: Vec<serde_json::Value> = (1..=7).map(state).collect();
+    let (pos, at) = (|k: usize| v(&s[k]["camera"]["position"]), |k: usize| v(&s[k]["camera"]["look_at"]));
+    let sun = |k: usize| v(&s[k]["light"]["direction"]);
+    eprintln!("{test}: camera positions {:?}", (0..7).map(pos).collect::<Vec<_>>());
+    // 1 → 2, left drag: the camera orbits its target; the light stays.
+    assert!(len(sub(pos(1), pos(0))) > 0.05, "left drag did not move the camera");
+    assert!(len(sub(at(1), at(0))) < 1e-4, "left drag moved the orbit target");
+    assert!((len(sub(pos(1), at(1))) - len(sub(pos(0), at(0)))).abs() < 1e-3, "orbiting changed the distance");
+    assert_eq!(s[1]["light"], s[0]["light"], "left drag moved the light");
+    // 2 → 3, right drag: the sun turns; the camera stays.
+    assert!(dot(sun(2), sun(1)) < 0.999, "right drag did not turn the sun: {:?} → {:?}", sun(1), sun(2));
+    assert_eq!(s[2]["camera"], s[1]["camera"], "right drag moved the camera");
+    // 3 → 4, W held: camera and target move forward together.
+    let fwd = sub(at(2), pos(2));
+    let moved = sub(at(3), at(2));
+    assert!(dot(moved, fwd) / len(fwd) > 0.05, "W did not fly forward: moved {moved:?}");
+    assert!(len(sub(sub(pos(3), pos(2)), moved)) < 1e-3, "W changed the view direction");
+    // 4 → 5, wheel up: dolly towards the target.
+    assert!(len(sub(pos(4), at(4))) < 0.95 * len(sub(pos(3), at(3))), "the wheel did not dolly in");
+    // 5 → 6, N: the next built-in scene; 6 → 7, T: the next technique.
+    assert_eq!((s[4]["scene"].as_str(), s[5]["scene"].as_str()), (Some("colonnade"), Some("forest")));
+    assert_ne!(s[6]["technique"], s[5]["technique"], "T did not switch the technique");
+    assert_eq!(s[6]["stats"]["technique"], s[6]["technique"], "the frame after T was not rendered with it");
+    // The screenshots show it: each gesture changed the image.
+    let img = |n: u32| image::open(d.join(format!("shot-{n}.png"))).unwrap().to_rgb8();
+    for n in 1..7 {
+        assert_ne!(img(n).as_raw(), img(n + 1).as_raw(), "shot {n} and {} are the same image", n + 1);
+    }
+}
+
 #[test]
 fn view_without_a_display_fails_with_one_line() {
     let out = bin()

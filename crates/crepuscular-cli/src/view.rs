@@ -1161,11 +1161,7 @@ impl Viewer {
     /// as `crepuscular view SCENE --technique T --preset P` would start. On error nothing
     /// changes.
     fn open_scene(&mut self, spec: &str) -> Result<()> {
-        let mut scene = render::load_scene(spec)?;
-        if let Some(s) = self.shadow_map_size {
-            scene.render.shadow.size = s;
-        }
-        let technique = parse_technique(self.technique.name(), &scene, self.preset, &[])?;
+        let (scene, technique) = load_for_view(spec, self.shadow_map_size, self.technique.name(), self.preset)?;
         let host = GpuHost::new(&self.gpu, &scene.geometry)?;
         self.host = host;
         self.controls = Controls { orbit: Orbit::from_camera(&scene.camera), light: scene.light.clone() };
@@ -1623,6 +1619,37 @@ impl Viewer {
     }
 }
 
+/// A scene to open in the window and the technique `name` on it: the scene's own
+/// `[render.<name>]` settings under `preset`, and `shadow_map_size` (`--shadow-map-size`)
+/// when given. Errors name the file, key and value.
+fn load_for_view(
+    spec: &str,
+    shadow_map_size: Option<u32>,
+    name: &str,
+    preset: Option<Preset>,
+) -> Result<(Scene, TechniqueChoice)> {
+    let mut scene = render::load_scene(spec)?;
+    if let Some(s) = shadow_map_size {
+        scene.render.shadow.size = s;
+    }
+    let technique = parse_technique(name, &scene, preset, &[])?;
+    Ok((scene, technique))
+}
+
+/// The phase function of kind `kind` (a scene file's `phase.kind`) with the scene file's
+/// defaults, keeping the asymmetry of `old` when both have one; None for an unknown kind.
+fn phase_of_kind(kind: &str, old: &Phase) -> Option<Phase> {
+    let mut p = serde_json::from_value::<Phase>(serde_json::json!({ "kind": kind })).ok()?;
+    if let (
+        Phase::HenyeyGreenstein { g } | Phase::HoffmanPreetham { g, .. },
+        Phase::HenyeyGreenstein { g: old } | Phase::HoffmanPreetham { g: old, .. },
+    ) = (&mut p, old)
+    {
+        *g = *old;
+    }
+    Some(p)
+}
+
 /// A linear-RGB colour picker; returns whether it changed.
 fn color_editor(ui: &mut egui::Ui, color: &mut Vec3) -> bool {
     let mut c = color.to_array();
@@ -1659,18 +1686,11 @@ fn phase_editor(ui: &mut egui::Ui, phase: &mut Phase) -> bool {
             }
         });
     });
-    if picked != kind(phase) {
-        let old_g = match phase {
-            Phase::HenyeyGreenstein { g } | Phase::HoffmanPreetham { g, .. } => Some(*g),
-            _ => None,
-        };
-        if let Ok(mut p) = serde_json::from_value::<Phase>(serde_json::json!({ "kind": picked })) {
-            if let (Phase::HenyeyGreenstein { g } | Phase::HoffmanPreetham { g, .. }, Some(old)) = (&mut p, old_g) {
-                *g = old;
-            }
-            *phase = p;
-            changed = true;
-        }
+    if picked != kind(phase)
+        && let Some(p) = phase_of_kind(picked, phase)
+    {
+        *phase = p;
+        changed = true;
     }
     match phase {
         Phase::HenyeyGreenstein { g } | Phase::HoffmanPreetham { g, .. } => {
@@ -1990,6 +2010,37 @@ mod tests {
         let outs = drive(&mut c, vec![vec![], vec![key(egui::Key::W, true)], vec![key(egui::Key::P, true)]], true);
         assert_eq!(c.orbit, before.orbit);
         assert!(outs.iter().all(|o| !o.screenshot && !o.keys_down), "{outs:?}");
+    }
+
+    #[test]
+    fn every_phase_kind_can_be_picked_and_keeps_g() {
+        let hg = Phase::HenyeyGreenstein { g: -0.3 };
+        for kind in ["isotropic", "henyey-greenstein", "rayleigh", "hoffman-preetham"] {
+            let p = phase_of_kind(kind, &hg).unwrap_or_else(|| panic!("{kind}"));
+            assert_eq!(serde_json::to_value(p).unwrap()["kind"], kind);
+            if let Phase::HenyeyGreenstein { g } | Phase::HoffmanPreetham { g, .. } = p {
+                assert_eq!(g, -0.3, "{kind} lost g");
+            }
+        }
+        // From a kind without g: the file format's defaults.
+        assert_eq!(phase_of_kind("henyey-greenstein", &Phase::Rayleigh), Some(Phase::HenyeyGreenstein { g: 0.7 }));
+        assert!(phase_of_kind("mie", &hg).is_none());
+    }
+
+    #[test]
+    fn opening_a_scene_keeps_the_technique_and_reports_bad_files_by_name() {
+        let (scene, t) = load_for_view("forest", Some(512), "epipolar", Some(Preset::Fast)).unwrap();
+        assert_eq!((scene.name.as_str(), t.name(), scene.render.shadow.size), ("forest", "epipolar", 512));
+        let fast = parse_technique("epipolar", &scene, Some(Preset::Fast), &[]).unwrap();
+        assert_eq!(serde_json::to_value(&t).unwrap(), serde_json::to_value(&fast).unwrap());
+        let d = std::env::temp_dir().join(format!("crepuscular-view-open-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let bad = d.join("bad.toml");
+        std::fs::write(&bad, "[medium]\nscattering = -1.0\n").unwrap();
+        let e = format!("{:#}", load_for_view(bad.to_str().unwrap(), None, "brute-force", None).unwrap_err());
+        assert!(e.contains("bad.toml") && e.contains("scattering"), "{e}");
+        let e = format!("{:#}", load_for_view("no-such-scene", None, "brute-force", None).unwrap_err());
+        assert!(e.contains("no-such-scene"), "{e}");
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! Settings changed in place (`GpuRunner::update`, what the viewer does when a setting is
 //! edited) render exactly what a runner built fresh with the new settings renders: a technique
-//! that kept a stale table, texture or pipeline across the change would differ here.
+//! that kept a stale table, texture or pipeline across the change would differ here. And
+//! `StatsMode::Off` (render without waiting for the GPU) renders the same image as measured.
 
 use crepuscular::gpu::{GpuContext, test_gpu};
 use crepuscular_cli::render::{GpuRunner, TechniqueChoice, frame_desc};
@@ -16,6 +17,16 @@ fn small(name: &str) -> Scene {
 
 /// One frame of `scene` through `runner`, read back as raw f32 bits.
 fn render(gpu: &GpuContext, scene: &Scene, host: &GpuHost, runner: &mut GpuRunner) -> Vec<u32> {
+    render_stats(gpu, scene, host, runner).0
+}
+
+/// One frame and the technique's stats.
+fn render_stats(
+    gpu: &GpuContext,
+    scene: &Scene,
+    host: &GpuHost,
+    runner: &mut GpuRunner,
+) -> (Vec<u32>, crepuscular::stats::TechniqueStats) {
     let desc = frame_desc(scene);
     let spot = match &scene.light {
         crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
@@ -24,8 +35,8 @@ fn render(gpu: &GpuContext, scene: &Scene, host: &GpuHost, runner: &mut GpuRunne
     let tex = host.render(gpu, &desc, spot).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
     let views = tex.views();
-    runner.render(gpu, Some(host), &views.frame(&desc), &out.create_view(&Default::default())).unwrap();
-    gpu.read_texture_f32(&out, 0).unwrap().into_iter().map(f32::to_bits).collect()
+    let stats = runner.render(gpu, Some(host), &views.frame(&desc), &out.create_view(&Default::default())).unwrap();
+    (gpu.read_texture_f32(&out, 0).unwrap().into_iter().map(f32::to_bits).collect(), stats)
 }
 
 fn parse(technique: &str, scene: &Scene, set: &[&str]) -> TechniqueChoice {
@@ -92,6 +103,55 @@ fn settings_changed_in_place_render_what_a_fresh_runner_renders() {
             // Another technique's settings are refused and change nothing.
             let other = parse(if *technique == "brute-force" { "epipolar" } else { "brute-force" }, &scene, &[]);
             assert!(!runner.update(&other), "{technique} accepted another technique's settings");
+        }
+    }
+}
+
+#[test]
+fn stats_off_renders_the_same_image_without_timing_or_readbacks() {
+    let Some(mut gpu) = test_gpu("stats_off_renders_the_same_image_without_timing_or_readbacks") else { return };
+    for scene_name in ["colonnade", "cage"] {
+        let scene = small(scene_name);
+        let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+        for (technique, set) in [
+            ("brute-force", &[][..]),
+            ("interleaved", &[]),
+            ("subsampled", &[]),
+            ("epipolar", &["slices=64", "samples=64"]),
+            ("prefiltered", &["map_size=[128, 128]"]),
+        ] {
+            let choice = parse(technique, &scene, set);
+            gpu.stats = crepuscular::StatsMode::Measured;
+            let mut runner = choice.gpu_runner(&gpu).unwrap().expect("a GPU technique");
+            let (measured, ms) = render_stats(&gpu, &scene, &host, &mut runner);
+            gpu.stats = crepuscular::StatsMode::Off;
+            let (off, os) = render_stats(&gpu, &scene, &host, &mut runner);
+            eprintln!(
+                "{scene_name} {technique}: measured {} samples {:?}; off {} samples {:?}",
+                ms.raymarched_samples, ms.timing, os.raymarched_samples, os.timing
+            );
+            assert!(off == measured, "{scene_name} {technique}: StatsMode::Off changed the image");
+            assert_eq!(os.timing, "off");
+            assert_ne!(ms.timing, "off");
+            let names =
+                |s: &crepuscular::stats::TechniqueStats| s.passes.iter().map(|p| p.name.clone()).collect::<Vec<_>>();
+            assert_eq!(names(&os), names(&ms), "{technique}: the same passes");
+            assert!(os.passes.iter().all(|p| p.ms == 0.0), "{technique}: {:?}", os.passes);
+            match technique {
+                // Known on the CPU: the same count.
+                "brute-force" | "interleaved" | "prefiltered" => {
+                    assert_eq!(os.raymarched_samples, ms.raymarched_samples)
+                }
+                // The grid only: without the re-marched pixels, which only the GPU counts.
+                "subsampled" => {
+                    assert!(os.raymarched_samples <= ms.raymarched_samples && os.raymarched_samples > 0);
+                    assert!(!os.extra.contains_key("remarched_pixels") && ms.extra.contains_key("remarched_pixels"));
+                }
+                _ => {
+                    assert_eq!(os.raymarched_samples, 0);
+                    assert!(!os.extra.contains_key("marched_samples") && ms.extra.contains_key("marched_samples"));
+                }
+            }
         }
     }
 }

@@ -4,6 +4,25 @@ use crate::error::Error;
 use crate::stats::PassTime;
 use std::time::Instant;
 
+/// Whether a technique's `render` waits for the GPU to report the frame's statistics.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StatsMode {
+    /// Time every pass and read the GPU's counters (epipolar's sample classification,
+    /// subsampled's re-marched pixels): complete [`crate::TechniqueStats`], at the price of
+    /// waiting for the GPU at the end of each frame — and after each pass on software
+    /// adapters, which are timed by synchronised wall clock. The default; what the command
+    /// line's `render`, `bench` and the viewer use.
+    #[default]
+    Measured,
+    /// Record and submit only: `render` returns once its passes are submitted, so the CPU
+    /// prepares the next frame while the GPU works (no CPU–GPU synchronisation per frame: what
+    /// an engine wants, and the only way a browser allows). The stats then list the passes
+    /// with `ms` = 0 and `timing` = `"off"`; counts that need a readback (epipolar's and
+    /// subsampled's GPU-classified pixels) are left out of `raymarched_samples` and `extra`.
+    Off,
+}
+
 /// An adapter, device and queue, and what they can do.
 pub struct GpuContext {
     /// The adapter.
@@ -19,6 +38,9 @@ pub struct GpuContext {
     pub software: bool,
     /// True when passes are timed with timestamp queries.
     pub timestamps: bool,
+    /// Whether techniques wait for the GPU to report statistics; default
+    /// [`StatsMode::Measured`]. Set [`StatsMode::Off`] to render without synchronising.
+    pub stats: StatsMode,
     /// The first error wgpu reported outside any error scope, or the device-lost reason: set
     /// by the handlers [`GpuContext::from_adapter`] installs (wgpu's default handler panics),
     /// turned into an [`Error::Gpu`] by [`GpuContext::wait`].
@@ -55,7 +77,14 @@ pub fn wait_idle(device: &wgpu::Device) -> Result<(), Error> {
 impl GpuContext {
     /// Finds an adapter (any backend wgpu was built with; software adapters included) and
     /// creates a device with the adapter's own limits and only the optional features it has.
+    /// Blocks on [`GpuContext::new_async`]; in a browser, await that instead.
     pub fn new() -> Result<Self, Error> {
+        pollster::block_on(Self::new_async())
+    }
+
+    /// [`GpuContext::new`] as a future, for executors and the browser (wasm32, where blocking
+    /// the main thread is not allowed).
+    pub async fn new_async() -> Result<Self, Error> {
         // Vulkan / Metal / DX12 first; the GL backend only when none of those has an adapter
         // (or when WGPU_BACKEND asks for it), since probing EGL is noisy on headless machines.
         let tries = match wgpu::Backends::from_env() {
@@ -67,34 +96,45 @@ impl GpuContext {
             let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
             desc.backends = backends;
             let instance = wgpu::Instance::new(desc);
-            match pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                force_fallback_adapter: false,
-                compatible_surface: None,
-                apply_limit_buckets: false,
-            })) {
-                Ok(adapter) => return Self::from_adapter(adapter),
+            match instance
+                .request_adapter(&wgpu::RequestAdapterOptions {
+                    power_preference: wgpu::PowerPreference::HighPerformance,
+                    force_fallback_adapter: false,
+                    compatible_surface: None,
+                    apply_limit_buckets: false,
+                })
+                .await
+            {
+                Ok(adapter) => return Self::from_adapter_async(adapter).await,
                 Err(e) => last = e.to_string(),
             }
         }
         Err(Error::NoAdapter(last))
     }
 
-    /// Creates the device on a given adapter.
+    /// Creates the device on a given adapter (yours: the one your renderer presents with).
+    /// Blocks on [`GpuContext::from_adapter_async`].
     pub fn from_adapter(adapter: wgpu::Adapter) -> Result<Self, Error> {
+        pollster::block_on(Self::from_adapter_async(adapter))
+    }
+
+    /// [`GpuContext::from_adapter`] as a future.
+    pub async fn from_adapter_async(adapter: wgpu::Adapter) -> Result<Self, Error> {
         let info = adapter.get_info();
         let software = info.device_type == wgpu::DeviceType::Cpu
             || info.name.to_lowercase().contains("llvmpipe")
             || info.name.to_lowercase().contains("swiftshader");
         let wanted = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::DEPTH_CLIP_CONTROL;
         let features = adapter.features() & wanted;
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("crepuscular"),
-            required_features: features,
-            required_limits: adapter.limits(),
-            ..Default::default()
-        }))
-        .map_err(|e| Error::Device(e.to_string()))?;
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("crepuscular"),
+                required_features: features,
+                required_limits: adapter.limits(),
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| Error::Device(e.to_string()))?;
         let timestamps = !software && features.contains(wgpu::Features::TIMESTAMP_QUERY);
         let fault = std::sync::Arc::new(std::sync::Mutex::new(None::<String>));
         let record = |slot: &std::sync::Arc<std::sync::Mutex<Option<String>>>, message: String| {
@@ -109,7 +149,7 @@ impl GpuContext {
         device.set_device_lost_callback(move |reason, message| {
             record(&on_lost, format!("device lost ({reason:?}): {message}"))
         });
-        Ok(Self { adapter, device, queue, info, software, timestamps, fault })
+        Ok(Self { adapter, device, queue, info, software, timestamps, stats: StatsMode::Measured, fault })
     }
 
     /// Waits for the GPU ([`wait_idle`]), then reports a lost device or an error wgpu raised
@@ -159,7 +199,19 @@ impl GpuContext {
     }
 
     /// Runs `f` inside validation and out-of-memory error scopes and turns a captured error into
-    /// [`Error::Gpu`] instead of wgpu's default panic.
+    /// [`Error::Gpu`] instead of wgpu's default panic. On wasm32 (WebGPU reports errors
+    /// asynchronously and the browser forbids blocking on them) `f` runs without scopes; its
+    /// errors reach the handler [`GpuContext::from_adapter`] installs and the next
+    /// [`GpuContext::wait`].
+    #[cfg(target_arch = "wasm32")]
+    pub fn scoped<T>(&self, _context: &str, f: impl FnOnce() -> T) -> Result<T, Error> {
+        Ok(f())
+    }
+
+    /// Runs `f` inside validation and out-of-memory error scopes and turns a captured error into
+    /// [`Error::Gpu`] instead of wgpu's default panic. On wasm32 `f` runs without scopes (the
+    /// browser forbids blocking on their result); its errors reach [`GpuContext::wait`].
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn scoped<T>(&self, context: &str, f: impl FnOnce() -> T) -> Result<T, Error> {
         let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let val = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -371,8 +423,9 @@ impl<'a> TimestampSlot<'a> {
 
 /// Times passes. On hardware adapters with timestamp queries each pass writes begin/end
 /// timestamps; elsewhere (software adapters) each pass is submitted on its own and waited for,
-/// and its synchronised wall-clock time is recorded.
+/// and its synchronised wall-clock time is recorded. With [`StatsMode::Off`] it only submits.
 pub struct PassTimer {
+    off: bool,
     query_set: Option<wgpu::QuerySet>,
     names: Vec<String>,
     wall_ms: Vec<f64>,
@@ -382,19 +435,29 @@ pub struct PassTimer {
 impl PassTimer {
     /// A timer for up to `max_passes` passes.
     pub fn new(gpu: &GpuContext, max_passes: u32) -> Self {
-        let query_set = gpu.timestamps.then(|| {
+        let off = gpu.stats == StatsMode::Off;
+        let query_set = (gpu.timestamps && !off).then(|| {
             gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
                 label: Some("pass timestamps"),
                 ty: wgpu::QueryType::Timestamp,
                 count: max_passes * 2,
             })
         });
-        Self { query_set, names: Vec::new(), wall_ms: Vec::new(), capacity: max_passes }
+        Self { off, query_set, names: Vec::new(), wall_ms: Vec::new(), capacity: max_passes }
     }
 
-    /// "timestamp-queries" or "wall-clock".
+    /// "timestamp-queries", "wall-clock" or "off".
     pub fn mode(&self) -> &'static str {
-        if self.query_set.is_some() { "timestamp-queries" } else { "wall-clock" }
+        match (self.off, &self.query_set) {
+            (true, _) => "off",
+            (false, Some(_)) => "timestamp-queries",
+            (false, None) => "wall-clock",
+        }
+    }
+
+    /// False with [`StatsMode::Off`]: the frame's counters should not be read back either.
+    pub fn measuring(&self) -> bool {
+        !self.off
     }
 
     /// Records one pass: `record` gets a fresh encoder (inside a debug group named `name`) and
@@ -410,7 +473,8 @@ impl PassTimer {
             Some(set) if index < self.capacity => Some(TimestampSlot { set, index: index * 2 }),
             _ => None,
         };
-        let start = Instant::now();
+        // No clock with StatsMode::Off: std's Instant panics on wasm32.
+        let start = (!self.off).then(Instant::now);
         gpu.scoped(name, || {
             let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(name) });
             enc.push_debug_group(name);
@@ -418,15 +482,16 @@ impl PassTimer {
             enc.pop_debug_group();
             gpu.queue.submit([enc.finish()]);
         })?;
-        if self.query_set.is_none() {
+        if self.query_set.is_none() && !self.off {
             gpu.wait()?;
         }
-        self.wall_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        self.wall_ms.push(start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3));
         self.names.push(name.to_string());
         Ok(())
     }
 
-    /// Waits for the passes and returns their times.
+    /// Waits for the passes and returns their times (with [`StatsMode::Off`]: their names, 0 ms,
+    /// without waiting).
     pub fn finish(self, gpu: &GpuContext) -> Result<Vec<PassTime>, Error> {
         let Some(set) = &self.query_set else {
             return Ok(self.names.into_iter().zip(self.wall_ms).map(|(name, ms)| PassTime { name, ms }).collect());

@@ -22,7 +22,7 @@ pub mod tonemap;
 
 pub use error::Error;
 pub use frame::{CpuFrame, FrameUniforms, GpuFrame};
-pub use gpu::GpuContext;
+pub use gpu::{GpuContext, StatsMode};
 pub use image::Image;
 pub use model::{Camera, Light, Medium, Phase, RgbTexture};
 pub use shadow::{Bounds, ShadowMap, ShadowProjection, ShadowSettings};

@@ -20,11 +20,14 @@ pub struct TechniqueStats {
     pub technique: String,
     /// "gpu" or "cpu".
     pub backend: String,
-    /// How the times were taken: "timestamp-queries", "wall-clock".
+    /// How the times were taken: "timestamp-queries", "wall-clock", or "off" (not taken:
+    /// [`crate::StatsMode::Off`], every pass 0 ms).
     pub timing: String,
     /// Per-pass times, in order.
     pub passes: Vec<PassTime>,
-    /// Number of ray-marched samples (shadow-map lookups along view rays) in the frame.
+    /// Number of ray-marched samples (shadow-map lookups along view rays) in the frame. Under
+    /// [`crate::StatsMode::Off`] the samples only the GPU counts (epipolar's classified and
+    /// re-marched pixels, subsampled's re-marched silhouette pixels) are not included.
     pub raymarched_samples: u64,
     /// Bytes of GPU memory the technique itself holds (buffers, textures, excluding the
     /// caller's inputs and output); 0 on the CPU.

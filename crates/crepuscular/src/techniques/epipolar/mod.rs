@@ -1160,17 +1160,31 @@ impl Epipolar {
             enc.copy_buffer_to_buffer(&self.counters, 0, &self.counters_readback, 0, 16);
         })?;
         let mode = timer.mode().to_string();
+        let measuring = timer.measuring();
         let passes = timer.finish(gpu)?;
-        let [marched_n, remarched, valid_lines, sample_texels] = self.read_counters(gpu)?;
         self.last_params = Some(params);
+        // StatsMode::Off: no readback, so no GPU-classified counts (they would stall the frame).
+        let (raymarched_samples, extra) = if measuring {
+            let [marched_n, remarched, valid_lines, sample_texels] = self.read_counters(gpu)?;
+            (
+                (marched_n + remarched) * s.steps as u64,
+                stats_extra(&params, desc, valid_lines, marched_n, remarched, sample_texels),
+            )
+        } else {
+            let mut extra = stats_extra(&params, desc, 0, 0, 0, 0);
+            for k in ["valid_lines", "marched_samples", "sample_texels", "remarched_pixels", "marched_share"] {
+                extra.remove(k);
+            }
+            (0, extra)
+        };
         Ok(TechniqueStats {
             technique: "epipolar".into(),
             backend: "gpu".into(),
             timing: mode,
             passes,
-            raymarched_samples: (marched_n + remarched) * s.steps as u64,
+            raymarched_samples,
             gpu_memory_bytes: self.gpu_memory_bytes(),
-            extra: stats_extra(&params, desc, valid_lines, marched_n, remarched, sample_texels),
+            extra,
         })
     }
 

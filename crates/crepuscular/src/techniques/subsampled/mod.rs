@@ -368,17 +368,24 @@ impl Subsampled {
             enc.copy_buffer_to_buffer(&self.counter, 0, &self.counter_readback, 0, 4);
         })?;
         let mode = timer.mode().to_string();
+        let measuring = timer.measuring();
         let passes = timer.finish(gpu)?;
-        let remarched = self.read_counter(gpu)?;
+        // StatsMode::Off: the re-marched pixels are counted on the GPU and not read back, so
+        // the samples are the grid's only.
+        let remarched = if measuring { Some(self.read_counter(gpu)?) } else { None };
         let steps = self.settings.steps as u64;
+        let mut extra = stats_extra(gw, gh, remarched.unwrap_or(0));
+        if remarched.is_none() {
+            extra.remove("remarched_pixels");
+        }
         Ok(TechniqueStats {
             technique: "subsampled".into(),
             backend: "gpu".into(),
             timing: mode,
             passes,
-            raymarched_samples: (gw as u64 * gh as u64 + remarched) * steps,
+            raymarched_samples: (gw as u64 * gh as u64 + remarched.unwrap_or(0)) * steps,
             gpu_memory_bytes: self.gpu_memory_bytes(),
-            extra: stats_extra(gw, gh, remarched),
+            extra,
         })
     }
 

@@ -44,8 +44,9 @@ enum Command {
     /// technique and write an animated GIF; `--flicker` measures temporal stability vs reference.
     Animate(AnimateArgs),
     /// Open an interactive window: the scene rendered every frame with a GPU technique, an
-    /// orbit/fly camera, a movable light, the medium and every technique setting editable live,
-    /// per-pass timings, debug and error views, screenshots (F12 / P).
+    /// orbit/fly camera, a movable light, the scene, medium and every technique setting editable
+    /// live, per-pass timings, debug and error views, screenshots (F12 / P, with the view's
+    /// state as JSON beside them); N / T cycle the built-in scenes / the techniques.
     View(ViewArgs),
 }
 
@@ -77,7 +78,8 @@ struct ViewArgs {
     /// and exit with code 0.
     #[arg(long, value_name = "N")]
     screenshot_after: Option<u32>,
-    /// Screenshot path: --screenshot-after writes it; F12 / P write `<stem>-<n>.png` beside it.
+    /// Screenshot path: --screenshot-after writes it; F12 / P write `<stem>-<n>.png` and
+    /// `<stem>-<n>.json` (scene, camera, light, medium, settings, stats) beside it.
     #[arg(long, short, default_value = "crepuscular-view.png")]
     output: PathBuf,
 }

@@ -9,7 +9,7 @@ use std::time::Instant;
 #[serde(rename_all = "kebab-case")]
 pub enum StatsMode {
     /// Time every pass and read the GPU's counters (epipolar's sample classification,
-    /// subsampled's re-marched pixels): complete [`crate::TechniqueStats`], at the price of
+    /// subsampled's re-marched pixels): complete [`crate::stats::TechniqueStats`], at the price of
     /// waiting for the GPU at the end of each frame — and after each pass on software
     /// adapters, which are timed by synchronised wall clock. The default; what the command
     /// line's `render`, `bench` and the viewer use.

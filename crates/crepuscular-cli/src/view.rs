@@ -66,58 +66,9 @@ pub struct ViewOptions {
     pub output: PathBuf,
 }
 
-/// One-line help on a setting, shown as a tooltip (the doc comments are not available at run
-/// time). Settings missing here still get a widget, without a tooltip.
-const SETTING_DOCS: &[(&str, &str, &str)] = &[
-    ("*", "steps", "Ray-marching steps per ray, N. Cost linear in N; more resolves thin shafts, less bands."),
-    ("*", "jitter", "Offset samples by a random fraction of a step: banding becomes noise, no extra cost."),
-    ("*", "frame_index", "Seed of the jitter; change per frame for temporal accumulation."),
-    (
-        "*",
-        "spot_steps",
-        "Spot lights: where the steps go (fixed, exact-cone = the chord inside the cone, appendix-b-*).",
-    ),
-    ("*", "spot_denominator", "Denominator of the appendix-b-* spot policies (a sine in (0, 1])."),
-    ("interleaved", "block", "Block size M: each pixel marches N/M² terms, an M×M sum adds them. 1..=16."),
-    ("interleaved", "depth_aware", "Sum only neighbours within depth_tolerance of the centre's view distance."),
-    ("*", "depth_tolerance", "Relative view-distance difference at which a neighbour / grid sample stops counting."),
-    ("interleaved", "phase_lut", "Read the phase function from a lookup table instead of evaluating it."),
-    ("interleaved", "phase_lut_size", "Entries of the phase table (16 bytes each); error falls as 1/size²."),
-    ("subsampled", "factor", "Subsampling factor f: ray-march a ⌈W/f⌉×⌈H/f⌉ grid; cost falls as 1/f²."),
-    ("subsampled", "grid", "Fixed grid [w, h] overriding factor (TOML array), empty = none."),
-    ("subsampled", "edge_remarch", "Re-march silhouette pixels with no depth-compatible grid neighbour."),
-    ("epipolar", "slices", "Epipolar lines (4..=8192); empty = auto, one per 4 pixels of perimeter."),
-    ("epipolar", "samples", "Texels per line S (2..=8192); empty = auto, one per 1.5 pixels of diagonal."),
-    ("epipolar", "initial_samples", "Initial ray-march samples per line K (typically 8 to 32)."),
-    ("epipolar", "length_proportional_initial_samples", "Give short lines proportionally fewer initial samples."),
-    ("epipolar", "depth_threshold", "Absolute discontinuity threshold, metres of view distance."),
-    ("epipolar", "threshold_growth", "Relative discontinuity threshold (grows with distance)."),
-    ("epipolar", "taps", "Bilateral taps along each line, odd, 1..=9."),
-    ("epipolar", "weighting", "Radial basis of the bilateral weights: gaussian, shepard, threshold."),
-    ("epipolar", "spatial_scale", "Width of the spatial kernel, in tap spacings."),
-    ("epipolar", "depth_scale", "Width of the depth kernel on the relative view-distance difference."),
-    ("epipolar", "outer_lines", "How many lines further out to look when a line has no usable tap."),
-    ("epipolar", "fallback_remarch", "Re-march pixels with no usable tap at full resolution."),
-    ("epipolar", "epipole_radius", "Re-march pixels within this many pixels of the epipole (0 disables)."),
-    ("epipolar", "spot_prefilter", "Spot texture prefilter: \"auto\", \"off\" or a level (TOML)."),
-    ("prefiltered", "bases", "Fourier bases M (multiple of 4, 4..=128): fewer ring more; cost and memory linear in M."),
-    ("prefiltered", "map_size", "Rectified shadow map [columns, rows]; prefilter cost and memory grow with it."),
-    ("prefiltered", "precision", "Filtered-basis storage: unorm8 (1 byte per basis) or float16 (2 bytes)."),
-    ("prefiltered", "rectification", "auto, projective (§4.2, sun off screen) or epipolar (§4.1, any light)."),
-    ("prefiltered", "max_projective_angle", "Widest projected frustum (degrees) that auto rectifies projectively."),
-    ("prefiltered", "regions", "Prefix-sum regions per row (1..=8): more prefilter threads, one lookup each."),
-    ("prefiltered", "split_lambda", "Region boundaries: 0 one projective map, 1 equal world extents (split maps)."),
-    ("prefiltered", "bases_per_thread", "Bases per prefilter thread (multiple of 4 dividing M)."),
-    (
-        "prefiltered",
-        "transmittance_weights",
-        "Weight the prefix sum by transmittance (§3.2) instead of plain averaging.",
-    ),
-    ("prefiltered", "reference_ray", "Reference ray of each slice for the weights: bisectrix or optimal."),
-    ("prefiltered", "epipole_radius", "Ray-march pixels within this many pixels of a visible light (§5; 0 off)."),
-    ("prefiltered", "epipole_steps", "Steps per pixel of the epipole disc."),
-    ("prefiltered", "light_steps", "Quadrature points of a local light's unoccluded in-scattering per pixel."),
-];
+// The doc comment of every field of every technique's settings struct, collected by build.rs
+// from the library's sources: (technique, field, doc).
+include!(concat!(env!("OUT_DIR"), "/setting_docs.rs"));
 
 /// Known values of string-valued settings, for a combo box.
 const ENUM_VALUES: &[(&str, &[&str])] = &[
@@ -128,13 +79,9 @@ const ENUM_VALUES: &[(&str, &[&str])] = &[
     ("reference_ray", &["bisectrix", "optimal"]),
 ];
 
-/// The tooltip of a technique's setting, if the table has one.
+/// The tooltip of a technique's setting: the doc comment of its field in the library.
 pub fn setting_doc(technique: &str, key: &str) -> Option<&'static str> {
-    SETTING_DOCS
-        .iter()
-        .find(|(t, k, _)| *t == technique && *k == key)
-        .map(|e| e.2)
-        .or_else(|| SETTING_DOCS.iter().find(|(t, k, _)| *t == "*" && *k == key).map(|e| e.2))
+    GENERATED_SETTING_DOCS.iter().find(|(t, k, _)| *t == technique && *k == key).map(|e| e.2)
 }
 
 /// Fails with one line when there is no display to open a window on.
@@ -1780,9 +1727,19 @@ mod tests {
     }
 
     #[test]
-    fn tooltips_cover_the_common_settings() {
-        assert!(setting_doc("brute-force", "steps").is_some());
-        assert!(setting_doc("epipolar", "taps").is_some());
+    fn every_setting_of_every_technique_has_its_doc_comment_as_tooltip() {
+        let scene = crepuscular_scene::builtin::builtin("colonnade").unwrap();
+        for t in crepuscular::techniques::TECHNIQUES {
+            let choice = parse_technique(t.name, &scene, None, &[]).unwrap();
+            for key in settings_fields(&choice).keys() {
+                let doc = setting_doc(t.name, key).unwrap_or_else(|| panic!("{}.{key} has no tooltip", t.name));
+                assert!(doc.len() > 20 && !doc.contains("///"), "{}.{key}: {doc:?}", t.name);
+            }
+        }
+        // The text is the field's documentation, paragraphs kept.
+        let steps = setting_doc("brute-force", "steps").unwrap();
+        assert!(steps.starts_with("Ray-marching steps per pixel, N in eq. 1 of Tóth & Umenhoffer 2009."), "{steps}");
+        assert!(steps.contains("\n\nMore steps resolve thinner shafts"), "{steps}");
         assert!(setting_doc("brute-force", "no-such-key").is_none());
     }
 

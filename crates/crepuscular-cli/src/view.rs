@@ -1482,7 +1482,7 @@ impl Viewer {
         }
         // Stacked bars per frame over the last seconds, one colour per pass.
         let width = ui.available_width().clamp(200.0, 420.0);
-        let (rect, _) = ui.allocate_exact_size(egui::vec2(width, 90.0), egui::Sense::hover());
+        let (rect, _) = ui.allocate_exact_size(egui::vec2(width, 70.0), egui::Sense::hover());
         let painter = ui.painter_at(rect);
         painter.rect_filled(rect, 2.0, egui::Color32::from_black_alpha(120));
         let max_ms = self.history.iter().map(|f| f.passes.iter().map(|p| p.ms).sum::<f64>()).fold(1.0, f64::max);
@@ -1514,14 +1514,15 @@ impl Viewer {
             egui::Color32::WHITE,
         );
         if let Some(last) = self.history.back() {
-            for p in &last.passes {
-                let k = names.iter().position(|n| *n == p.name).unwrap_or(0);
-                ui.horizontal(|ui| {
+            // The legend, wrapped: a colour swatch and the pass's last time each.
+            ui.horizontal_wrapped(|ui| {
+                for p in &last.passes {
+                    let k = names.iter().position(|n| *n == p.name).unwrap_or(0);
                     let (r, _) = ui.allocate_exact_size(egui::vec2(10.0, 10.0), egui::Sense::hover());
                     ui.painter().rect_filled(r, 1.0, pass_color(k));
-                    ui.small(format!("{} {:.2} ms", p.name, p.ms));
-                });
-            }
+                    ui.small(format!("{} {:.1} ms", p.name, p.ms));
+                }
+            });
         }
     }
 

@@ -107,7 +107,8 @@ fn xdotool() -> Option<PathBuf> {
 
 /// Drives the viewer in a real window with X input events (xdotool: the X server's XTEST
 /// extension, the same path a physical mouse and keyboard take through winit and egui-winit).
-/// After each gesture F12 saves a screenshot and its JSON view state.
+/// After each gesture F12 saves a screenshot and its JSON view state. The pauses spread each
+/// gesture over several frames (a frame takes ~0.15 s here on llvmpipe), as a hand would.
 const DRIVE_SCRIPT: &str = r#"
 set -u
 bin="$1"; d="$2"
@@ -133,16 +134,16 @@ drag() {
     xdotool mousemove --window "$wid" 480 300; sleep 0.3
     xdotool mousedown "$1"; sleep 0.3
     for k in 1 2 3 4 5 6; do
-        xdotool mousemove --window "$wid" $((480 + $2 * k / 6)) $((300 + $3 * k / 6)); sleep 0.2
+        xdotool mousemove --window "$wid" $((480 + $2 * k / 6)) $((300 + $3 * k / 6)); sleep 0.3
     done
     xdotool mouseup "$1"; sleep 0.5
 }
 shot                                  # 1: as loaded
 drag 1 60 0; shot                     # 2: left drag right: orbit
 drag 3 60 -40; shot                   # 3: right drag: the sun turns
-xdotool keydown w; sleep 0.6; xdotool keyup w; sleep 0.5; shot     # 4: fly forward
+xdotool keydown w; sleep 1; xdotool keyup w; sleep 0.5; shot     # 4: fly forward
 xdotool mousemove --window "$wid" 480 300
-for _ in 1 2 3 4 5; do xdotool click 4; sleep 0.2; done; sleep 0.5; shot   # 5: wheel: dolly in
+for _ in 1 2 3 4 5; do xdotool click 4; sleep 0.3; done; sleep 0.5; shot   # 5: wheel: dolly in
 xdotool key n; sleep 1; shot          # 6: next built-in scene
 xdotool key t; sleep 1; shot          # 7: next technique
 cat "$d/log"

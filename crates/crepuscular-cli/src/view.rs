@@ -294,6 +294,9 @@ pub(crate) struct Controls {
     pub(crate) orbit: Orbit,
     /// The light (direction, position, aim).
     pub(crate) light: Light,
+    /// Ignore the wheel until egui's smooth scrolling has run out, so that the rest of a wheel
+    /// turn does not move a camera just reset or loaded.
+    pub(crate) settle_scroll: bool,
 }
 
 /// What one frame's input did.
@@ -312,6 +315,11 @@ pub(crate) struct InputOutcome {
 }
 
 impl Controls {
+    /// The camera and light of `scene`.
+    pub(crate) fn of(scene: &Scene) -> Self {
+        Self { orbit: Orbit::from_camera(&scene.camera), light: scene.light.clone(), settle_scroll: true }
+    }
+
     /// Reads one frame's pointer and keyboard input over `rect` (the scene area, behind the
     /// panels): left drag orbits, shift/middle drag pans, the wheel dollies, W A S D Q E fly
     /// (shift: 4× faster), right or ctrl drag moves the light ([`Controls::drag_light`]),
@@ -340,7 +348,10 @@ impl Controls {
             }
             out.changed = true;
         }
-        if resp.hovered() && scroll != 0.0 {
+        if scroll == 0.0 {
+            self.settle_scroll = false;
+        }
+        if resp.hovered() && scroll != 0.0 && !self.settle_scroll {
             self.orbit.distance = (self.orbit.distance * (-scroll * 0.002).exp()).clamp(0.05, 5000.0);
             out.changed = true;
         }
@@ -649,7 +660,7 @@ impl Viewer {
         let fields = settings_fields(&technique);
         eprintln!("view: `{}` with {} on {}", scene.name, technique.name(), gpu.describe());
         Ok(Self {
-            controls: Controls { orbit: Orbit::from_camera(&scene.camera), light: scene.light.clone() },
+            controls: Controls::of(&scene),
             medium: scene.medium.clone(),
             exposure: scene.render.exposure,
             text_fields: text_fields(&fields),
@@ -1111,7 +1122,7 @@ impl Viewer {
         let (scene, technique) = load_for_view(spec, self.shadow_map_size, self.technique.name(), self.preset)?;
         let host = GpuHost::new(&self.gpu, &scene.geometry)?;
         self.host = host;
-        self.controls = Controls { orbit: Orbit::from_camera(&scene.camera), light: scene.light.clone() };
+        self.controls = Controls::of(&scene);
         self.medium = scene.medium.clone();
         self.exposure = scene.render.exposure;
         self.scene = scene;
@@ -1445,8 +1456,7 @@ impl Viewer {
         });
         ui.horizontal(|ui| {
             if ui.button("reset camera & light").clicked() {
-                self.controls.orbit = Orbit::from_camera(&self.scene.camera);
-                self.controls.light = self.scene.light.clone();
+                self.controls = Controls::of(&self.scene);
                 self.medium = self.scene.medium.clone();
                 changed = true;
             }
@@ -1775,7 +1785,7 @@ mod tests {
     fn controls(light: Light) -> Controls {
         let camera =
             crepuscular::Camera { position: Vec3::new(0.0, 2.0, 10.0), look_at: Vec3::ZERO, ..Default::default() };
-        Controls { orbit: Orbit::from_camera(&camera), light }
+        Controls { orbit: Orbit::from_camera(&camera), light, settle_scroll: false }
     }
 
     fn sun() -> Light {
@@ -1934,6 +1944,27 @@ mod tests {
         drive(&mut c, frames, false);
         assert!(c.orbit.distance < before.orbit.distance * 0.95, "{} → {}", before.orbit.distance, c.orbit.distance);
         assert!(close(c.orbit.target, before.orbit.target) && c.orbit.yaw == before.orbit.yaw);
+    }
+
+    #[test]
+    fn the_rest_of_a_wheel_turn_does_not_move_a_camera_just_reset() {
+        let wheel = egui::Event::MouseWheel {
+            unit: egui::MouseWheelUnit::Point,
+            delta: egui::vec2(0.0, 120.0),
+            phase: egui::TouchPhase::Move,
+            source: egui::MouseWheelSource::Wheel,
+            modifiers: Default::default(),
+        };
+        let mut c = controls(sun());
+        c.settle_scroll = true; // as Controls::of leaves it
+        let before = c.orbit;
+        let mut frames = vec![vec![egui::Event::PointerMoved(egui::pos2(160.0, 90.0)), wheel.clone()]];
+        frames.extend((0..30).map(|_| vec![]));
+        drive(&mut c, frames.clone(), false);
+        assert_eq!(c.orbit, before, "a smooth-scroll tail moved the camera");
+        // Once it has run out, the wheel works again.
+        drive(&mut c, frames, false);
+        assert!(c.orbit.distance < before.distance * 0.95);
     }
 
     #[test]

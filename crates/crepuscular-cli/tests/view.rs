@@ -207,6 +207,13 @@ fn view_follows_real_mouse_and_keyboard_events_under_xvfb() {
     assert!(len(sub(pos(4), at(4))) < 0.95 * len(sub(pos(3), at(3))), "the wheel did not dolly in");
     // 5 → 6, N: the next built-in scene; 6 → 7, T: the next technique.
     assert_eq!((s[4]["scene"].as_str(), s[5]["scene"].as_str()), (Some("colonnade"), Some("forest")));
+    // ... with forest's own camera (the rest of the wheel turn does not move it).
+    let forest = crepuscular_scene::builtin::builtin("forest").unwrap().camera.position;
+    let p = pos(5);
+    assert!(
+        (p[0] - forest.x as f64).abs() + (p[1] - forest.y as f64).abs() + (p[2] - forest.z as f64).abs() < 1e-4,
+        "the new scene's camera moved: {p:?} vs {forest}"
+    );
     assert_ne!(s[6]["technique"], s[5]["technique"], "T did not switch the technique");
     assert_eq!(s[6]["stats"]["technique"], s[6]["technique"], "the frame after T was not rendered with it");
     // The screenshots show it: each gesture changed the image.

@@ -253,19 +253,6 @@ fn frame_index_of(choice: &TechniqueChoice) -> Option<u32> {
     v.get("frame_index")?.as_u64().map(|x| x as u32)
 }
 
-/// Puts `choice`'s settings into a built runner of the same technique; false if it cannot.
-fn set_runner_settings(runner: &mut GpuRunner, choice: &TechniqueChoice) -> bool {
-    match (runner, choice) {
-        (GpuRunner::BruteForce(r), TechniqueChoice::BruteForce(s)) => r.settings = s.clone(),
-        (GpuRunner::Interleaved(r), TechniqueChoice::Interleaved(s)) => r.settings = s.clone(),
-        (GpuRunner::Subsampled(r), TechniqueChoice::Subsampled(s)) => r.settings = s.clone(),
-        (GpuRunner::Epipolar(r), TechniqueChoice::Epipolar(s)) => r.settings = s.clone(),
-        (GpuRunner::Prefiltered(r), TechniqueChoice::Prefiltered(s)) => r.settings = s.clone(),
-        _ => return false,
-    }
-    true
-}
-
 impl AnimatedTechnique {
     /// Parses the technique's settings (scene table + `key=value` overrides); errors name them.
     pub fn new(name: &str, scene: &Scene, overrides: &[String]) -> Result<Self> {
@@ -333,7 +320,7 @@ impl AnimatedTechnique {
                     }
                     Some((k, _, _)) if *k == key => false,
                     Some((k, runner, _)) => {
-                        let done = set_runner_settings(runner, &choice);
+                        let done = runner.update(&choice);
                         if done {
                             *k = key.clone();
                         }

@@ -1810,6 +1810,17 @@ mod tests {
         frames
     }
 
+    /// A wheel turn of `dy` points (positive: away from the user).
+    fn wheel(dy: f32) -> egui::Event {
+        egui::Event::MouseWheel {
+            unit: egui::MouseWheelUnit::Point,
+            delta: egui::vec2(0.0, dy),
+            phase: egui::TouchPhase::Move,
+            source: egui::MouseWheelSource::Wheel,
+            modifiers: Default::default(),
+        }
+    }
+
     fn key(key: egui::Key, pressed: bool) -> egui::Event {
         egui::Event::Key { key, physical_key: Some(key), pressed, repeat: false, modifiers: Default::default() }
     }
@@ -1932,13 +1943,6 @@ mod tests {
     fn the_wheel_dollies_towards_the_target() {
         let mut c = controls(sun());
         let before = c.clone();
-        let wheel = |dy: f32| egui::Event::MouseWheel {
-            unit: egui::MouseWheelUnit::Point,
-            delta: egui::vec2(0.0, dy),
-            phase: egui::TouchPhase::Move,
-            source: egui::MouseWheelSource::Wheel,
-            modifiers: Default::default(),
-        };
         let mut frames = vec![vec![egui::Event::PointerMoved(egui::pos2(160.0, 90.0)), wheel(120.0)]];
         frames.extend((0..30).map(|_| vec![]));
         drive(&mut c, frames, false);
@@ -1948,17 +1952,10 @@ mod tests {
 
     #[test]
     fn the_rest_of_a_wheel_turn_does_not_move_a_camera_just_reset() {
-        let wheel = egui::Event::MouseWheel {
-            unit: egui::MouseWheelUnit::Point,
-            delta: egui::vec2(0.0, 120.0),
-            phase: egui::TouchPhase::Move,
-            source: egui::MouseWheelSource::Wheel,
-            modifiers: Default::default(),
-        };
         let mut c = controls(sun());
         c.settle_scroll = true; // as Controls::of leaves it
         let before = c.orbit;
-        let mut frames = vec![vec![egui::Event::PointerMoved(egui::pos2(160.0, 90.0)), wheel.clone()]];
+        let mut frames = vec![vec![egui::Event::PointerMoved(egui::pos2(160.0, 90.0)), wheel(120.0)]];
         frames.extend((0..30).map(|_| vec![]));
         drive(&mut c, frames.clone(), false);
         assert_eq!(c.orbit, before, "a smooth-scroll tail moved the camera");

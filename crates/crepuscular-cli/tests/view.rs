@@ -20,21 +20,33 @@ fn require_gpu() -> bool {
     std::env::var("CREPUSCULAR_REQUIRE_GPU").is_ok_and(|v| v == "1")
 }
 
-fn xvfb_run() -> Option<PathBuf> {
+/// `exe` found on PATH.
+fn on_path(exe: &str) -> Option<PathBuf> {
     let paths = std::env::var_os("PATH")?;
-    std::env::split_paths(&paths).map(|p| p.join("xvfb-run")).find(|p| p.is_file())
+    std::env::split_paths(&paths).map(|p| p.join(exe)).find(|p| p.is_file())
 }
 
-/// A command run under `xvfb-run -a` with a 1280×720 screen.
-fn under_xvfb(xvfb: &Path) -> Command {
+fn xvfb_run() -> Option<PathBuf> {
+    on_path("xvfb-run")
+}
+
+/// `xvfb-run -a` with a 1280×720 screen; the program and its arguments follow.
+fn xvfb_command(xvfb: &Path) -> Command {
     let mut c = Command::new(xvfb);
-    c.args(["-a", "-s", "-screen 0 1280x720x24"]).arg(env!("CARGO_BIN_EXE_crepuscular"));
+    c.args(["-a", "-s", "-screen 0 1280x720x24"]);
     // The Vulkan loader wants a runtime dir on headless machines.
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         let d = std::env::temp_dir().join(format!("crepuscular-xdg-{}", std::process::id()));
         let _ = std::fs::create_dir_all(&d);
         c.env("XDG_RUNTIME_DIR", d);
     }
+    c
+}
+
+/// `crepuscular` run under `xvfb-run -a` with a 1280×720 screen.
+fn under_xvfb(xvfb: &Path) -> Command {
+    let mut c = xvfb_command(xvfb);
+    c.arg(env!("CARGO_BIN_EXE_crepuscular"));
     c
 }
 
@@ -100,11 +112,6 @@ fn view_renders_frames_under_xvfb_and_saves_the_scene_image() {
     assert!(mean < 0.25 && over * 1000 < diff.len(), "view vs render: mean {mean} levels, {over} channels > 2");
 }
 
-fn xdotool() -> Option<PathBuf> {
-    let paths = std::env::var_os("PATH")?;
-    std::env::split_paths(&paths).map(|p| p.join("xdotool")).find(|p| p.is_file())
-}
-
 /// Drives the viewer in a real window with X input events (xdotool: the X server's XTEST
 /// extension, the same path a physical mouse and keyboard take through winit and egui-winit).
 /// After each gesture F12 saves a screenshot and its JSON view state. The pauses spread each
@@ -152,7 +159,7 @@ cat "$d/log"
 #[test]
 fn view_follows_real_mouse_and_keyboard_events_under_xvfb() {
     let test = "view_follows_real_mouse_and_keyboard_events_under_xvfb";
-    let (Some(xvfb), Some(_)) = (xvfb_run(), xdotool()) else {
+    let (Some(xvfb), Some(_)) = (xvfb_run(), on_path("xdotool")) else {
         eprintln!("SKIPPED {test}: xvfb-run or xdotool is not installed (apt-get install xvfb xdotool)");
         return;
     };
@@ -162,16 +169,12 @@ fn view_follows_real_mouse_and_keyboard_events_under_xvfb() {
         return;
     }
     let d = tmp("drive");
-    let mut c = Command::new(xvfb);
-    c.args(["-a", "-s", "-screen 0 1280x720x24", "timeout", "600", "bash", "-c", DRIVE_SCRIPT, "drive"])
+    let out = xvfb_command(&xvfb)
+        .args(["timeout", "600", "bash", "-c", DRIVE_SCRIPT, "drive"])
         .arg(env!("CARGO_BIN_EXE_crepuscular"))
-        .arg(&d);
-    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
-        let x = std::env::temp_dir().join(format!("crepuscular-xdg-{}", std::process::id()));
-        let _ = std::fs::create_dir_all(&x);
-        c.env("XDG_RUNTIME_DIR", x);
-    }
-    let out = c.output().unwrap();
+        .arg(&d)
+        .output()
+        .unwrap();
     let log = text(&out);
     assert!(out.status.success(), "{test}: {log}");
     assert!(!log.contains("panicked"), "{log}");

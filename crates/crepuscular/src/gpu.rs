@@ -421,6 +421,18 @@ impl<'a> TimestampSlot<'a> {
     }
 }
 
+/// Begins a compute pass labelled `label` that writes `ts`'s timestamps, if any.
+pub fn compute_pass<'e>(
+    enc: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    ts: Option<TimestampSlot<'_>>,
+) -> wgpu::ComputePass<'e> {
+    enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: ts.map(|t| t.compute()),
+    })
+}
+
 /// Times passes. On hardware adapters with timestamp queries each pass writes begin/end
 /// timestamps; elsewhere (software adapters) each pass is submitted on its own and waited for,
 /// and its synchronised wall-clock time is recorded. With [`StatsMode::Off`] it only submits.
@@ -488,6 +500,25 @@ impl PassTimer {
         self.wall_ms.push(start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3));
         self.names.push(name.to_string());
         Ok(())
+    }
+
+    /// Records one pass named `name` that is a single compute dispatch: `pipeline` with
+    /// `bind_group` at group 0 and `groups` workgroups, in a compute pass labelled `label`.
+    pub fn dispatch(
+        &mut self,
+        gpu: &GpuContext,
+        name: &str,
+        label: &str,
+        pipeline: &wgpu::ComputePipeline,
+        bind_group: &wgpu::BindGroup,
+        groups: [u32; 3],
+    ) -> Result<(), Error> {
+        self.pass(gpu, name, |enc, ts| {
+            let mut pass = compute_pass(enc, label, ts);
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, bind_group, &[]);
+            pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+        })
     }
 
     /// Waits for the passes and returns their times (with [`StatsMode::Off`]: their names, 0 ms,

@@ -167,15 +167,8 @@ impl BruteForce {
             })
         })?;
         let mut timer = PassTimer::new(gpu, 1);
-        timer.pass(gpu, "march", |enc, ts| {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("brute-force march"),
-                timestamp_writes: ts.map(|t| t.compute()),
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(desc.width.div_ceil(8), desc.height.div_ceil(8), 1);
-        })?;
+        let groups = [desc.width.div_ceil(8), desc.height.div_ceil(8), 1];
+        timer.dispatch(gpu, "march", "brute-force march", &self.pipeline, &bind, groups)?;
         let mode = timer.mode().to_string();
         Ok(TechniqueStats {
             technique: "brute-force".into(),

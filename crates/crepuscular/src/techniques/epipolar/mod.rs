@@ -81,7 +81,7 @@ pub mod debug;
 
 use crate::error::Error;
 use crate::frame::{FrameDesc, GpuFrame};
-use crate::gpu::{GpuContext, PassTimer};
+use crate::gpu::{GpuContext, PassTimer, compute_pass};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
 use crate::model::Light;
 use crate::stats::TechniqueStats;
@@ -1104,25 +1104,20 @@ impl Epipolar {
         let (w, h) = (desc.width, desc.height);
         let p = &self.pipelines;
         let mut timer = PassTimer::new(gpu, 6);
-        let compute = |enc: &mut wgpu::CommandEncoder, label, ts: Option<crate::gpu::TimestampSlot<'_>>| {
-            enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(label),
-                timestamp_writes: ts.map(|t| t.compute()),
-            })
-            .forget_lifetime()
-        };
         if let (Some(bind), Some(pre)) = (&prefilter_bind, &self.prefiltered) {
             let (pw, ph) = (pre.texture.width(), pre.texture.height());
-            timer.pass(gpu, "prefilter", |enc, ts| {
-                let mut pass = compute(enc, "epipolar prefilter", ts);
-                pass.set_pipeline(&p.prefilter);
-                pass.set_bind_group(0, bind, &[]);
-                pass.dispatch_workgroups(pw.div_ceil(8), ph.div_ceil(8), 1);
-            })?;
+            timer.dispatch(
+                gpu,
+                "prefilter",
+                "epipolar prefilter",
+                &p.prefilter,
+                bind,
+                [pw.div_ceil(8), ph.div_ceil(8), 1],
+            )?;
         }
         timer.pass(gpu, "lines", |enc, ts| {
             enc.clear_buffer(&self.counters, 0, None);
-            let mut pass = compute(enc, "epipolar lines", ts);
+            let mut pass = compute_pass(enc, "epipolar lines", ts);
             pass.set_bind_group(0, &lines_bind, &[]);
             pass.set_pipeline(&p.lines);
             pass.dispatch_workgroups(slices.div_ceil(64), 1, 1);
@@ -1131,7 +1126,7 @@ impl Epipolar {
         })?;
         timer.pass(gpu, "refine", |enc, ts| {
             enc.clear_buffer(&sized.claims, 0, None);
-            let mut pass = compute(enc, "epipolar refine", ts);
+            let mut pass = compute_pass(enc, "epipolar refine", ts);
             pass.set_bind_group(0, &refine_bind, &[]);
             pass.set_pipeline(&p.refine);
             pass.dispatch_workgroups(samples.div_ceil(8), slices.div_ceil(8), 1);
@@ -1139,20 +1134,16 @@ impl Epipolar {
             pass.dispatch_workgroups(1, 1, 1);
         })?;
         timer.pass(gpu, "march", |enc, ts| {
-            let mut pass = compute(enc, "epipolar march", ts);
+            let mut pass = compute_pass(enc, "epipolar march", ts);
             pass.set_pipeline(&p.march);
             pass.set_bind_group(0, &march_bind, &[]);
             pass.dispatch_workgroups_indirect(&self.indirect, 0);
         })?;
-        timer.pass(gpu, "interpolate", |enc, ts| {
-            let mut pass = compute(enc, "epipolar interpolate", ts);
-            pass.set_pipeline(&p.interpolate);
-            pass.set_bind_group(0, &interpolate_bind, &[]);
-            pass.dispatch_workgroups(samples.div_ceil(8), slices.div_ceil(8), 1);
-        })?;
+        let groups = [samples.div_ceil(8), slices.div_ceil(8), 1];
+        timer.dispatch(gpu, "interpolate", "epipolar interpolate", &p.interpolate, &interpolate_bind, groups)?;
         timer.pass(gpu, "upsample", |enc, ts| {
             {
-                let mut pass = compute(enc, "epipolar upsample", ts);
+                let mut pass = compute_pass(enc, "epipolar upsample", ts);
                 pass.set_pipeline(&p.upsample);
                 pass.set_bind_group(0, &upsample_bind, &[]);
                 pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);

@@ -542,16 +542,7 @@ impl Interleaved {
             ("sum_rows", &self.rows_pipeline, &rows_bind),
             ("sum_columns", &self.columns_pipeline, &columns_bind),
         ] {
-            timer.pass(gpu, name, |enc, ts| {
-                let label = format!("interleaved {name}");
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some(&label),
-                    timestamp_writes: ts.map(|t| t.compute()),
-                });
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, bind, &[]);
-                pass.dispatch_workgroups(groups.0, groups.1, 1);
-            })?;
+            timer.dispatch(gpu, name, &format!("interleaved {name}"), pipeline, bind, [groups.0, groups.1, 1])?;
         }
         let mode = timer.mode().to_string();
         Ok(TechniqueStats {

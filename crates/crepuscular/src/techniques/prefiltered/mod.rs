@@ -439,47 +439,19 @@ impl Prefiltered {
         })?;
         let mut timer = PassTimer::new(gpu, 4);
         if host.is_none() {
-            timer.pass(gpu, "rectify", |enc, ts| {
-                let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("prefiltered rectify"),
-                    timestamp_writes: ts.map(|t| t.compute()),
-                });
-                p.set_pipeline(&self.rectify_pipeline);
-                p.set_bind_group(0, &rectify_bind, &[]);
-                p.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-            })?;
+            let groups = [w.div_ceil(8), h.div_ceil(8), 1];
+            timer.dispatch(gpu, "rectify", "prefiltered rectify", &self.rectify_pipeline, &rectify_bind, groups)?;
         }
         let threads = h * s.regions * (s.bases / s.bases_per_thread) * sets;
-        timer.pass(gpu, "prefilter", |enc, ts| {
-            let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("prefiltered prefilter"),
-                timestamp_writes: ts.map(|t| t.compute()),
-            });
-            p.set_pipeline(&self.prefilter_pipeline);
-            p.set_bind_group(0, &prefilter_bind, &[]);
-            let groups = threads.div_ceil(64);
-            p.dispatch_workgroups(groups.min(65535), groups.div_ceil(65535), 1);
-        })?;
-        timer.pass(gpu, "evaluate", |enc, ts| {
-            let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("prefiltered evaluate"),
-                timestamp_writes: ts.map(|t| t.compute()),
-            });
-            p.set_pipeline(&self.evaluate_pipeline);
-            p.set_bind_group(0, &evaluate_bind, &[]);
-            p.dispatch_workgroups(desc.width.div_ceil(8), desc.height.div_ceil(8), 1);
-        })?;
+        let groups = threads.div_ceil(64);
+        let groups = [groups.min(65535), groups.div_ceil(65535), 1];
+        timer.dispatch(gpu, "prefilter", "prefiltered prefilter", &self.prefilter_pipeline, &prefilter_bind, groups)?;
+        let groups = [desc.width.div_ceil(8), desc.height.div_ceil(8), 1];
+        timer.dispatch(gpu, "evaluate", "prefiltered evaluate", &self.evaluate_pipeline, &evaluate_bind, groups)?;
         if let Some([x0, y0, x1, y1]) = epipole_box(desc, s.epipole_radius, epipole) {
             let (bw, bh) = (x1 - x0, y1 - y0);
-            timer.pass(gpu, "epipole", |enc, ts| {
-                let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("prefiltered epipole"),
-                    timestamp_writes: ts.map(|t| t.compute()),
-                });
-                p.set_pipeline(&self.epipole_pipeline);
-                p.set_bind_group(0, &evaluate_bind, &[]);
-                p.dispatch_workgroups(bw.div_ceil(8), bh.div_ceil(8), 1);
-            })?;
+            let groups = [bw.div_ceil(8), bh.div_ceil(8), 1];
+            timer.dispatch(gpu, "epipole", "prefiltered epipole", &self.epipole_pipeline, &evaluate_bind, groups)?;
         }
         let mode = timer.mode().to_string();
         let passes = timer.finish(gpu)?;

@@ -24,7 +24,7 @@ pub mod cpu;
 
 use crate::error::Error;
 use crate::frame::GpuFrame;
-use crate::gpu::{GpuContext, PassTimer};
+use crate::gpu::{GpuContext, PassTimer, compute_pass};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
 use crate::stats::TechniqueStats;
 use crate::techniques::pass;
@@ -345,22 +345,12 @@ impl Subsampled {
             (march, upsample)
         })?;
         let mut timer = PassTimer::new(gpu, 2);
-        timer.pass(gpu, "march", |enc, ts| {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("subsampled march"),
-                timestamp_writes: ts.map(|t| t.compute()),
-            });
-            pass.set_pipeline(&self.march_pipeline);
-            pass.set_bind_group(0, &march_bind, &[]);
-            pass.dispatch_workgroups(gw.div_ceil(8), gh.div_ceil(8), 1);
-        })?;
+        let groups = [gw.div_ceil(8), gh.div_ceil(8), 1];
+        timer.dispatch(gpu, "march", "subsampled march", &self.march_pipeline, &march_bind, groups)?;
         timer.pass(gpu, "upsample", |enc, ts| {
             enc.clear_buffer(&self.counter, 0, None);
             {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("subsampled upsample"),
-                    timestamp_writes: ts.map(|t| t.compute()),
-                });
+                let mut pass = compute_pass(enc, "subsampled upsample", ts);
                 pass.set_pipeline(&self.upsample_pipeline);
                 pass.set_bind_group(0, &upsample_bind, &[]);
                 pass.dispatch_workgroups(desc.width.div_ceil(8), desc.height.div_ceil(8), 1);

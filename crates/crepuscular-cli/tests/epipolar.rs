@@ -14,12 +14,13 @@ use crepuscular::techniques::epipolar::{
     Weighting, cpu,
 };
 use crepuscular::techniques::reference::{self, ReferenceSettings};
+use crepuscular::testing::wall_closed_form;
 use crepuscular::tonemap::{ToneMap, composite};
 use crepuscular::{Bounds, Camera, CpuFrame, Image, Light, Medium, Phase, ShadowMap, ShadowProjection};
 use crepuscular_cli::metrics::compare;
 use crepuscular_cli::render::frame_desc;
 use crepuscular_scene::{GpuHost, builtin, host, host_cpu};
-use glam::{DVec2, DVec3, Vec2, Vec3};
+use glam::{DVec2, Vec2, Vec3};
 
 // ---- Helpers -----------------------------------------------------------------------------
 
@@ -774,20 +775,6 @@ fn spot_step_policies_change_the_marched_samples_and_each_matches_the_mirror() {
 const CW: u32 = 96;
 const CH: u32 = 54;
 
-/// σs·p·E·(1 − e^(−σt·s))/σt at pixel (x, y) of the wall frame, f64.
-fn closed_form(desc: &FrameDesc, x: u32, y: u32) -> DVec3 {
-    let Light::Directional { direction, color, intensity } = &desc.light else { unreachable!() };
-    let inv = desc.camera.view_projection(desc.aspect()).as_dmat4().inverse();
-    let (w, h) = (desc.width as f64, desc.height as f64);
-    let ndc = DVec3::new((x as f64 + 0.5) / w * 2.0 - 1.0, 1.0 - (y as f64 + 0.5) / h * 2.0, 1.0);
-    let dir = inv.project_point3(ndc).normalize();
-    let s = 30.0 / dir.dot(DVec3::NEG_Z);
-    let st = desc.medium.extinction().as_dvec3();
-    let p = DVec3::from(desc.medium.phase.eval_f64(-direction.as_dvec3().normalize().dot(dir)));
-    let f = |st: f64| if st > 0.0 { (1.0 - (-st * s).exp()) / st } else { s };
-    desc.medium.scattering.as_dvec3() * p * color.as_dvec3() * *intensity as f64 * DVec3::new(f(st.x), f(st.y), f(st.z))
-}
-
 fn media() -> Vec<Medium> {
     vec![
         Medium {
@@ -853,7 +840,7 @@ fn closed_form_check(
                     epipolar::debug::TexelClass::Initial => {
                         let c = d.coords[d.index(t, k)];
                         let (x, y) = cpu::texel_pixel(&desc, Vec2::new(c[0], c[1]));
-                        let exact = closed_form(&desc, x, y);
+                        let exact = wall_closed_form(&desc, x, y);
                         let v = d.radiance[d.index(t, k)];
                         for ch in 0..3 {
                             let rel = (v[ch] as f64 - exact[ch]).abs() / exact[ch].abs().max(1e-9);
@@ -884,7 +871,7 @@ fn closed_form_check(
         let mut worst_at = (0, 0);
         for y in 0..CH {
             for x in 0..CW {
-                let exact = closed_form(&desc, x, y);
+                let exact = wall_closed_form(&desc, x, y);
                 let v = img.get(x, y);
                 for ch in 0..3 {
                     let r = ((v[ch] as f64 - exact[ch]).abs() / exact[ch].abs().max(1e-9)) as f32;
@@ -901,7 +888,7 @@ fn closed_form_check(
         let mut worst_dense = 0.0f32;
         for y in 0..CH {
             for x in 0..CW {
-                let exact = closed_form(&desc, x, y);
+                let exact = wall_closed_form(&desc, x, y);
                 let v = img.get(x, y);
                 for ch in 0..3 {
                     worst_dense =

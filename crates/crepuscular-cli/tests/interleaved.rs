@@ -11,8 +11,9 @@ use crepuscular::stats::TechniqueStats;
 use crepuscular::techniques::brute_force::{self, BruteForce, BruteForceSettings};
 use crepuscular::techniques::interleaved::{Interleaved, InterleavedSettings, PhaseLut, cpu};
 use crepuscular::techniques::reference::{self, ReferenceSettings};
+use crepuscular::testing::wall_frame;
 use crepuscular::tonemap::{ToneMap, composite};
-use crepuscular::{Bounds, Camera, CpuFrame, GpuFrame, Image, Light, Medium, Phase, ShadowMap, ShadowProjection};
+use crepuscular::{CpuFrame, GpuFrame, Image, Light, Medium, Phase};
 use crepuscular_cli::metrics::compare;
 use crepuscular_cli::render::frame_desc;
 use crepuscular_scene::{GpuHost, builtin, host, host_cpu};
@@ -182,37 +183,6 @@ fn interleaved_gpu_matches_its_cpu_mirror_pass_by_pass() {
 }
 
 // ---- (3) Closed form ---------------------------------------------------------------------
-
-/// A frame looking down −Z at a wall 30 m away, with an empty shadow map (V = 1), as in the
-/// library's closed_form.rs.
-fn wall_frame(light: Light, medium: Medium, w: u32, h: u32) -> (FrameDesc, Vec<f32>, ShadowMap) {
-    let camera = Camera {
-        position: Vec3::ZERO,
-        look_at: Vec3::new(0.0, 0.0, -1.0),
-        up: Vec3::Y,
-        fov_y_degrees: 60.0,
-        near: 0.1,
-        far: 100.0,
-    };
-    let aspect = w as f32 / h as f32;
-    let bounds = Bounds { min: Vec3::new(-40.0, -40.0, -40.0), max: Vec3::new(40.0, 40.0, 1.0) };
-    let shadow = ShadowProjection::fit(&light, &camera, aspect, bounds, 64);
-    let sm = ShadowMap { projection: shadow.clone(), depth: vec![1.0; shadow.layers as usize * 64 * 64] };
-    let c = camera.projection(aspect) * glam::Vec4::new(0.0, 0.0, -30.0, 1.0);
-    let depth = vec![c.z / c.w; (w * h) as usize];
-    let desc = FrameDesc {
-        camera,
-        light,
-        medium,
-        shadow,
-        shadow_bias: 0.02,
-        normal_offset_texels: 1.5,
-        ambient: Vec3::ZERO,
-        width: w,
-        height: h,
-    };
-    (desc, depth, sm)
-}
 
 fn sun() -> Light {
     Light::Directional {

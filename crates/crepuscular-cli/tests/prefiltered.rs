@@ -8,19 +8,20 @@
 //! `reference` on every built-in scene on both backends, the projective variant and the
 //! average-visibility ablation (§3.1 vs §3.2); settings validation and their TOML form.
 
-use crepuscular::frame::{FrameDesc, surface_transmittance};
+use crepuscular::frame::surface_transmittance;
 use crepuscular::gpu::{GpuContext, UploadedFrame, test_gpu};
 use crepuscular::stats::TechniqueStats;
 use crepuscular::techniques::prefiltered::{
     self, BasisPrecision, Mode, Prefiltered, PrefilteredSettings, Rectification, RectificationChoice, ReferenceRay, cpu,
 };
 use crepuscular::techniques::reference::{self, ReferenceSettings};
+use crepuscular::testing::{wall_closed_form, wall_frame};
 use crepuscular::tonemap::{ToneMap, composite};
-use crepuscular::{Bounds, Camera, CpuFrame, Image, Light, Medium, Phase, ShadowMap, ShadowProjection};
+use crepuscular::{CpuFrame, Image, Light, Medium, Phase};
 use crepuscular_cli::metrics::compare;
 use crepuscular_cli::render::{GpuRunner, RenderOptions, RenderOutput, TechniqueChoice, frame_desc, render};
 use crepuscular_scene::{GpuHost, Scene, builtin, host, host_cpu, raster};
-use glam::{DVec3, Vec3};
+use glam::Vec3;
 
 // ---- Helpers -----------------------------------------------------------------------------
 
@@ -226,36 +227,6 @@ fn the_eq8_bases_by_rotation_match_sin_and_cos() {
     }
     eprintln!("rotated bases vs sin/cos: worst {worst:.1e}");
     assert!(worst < 2e-4, "rotation drifts by {worst} (8-bit storage resolves 2e-3)");
-}
-
-/// A wall frame (as closed_form.rs): the camera at the origin looking down −Z at a wall 30 m
-/// away, an empty shadow map (nothing casts shadows), `w × h` pixels.
-fn wall_frame(light: Light, medium: Medium, w: u32, h: u32) -> (FrameDesc, Vec<f32>, ShadowMap) {
-    let camera = Camera {
-        position: Vec3::ZERO,
-        look_at: Vec3::new(0.0, 0.0, -1.0),
-        up: Vec3::Y,
-        fov_y_degrees: 60.0,
-        near: 0.1,
-        far: 100.0,
-    };
-    let bounds = Bounds { min: Vec3::splat(-40.0), max: Vec3::new(40.0, 40.0, 1.0) };
-    let shadow = ShadowProjection::fit(&light, &camera, w as f32 / h as f32, bounds, 64);
-    let sm = ShadowMap { projection: shadow.clone(), depth: vec![1.0; shadow.layers as usize * 64 * 64] };
-    let c = camera.projection(w as f32 / h as f32) * glam::Vec4::new(0.0, 0.0, -30.0, 1.0);
-    let depth = vec![c.z / c.w; (w * h) as usize];
-    let desc = FrameDesc {
-        camera,
-        light,
-        medium,
-        shadow,
-        shadow_bias: 0.02,
-        normal_offset_texels: 1.5,
-        ambient: Vec3::ZERO,
-        width: w,
-        height: h,
-    };
-    (desc, depth, sm)
 }
 
 fn sun(direction: Vec3) -> Light {
@@ -770,20 +741,6 @@ fn prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map() {
 
 // ---- (3) Closed form ---------------------------------------------------------------------
 
-/// σs·p·E·(1 − e^(−σt·s))/σt at pixel (x, y) of the wall frame, f64.
-fn closed_form(desc: &FrameDesc, x: u32, y: u32) -> DVec3 {
-    let Light::Directional { direction, color, intensity } = &desc.light else { unreachable!() };
-    let inv = desc.camera.view_projection(desc.aspect()).as_dmat4().inverse();
-    let (w, h) = (desc.width as f64, desc.height as f64);
-    let ndc = DVec3::new((x as f64 + 0.5) / w * 2.0 - 1.0, 1.0 - (y as f64 + 0.5) / h * 2.0, 1.0);
-    let dir = inv.project_point3(ndc).normalize();
-    let s = 30.0 / dir.dot(DVec3::NEG_Z);
-    let st = desc.medium.extinction().as_dvec3();
-    let p = DVec3::from(desc.medium.phase.eval_f64(-direction.as_dvec3().normalize().dot(dir)));
-    let f = |st: f64| if st > 0.0 { (1.0 - (-st * s).exp()) / st } else { s };
-    desc.medium.scattering.as_dvec3() * p * color.as_dvec3() * *intensity as f64 * DVec3::new(f(st.x), f(st.y), f(st.z))
-}
-
 fn closed_form_media() -> Vec<Medium> {
     vec![
         Medium {
@@ -828,7 +785,7 @@ fn closed_form_errors(frame: &CpuFrame, s: &PrefilteredSettings, img: &Image) ->
         ClosedForm { method: 0.0, method_at: (0, 0, 0.0), truth: 0.0, truth_shallow: 0.0, truth_at: (0, 0, 0.0) };
     for y in 0..desc.height {
         for x in 0..desc.width {
-            let exact = closed_form(desc, x, y);
+            let exact = wall_closed_form(desc, x, y);
             let dir = desc.pixel_ray(&inv, x, y);
             let dist = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
             let (_, _, _, z) = rect.rectify_point(desc.camera.position + dir * dist, dir);

@@ -162,66 +162,25 @@ fn the_grid_is_reallocated_only_when_its_size_changes() {
 
 mod closed_form {
     use crepuscular::frame::FrameDesc;
-    use crepuscular::{Bounds, Camera, Image, Light, Medium, Phase, ShadowMap, ShadowProjection};
-    use glam::{DVec3, Vec3};
+    use crepuscular::testing::wall_frame;
+    use crepuscular::{Image, Light, Medium, Phase, ShadowMap};
+    use glam::Vec3;
 
     pub const W: u32 = 64;
     pub const H: u32 = 36;
 
-    /// As in crates/crepuscular/tests/closed_form.rs: the camera looks down −Z at a wall 30 m
-    /// away, an empty shadow map (V = 1), an unshadowed sun.
+    /// The library's wall frame (`crepuscular::testing`) at W × H, lit by an unshadowed sun.
     pub fn frame(medium: Medium) -> (FrameDesc, Vec<f32>, ShadowMap) {
         let light = Light::Directional {
             direction: Vec3::new(0.3, -0.2, 1.0).normalize(),
             color: Vec3::new(1.0, 0.9, 0.8),
             intensity: 4.0,
         };
-        let camera = Camera {
-            position: Vec3::ZERO,
-            look_at: Vec3::new(0.0, 0.0, -1.0),
-            up: Vec3::Y,
-            fov_y_degrees: 60.0,
-            near: 0.1,
-            far: 100.0,
-        };
-        let bounds = Bounds { min: Vec3::splat(-40.0), max: Vec3::new(40.0, 40.0, 1.0) };
-        let shadow = ShadowProjection::fit(&light, &camera, W as f32 / H as f32, bounds, 64);
-        let sm = ShadowMap { projection: shadow.clone(), depth: vec![1.0; shadow.layers as usize * 64 * 64] };
-        let c = camera.projection(W as f32 / H as f32) * glam::Vec4::new(0.0, 0.0, -30.0, 1.0);
-        let depth = vec![c.z / c.w; (W * H) as usize];
-        let desc = FrameDesc {
-            camera,
-            light,
-            medium,
-            shadow,
-            shadow_bias: 0.02,
-            normal_offset_texels: 1.5,
-            ambient: Vec3::ZERO,
-            width: W,
-            height: H,
-        };
-        (desc, depth, sm)
+        wall_frame(light, medium, W, H)
     }
 
     /// σs·p·E·(1 − e^(−σt·s))/σt at pixel (x, y), f64.
-    pub fn exact(desc: &FrameDesc, x: u32, y: u32) -> DVec3 {
-        let Light::Directional { direction, color, intensity } = &desc.light else { unreachable!() };
-        let inv = desc.camera.view_projection(desc.aspect()).as_dmat4().inverse();
-        let ndc = DVec3::new((x as f64 + 0.5) / W as f64 * 2.0 - 1.0, 1.0 - (y as f64 + 0.5) / H as f64 * 2.0, 1.0);
-        let dir = inv.project_point3(ndc).normalize();
-        let s = 30.0 / dir.dot(DVec3::NEG_Z);
-        let st = desc.medium.extinction().as_dvec3();
-        let p = DVec3::from(desc.medium.phase.eval_f64(-direction.as_dvec3().normalize().dot(dir)));
-        let e = color.as_dvec3() * *intensity as f64;
-        let one_minus = DVec3::ONE - (-st * s).exp();
-        // σt → 0 per channel: the limit σs·p·E·s.
-        let f = DVec3::new(
-            if st.x > 0.0 { one_minus.x / st.x } else { s },
-            if st.y > 0.0 { one_minus.y / st.y } else { s },
-            if st.z > 0.0 { one_minus.z / st.z } else { s },
-        );
-        desc.medium.scattering.as_dvec3() * p * e * f
-    }
+    pub use crepuscular::testing::wall_closed_form as exact;
 
     /// Independent of the library's `bracket`: the source pixels ⌊(i + ½)·n/g⌋ and, for pixel
     /// x, the last at or before it and the first after it, by search.

@@ -18,6 +18,8 @@ pub mod shaders;
 pub mod shadow;
 pub mod stats;
 pub mod techniques;
+#[doc(hidden)]
+pub mod testing;
 pub mod tonemap;
 
 pub use error::Error;

@@ -8,43 +8,16 @@ use crepuscular::frame::FrameDesc;
 use crepuscular::gpu::test_gpu;
 use crepuscular::techniques::brute_force::{self, BruteForceSettings};
 use crepuscular::techniques::reference::{self, ReferenceSettings};
-use crepuscular::{Bounds, Camera, CpuFrame, Image, Light, Medium, Phase, ShadowMap, ShadowProjection};
+use crepuscular::testing::{WALL_DISTANCE, wall_closed_form, wall_frame};
+use crepuscular::{CpuFrame, Image, Light, Medium, Phase, ShadowMap};
 use glam::{DVec3, Vec3};
 
 const W: u32 = 64;
 const H: u32 = 36;
 
-/// A frame looking down −Z at a wall 30 m away (depth constant), with an empty shadow map
-/// (nothing casts shadows, V = 1).
+/// The wall frame (a wall 30 m down −Z, empty shadow map: V = 1) at W × H.
 fn frame(light: Light, medium: Medium) -> (FrameDesc, Vec<f32>, ShadowMap) {
-    let camera = Camera {
-        position: Vec3::ZERO,
-        look_at: Vec3::new(0.0, 0.0, -1.0),
-        up: Vec3::Y,
-        fov_y_degrees: 60.0,
-        near: 0.1,
-        far: 100.0,
-    };
-    let bounds = Bounds { min: Vec3::new(-40.0, -40.0, -40.0), max: Vec3::new(40.0, 40.0, 1.0) };
-    let shadow = ShadowProjection::fit(&light, &camera, W as f32 / H as f32, bounds, 64);
-    let layers = shadow.layers as usize;
-    let sm = ShadowMap { projection: shadow.clone(), depth: vec![1.0; layers * 64 * 64] };
-    // The wall's depth-buffer value at view depth 30.
-    let proj = camera.projection(W as f32 / H as f32);
-    let c = proj * glam::Vec4::new(0.0, 0.0, -30.0, 1.0);
-    let depth = vec![c.z / c.w; (W * H) as usize];
-    let desc = FrameDesc {
-        camera,
-        light,
-        medium,
-        shadow,
-        shadow_bias: 0.02,
-        normal_offset_texels: 1.5,
-        ambient: Vec3::ZERO,
-        width: W,
-        height: H,
-    };
-    (desc, depth, sm)
+    wall_frame(light, medium, W, H)
 }
 
 fn ray(desc: &FrameDesc, x: u32, y: u32) -> (DVec3, f64) {
@@ -52,20 +25,15 @@ fn ray(desc: &FrameDesc, x: u32, y: u32) -> (DVec3, f64) {
     let ndc_x = (x as f64 + 0.5) / W as f64 * 2.0 - 1.0;
     let ndc_y = 1.0 - (y as f64 + 0.5) / H as f64 * 2.0;
     let dir = inv.project_point3(DVec3::new(ndc_x, ndc_y, 1.0)).normalize();
-    let s = 30.0 / dir.dot(DVec3::NEG_Z);
+    let s = WALL_DISTANCE as f64 / dir.dot(DVec3::NEG_Z);
     (dir, s)
 }
 
 fn directional_closed_form(desc: &FrameDesc) -> Image {
-    let Light::Directional { direction, color, intensity } = &desc.light else { unreachable!() };
-    let st = desc.medium.extinction().as_dvec3();
-    let ss = desc.medium.scattering.as_dvec3();
     let mut img = Image::new(W, H);
     for y in 0..H {
         for x in 0..W {
-            let (dir, s) = ray(desc, x, y);
-            let p = DVec3::from(desc.medium.phase.eval_f64(-direction.as_dvec3().normalize().dot(dir)));
-            let l = ss * p * color.as_dvec3() * *intensity as f64 * (DVec3::ONE - (-st * s).exp()) / st;
+            let l = wall_closed_form(desc, x, y);
             img.pixels[(y * W + x) as usize] = [l.x as f32, l.y as f32, l.z as f32, 1.0];
         }
     }

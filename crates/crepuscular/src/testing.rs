@@ -1,0 +1,59 @@
+//! Fixtures shared by the test suites of this workspace (not part of the supported API): the
+//! occluder-free "wall frame" and its closed form, DESIGN.md §4 rung 2.
+
+use crate::frame::FrameDesc;
+use crate::{Bounds, Camera, Light, Medium, ShadowMap, ShadowProjection};
+use glam::{DVec3, Vec3};
+
+/// Distance of the wall from the camera, metres.
+pub const WALL_DISTANCE: f32 = 30.0;
+
+/// A frame looking down −Z from the origin at a wall [`WALL_DISTANCE`] away (constant depth),
+/// `w × h` pixels, with an empty 64² shadow map (nothing casts shadows, V = 1). Returns the
+/// description, the depth buffer and the shadow map.
+pub fn wall_frame(light: Light, medium: Medium, w: u32, h: u32) -> (FrameDesc, Vec<f32>, ShadowMap) {
+    let camera = Camera {
+        position: Vec3::ZERO,
+        look_at: Vec3::new(0.0, 0.0, -1.0),
+        up: Vec3::Y,
+        fov_y_degrees: 60.0,
+        near: 0.1,
+        far: 100.0,
+    };
+    let aspect = w as f32 / h as f32;
+    let bounds = Bounds { min: Vec3::splat(-40.0), max: Vec3::new(40.0, 40.0, 1.0) };
+    let shadow = ShadowProjection::fit(&light, &camera, aspect, bounds, 64);
+    let sm = ShadowMap { projection: shadow.clone(), depth: vec![1.0; shadow.layers as usize * 64 * 64] };
+    // The wall's depth-buffer value at its view depth.
+    let c = camera.projection(aspect) * glam::Vec4::new(0.0, 0.0, -WALL_DISTANCE, 1.0);
+    let depth = vec![c.z / c.w; (w * h) as usize];
+    let desc = FrameDesc {
+        camera,
+        light,
+        medium,
+        shadow,
+        shadow_bias: 0.02,
+        normal_offset_texels: 1.5,
+        ambient: Vec3::ZERO,
+        width: w,
+        height: h,
+    };
+    (desc, depth, sm)
+}
+
+/// The in-scattering of a sun at pixel (x, y) of a [`wall_frame`], in f64:
+/// σs·p·E·(1 − e^(−σt·s))/σt, and σs·p·E·s where a channel's σt is 0. Panics for another light.
+pub fn wall_closed_form(desc: &FrameDesc, x: u32, y: u32) -> DVec3 {
+    let Light::Directional { direction, color, intensity } = &desc.light else {
+        panic!("wall_closed_form: the closed form is for a directional light")
+    };
+    let inv = desc.camera.view_projection(desc.aspect()).as_dmat4().inverse();
+    let (w, h) = (desc.width as f64, desc.height as f64);
+    let ndc = DVec3::new((x as f64 + 0.5) / w * 2.0 - 1.0, 1.0 - (y as f64 + 0.5) / h * 2.0, 1.0);
+    let dir = inv.project_point3(ndc).normalize();
+    let s = WALL_DISTANCE as f64 / dir.dot(DVec3::NEG_Z);
+    let st = desc.medium.extinction().as_dvec3();
+    let p = DVec3::from(desc.medium.phase.eval_f64(-direction.as_dvec3().normalize().dot(dir)));
+    let f = |st: f64| if st > 0.0 { (1.0 - (-st * s).exp()) / st } else { s };
+    desc.medium.scattering.as_dvec3() * p * color.as_dvec3() * *intensity as f64 * DVec3::new(f(st.x), f(st.y), f(st.z))
+}

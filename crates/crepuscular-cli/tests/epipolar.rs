@@ -16,7 +16,7 @@ use crepuscular::techniques::epipolar::{
 use crepuscular::techniques::reference::{self, ReferenceSettings};
 use crepuscular::testing::wall_closed_form;
 use crepuscular::tonemap::{ToneMap, composite};
-use crepuscular::{Bounds, Camera, CpuFrame, Image, Light, Medium, Phase, ShadowMap, ShadowProjection};
+use crepuscular::{Bounds, Camera, CpuFrame, Image, Light, Medium, ShadowMap, ShadowProjection};
 use crepuscular_cli::metrics::compare;
 use crepuscular_cli::render::frame_desc;
 use crepuscular_scene::{GpuHost, builtin, host, host_cpu};
@@ -775,28 +775,7 @@ fn spot_step_policies_change_the_marched_samples_and_each_matches_the_mirror() {
 const CW: u32 = 96;
 const CH: u32 = 54;
 
-fn media() -> Vec<Medium> {
-    vec![
-        Medium {
-            scattering: Vec3::new(0.02, 0.03, 0.05),
-            absorption: Vec3::splat(0.01),
-            phase: Phase::HenyeyGreenstein { g: 0.7 },
-        },
-        Medium { scattering: Vec3::splat(0.1), absorption: Vec3::ZERO, phase: Phase::Isotropic },
-        Medium { scattering: Vec3::new(0.05, 0.08, 0.12), absorption: Vec3::splat(0.02), phase: Phase::Rayleigh },
-        Medium {
-            scattering: Vec3::splat(0.04),
-            absorption: Vec3::ZERO,
-            phase: Phase::HoffmanPreetham { g: 0.76, rayleigh_fraction: Vec3::new(0.2, 0.4, 0.6) },
-        },
-        // σt = 0 in one channel: the closed form's limit σs·p·E·s.
-        Medium {
-            scattering: Vec3::new(0.0, 0.05, 0.05),
-            absorption: Vec3::ZERO,
-            phase: Phase::HenyeyGreenstein { g: -0.3 },
-        },
-    ]
-}
+use crepuscular::testing::wall_media as media;
 
 /// Per medium, the largest relative error of the epipolar image against the closed form, over
 /// the pixels: its interpolation error (the ray-march samples themselves are exact to f32

@@ -163,7 +163,7 @@ fn the_grid_is_reallocated_only_when_its_size_changes() {
 mod closed_form {
     use crepuscular::frame::FrameDesc;
     use crepuscular::testing::wall_frame;
-    use crepuscular::{Image, Light, Medium, Phase, ShadowMap};
+    use crepuscular::{Image, Light, Medium, ShadowMap};
     use glam::Vec3;
 
     pub const W: u32 = 64;
@@ -224,27 +224,7 @@ mod closed_form {
         img
     }
 
-    pub fn media() -> Vec<Medium> {
-        vec![
-            Medium {
-                scattering: Vec3::new(0.02, 0.03, 0.05),
-                absorption: Vec3::splat(0.01),
-                phase: Phase::HenyeyGreenstein { g: 0.7 },
-            },
-            Medium { scattering: Vec3::splat(0.1), absorption: Vec3::ZERO, phase: Phase::Isotropic },
-            Medium { scattering: Vec3::new(0.05, 0.08, 0.12), absorption: Vec3::splat(0.02), phase: Phase::Rayleigh },
-            Medium {
-                scattering: Vec3::splat(0.04),
-                absorption: Vec3::splat(0.0),
-                phase: Phase::HoffmanPreetham { g: 0.76, rayleigh_fraction: Vec3::new(0.2, 0.4, 0.6) },
-            },
-            Medium {
-                scattering: Vec3::new(0.0, 0.05, 0.05),
-                absorption: Vec3::ZERO,
-                phase: Phase::HenyeyGreenstein { g: -0.3 },
-            },
-        ]
-    }
+    pub use crepuscular::testing::wall_media as media;
 
     /// Largest relative difference per pixel (max over RGB of |a − b| / max(|b|, floor)).
     pub fn max_rel(a: &Image, b: &Image, floor: f32) -> f32 {

@@ -2,7 +2,7 @@
 //! occluder-free "wall frame" and its closed form, DESIGN.md §4 rung 2.
 
 use crate::frame::FrameDesc;
-use crate::{Bounds, Camera, Light, Medium, ShadowMap, ShadowProjection};
+use crate::{Bounds, Camera, Light, Medium, Phase, ShadowMap, ShadowProjection};
 use glam::{DVec3, Vec3};
 
 /// Distance of the wall from the camera, metres.
@@ -56,4 +56,29 @@ pub fn wall_closed_form(desc: &FrameDesc, x: u32, y: u32) -> DVec3 {
     let p = DVec3::from(desc.medium.phase.eval_f64(-direction.as_dvec3().normalize().dot(dir)));
     let f = |st: f64| if st > 0.0 { (1.0 - (-st * s).exp()) / st } else { s };
     desc.medium.scattering.as_dvec3() * p * color.as_dvec3() * *intensity as f64 * DVec3::new(f(st.x), f(st.y), f(st.z))
+}
+
+/// The media the closed-form tests sweep: each phase function, coloured and grey σs, with and
+/// without absorption, and σt = 0 in one channel.
+pub fn wall_media() -> Vec<Medium> {
+    vec![
+        Medium {
+            scattering: Vec3::new(0.02, 0.03, 0.05),
+            absorption: Vec3::splat(0.01),
+            phase: Phase::HenyeyGreenstein { g: 0.7 },
+        },
+        Medium { scattering: Vec3::splat(0.1), absorption: Vec3::ZERO, phase: Phase::Isotropic },
+        Medium { scattering: Vec3::new(0.05, 0.08, 0.12), absorption: Vec3::splat(0.02), phase: Phase::Rayleigh },
+        Medium {
+            scattering: Vec3::splat(0.04),
+            absorption: Vec3::ZERO,
+            phase: Phase::HoffmanPreetham { g: 0.76, rayleigh_fraction: Vec3::new(0.2, 0.4, 0.6) },
+        },
+        // σt = 0 in one channel: the closed form's limit σs·p·E·s.
+        Medium {
+            scattering: Vec3::new(0.0, 0.05, 0.05),
+            absorption: Vec3::ZERO,
+            phase: Phase::HenyeyGreenstein { g: -0.3 },
+        },
+    ]
 }

@@ -77,28 +77,7 @@ fn point_quadrature(desc: &FrameDesc) -> Image {
     img
 }
 
-fn media() -> Vec<Medium> {
-    vec![
-        Medium {
-            scattering: Vec3::new(0.02, 0.03, 0.05),
-            absorption: Vec3::splat(0.01),
-            phase: Phase::HenyeyGreenstein { g: 0.7 },
-        },
-        Medium { scattering: Vec3::splat(0.1), absorption: Vec3::ZERO, phase: Phase::Isotropic },
-        Medium { scattering: Vec3::new(0.05, 0.08, 0.12), absorption: Vec3::splat(0.02), phase: Phase::Rayleigh },
-        Medium {
-            scattering: Vec3::splat(0.04),
-            absorption: Vec3::splat(0.0),
-            phase: Phase::HoffmanPreetham { g: 0.76, rayleigh_fraction: Vec3::new(0.2, 0.4, 0.6) },
-        },
-        // σt = 0 in one channel: the closed form's limit σs·p·E·s.
-        Medium {
-            scattering: Vec3::new(0.0, 0.05, 0.05),
-            absorption: Vec3::ZERO,
-            phase: Phase::HenyeyGreenstein { g: -0.3 },
-        },
-    ]
-}
+use crepuscular::testing::wall_media as media;
 
 fn sun() -> Light {
     Light::Directional {

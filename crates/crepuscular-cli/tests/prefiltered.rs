@@ -419,51 +419,14 @@ fn round_trip_failures(rect: &Rectification) -> Vec<(u32, f32, f32, u32, u32)> {
     bad
 }
 
-#[test]
-fn column_mapping_round_trips_when_regions_divide_the_columns() {
-    let scene = side_lit(scene_at("colonnade", 96, 54, 64));
-    let desc = frame_desc(&scene);
-    for choice in [RectificationChoice::Projective, RectificationChoice::Epipolar] {
-        for (w, regions, lambda) in
-            [(256u32, 1u32, 0.0f32), (256, 4, 0.0), (256, 8, 0.6), (240, 3, 1.0), (1000, 5, 0.3)]
-        {
-            let s = PrefilteredSettings {
-                map_size: [w, 16],
-                regions,
-                split_lambda: lambda,
-                rectification: choice,
-                ..Default::default()
-            };
-            let rect = Rectification::new(&desc, &s.rectify_options());
-            let bad = round_trip_failures(&rect);
-            assert!(
-                bad.is_empty(),
-                "{:?} W {w} R {regions} λ {lambda}: (texel, line, back, region, want) {bad:?}",
-                rect.mode
-            );
-        }
-    }
-}
-
-/// The same round trip where the regions do not divide the columns. `region_columns` gives
-/// region r the columns ⌊r·W/R⌋..⌊(r+1)·W/R⌋ (rectify.rs:427), but `line_of_column`
-/// (rectify.rs:460; geometry.wgsl:81) and the epipolar branch of `column_of` (rectify.rs:449;
-/// geometry.wgsl:75) take a column's region as ⌊col⌋·R/W. The two disagree on the first texel of a region whenever R ∤ W: with
-/// W = 256 and R = 3 (Table 1's choice of regions), texel 85 is summed into region 1 by the
-/// prefilter, but its light line is extrapolated from region 0's projective map: with
-/// split_lambda > 0 (region maps that differ) 1/x goes negative and the line lands behind the
-/// camera (x = −27.2 m for texel 85 at λ = 0.5 in the side-lit colonnade), so `rectify`
-/// resamples an unrelated line and that texel's depth enters every prefix of region 1 (the
-/// last texel of other regions comes back a column or more off too); and an epipolar ray
-/// ending in [85, 85.33) is assigned region 0, whose lookup then stops before texel 85. The
-/// inverse of region_columns is r = ((⌊col⌋ + 1)·R − 1)/W. One texel per region boundary.
-#[test]
-fn column_mapping_round_trips_when_regions_do_not_divide_the_columns() {
+/// [`round_trip_failures`] on the side-lit colonnade for both rectifications and each
+/// (map width, regions, split_lambda) of `cases`: one line per failing case.
+fn round_trip_sweep(cases: &[(u32, u32, f32)]) -> Vec<String> {
     let scene = side_lit(scene_at("colonnade", 96, 54, 64));
     let desc = frame_desc(&scene);
     let mut failures = vec![];
     for choice in [RectificationChoice::Projective, RectificationChoice::Epipolar] {
-        for (w, regions, lambda) in [(256u32, 3u32, 0.5f32), (256, 5, 0.5), (100, 3, 1.0), (1024, 7, 0.0)] {
+        for &(w, regions, lambda) in cases {
             let s = PrefilteredSettings {
                 map_size: [w, 16],
                 regions,
@@ -481,6 +444,30 @@ fn column_mapping_round_trips_when_regions_do_not_divide_the_columns() {
             }
         }
     }
+    failures
+}
+
+#[test]
+fn column_mapping_round_trips_when_regions_divide_the_columns() {
+    let failures = round_trip_sweep(&[(256, 1, 0.0), (256, 4, 0.0), (256, 8, 0.6), (240, 3, 1.0), (1000, 5, 0.3)]);
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// The same round trip where the regions do not divide the columns. `region_columns` gives
+/// region r the columns ⌊r·W/R⌋..⌊(r+1)·W/R⌋ (rectify.rs:427), but `line_of_column`
+/// (rectify.rs:460; geometry.wgsl:81) and the epipolar branch of `column_of` (rectify.rs:449;
+/// geometry.wgsl:75) take a column's region as ⌊col⌋·R/W. The two disagree on the first texel of a region whenever R ∤ W: with
+/// W = 256 and R = 3 (Table 1's choice of regions), texel 85 is summed into region 1 by the
+/// prefilter, but its light line is extrapolated from region 0's projective map: with
+/// split_lambda > 0 (region maps that differ) 1/x goes negative and the line lands behind the
+/// camera (x = −27.2 m for texel 85 at λ = 0.5 in the side-lit colonnade), so `rectify`
+/// resamples an unrelated line and that texel's depth enters every prefix of region 1 (the
+/// last texel of other regions comes back a column or more off too); and an epipolar ray
+/// ending in [85, 85.33) is assigned region 0, whose lookup then stops before texel 85. The
+/// inverse of region_columns is r = ((⌊col⌋ + 1)·R − 1)/W. One texel per region boundary.
+#[test]
+fn column_mapping_round_trips_when_regions_do_not_divide_the_columns() {
+    let failures = round_trip_sweep(&[(256, 3, 0.5), (256, 5, 0.5), (100, 3, 1.0), (1024, 7, 0.0)]);
     assert!(failures.is_empty(), "{failures:#?}");
 }
 

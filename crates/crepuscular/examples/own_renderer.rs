@@ -166,73 +166,48 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         color_target("surface colour", wgpu::TextureFormat::Rgba16Float, wgpu::TextureUsages::TEXTURE_BINDING);
     let final_image = color_target("final image", wgpu::TextureFormat::Rgba8Unorm, wgpu::TextureUsages::COPY_SRC);
 
-    // The engine's depth-only pipeline, used for both passes with a different matrix each.
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("depth"),
-        source: wgpu::ShaderSource::Wgsl(DEPTH_WGSL.into()),
-    });
-    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("depth only"),
-        layout: None,
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs"),
-            compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: 12,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-            })],
-        },
-        primitive: wgpu::PrimitiveState::default(), // cull_mode: None
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: wgpu::TextureFormat::Depth32Float,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: None,
-        multiview_mask: None,
-        cache: None,
-    });
-    // The engine's lit pipeline for the camera pass: the same vertices, colour + depth.
-    let lit_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("lit"),
-        source: wgpu::ShaderSource::Wgsl(LIT_WGSL.into()),
-    });
-    let lit_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("lit"),
-        layout: None,
-        vertex: wgpu::VertexState {
-            module: &lit_module,
-            entry_point: Some("vs"),
-            compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: 12,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-            })],
-        },
-        primitive: wgpu::PrimitiveState::default(),
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: wgpu::TextureFormat::Depth32Float,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &lit_module,
-            entry_point: Some("fs"),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::TextureFormat::Rgba16Float.into())],
-        }),
-        multiview_mask: None,
-        cache: None,
-    });
+    // The engine's two scene pipelines over the same vertices, depth-tested: depth only (WGSL
+    // `vs`, no fragment stage) for the shadow pass, and lit colour + depth for the camera pass.
+    let scene_pipeline = |label: &str, wgsl: &str, color: Option<wgpu::TextureFormat>| {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(wgsl.into()),
+        });
+        let targets = [color.map(wgpu::ColorTargetState::from)];
+        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some(label),
+            layout: None,
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: 12,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                })],
+            },
+            primitive: wgpu::PrimitiveState::default(), // cull_mode: None
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: wgpu::TextureFormat::Depth32Float,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: color.map(|_| wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs"),
+                compilation_options: Default::default(),
+                targets: &targets,
+            }),
+            multiview_mask: None,
+            cache: None,
+        })
+    };
+    let pipeline = scene_pipeline("depth only", DEPTH_WGSL, None);
+    let lit_pipeline = scene_pipeline("lit", LIT_WGSL, Some(wgpu::TextureFormat::Rgba16Float));
     let uniform = |label, bytes: &[u8]| {
         device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(label),

@@ -9,13 +9,14 @@
 //! dollies towards it, the light sweeps (directional: travel direction; spot: aim; point:
 //! position). t = 0 is the scene exactly as `render` draws it.
 
-use crate::render::{GpuRunner, TechniqueChoice, frame_desc, load_scene};
+use crate::render::{self, frame_desc, load_scene, parse_technique};
 use anyhow::{Context, Result, bail};
 use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::GpuContext;
 use crepuscular::stats::TechniqueStats;
 use crepuscular::tonemap::{ToneMap, composite};
 use crepuscular::{Camera, CpuFrame, Image, Light, ShadowMap};
+use crepuscular::{Scattering, TechniqueSettings};
 use crepuscular_scene::{Geometry, GpuHost, HostTextures, Scene, builtin, host, host_cpu};
 use glam::{Quat, Vec3};
 use serde::Serialize;
@@ -242,13 +243,13 @@ pub struct AnimatedTechnique {
     /// The scene's settings tables (no geometry), to parse each frame's settings.
     stub: Scene,
     frame_index: Option<u32>,
-    gpu: Option<(serde_json::Value, GpuRunner, wgpu::Texture)>,
+    gpu: Option<(serde_json::Value, Scattering, wgpu::Texture)>,
     /// Settings of frame 0.
-    pub first: TechniqueChoice,
+    pub first: TechniqueSettings,
 }
 
 /// The `frame_index` setting of a parsed technique, if it has one.
-fn frame_index_of(choice: &TechniqueChoice) -> Option<u32> {
+fn frame_index_of(choice: &TechniqueSettings) -> Option<u32> {
     let v = serde_json::to_value(choice).ok()?;
     v.get("frame_index")?.as_u64().map(|x| x as u32)
 }
@@ -256,7 +257,7 @@ fn frame_index_of(choice: &TechniqueChoice) -> Option<u32> {
 impl AnimatedTechnique {
     /// Parses the technique's settings (scene table + `key=value` overrides); errors name them.
     pub fn new(name: &str, scene: &Scene, overrides: &[String]) -> Result<Self> {
-        let first = TechniqueChoice::parse(name, scene, overrides)?;
+        let first = parse_technique(name, scene, overrides)?;
         let stub = Scene {
             name: scene.name.clone(),
             description: String::new(),
@@ -287,13 +288,13 @@ impl AnimatedTechnique {
     }
 
     /// Settings of frame `i`.
-    pub fn settings(&self, i: u32) -> Result<TechniqueChoice> {
+    pub fn settings(&self, i: u32) -> Result<TechniqueSettings> {
         match self.frame_index {
             None => Ok(self.first.clone()),
             Some(base) => {
                 let mut o = self.overrides.clone();
                 o.push(format!("frame_index={}", base.wrapping_add(i)));
-                TechniqueChoice::parse(&self.name, &self.stub, &o)
+                parse_technique(&self.name, &self.stub, &o)
             }
         }
     }
@@ -320,7 +321,7 @@ impl AnimatedTechnique {
                     }
                     Some((k, _, _)) if *k == key => false,
                     Some((k, runner, _)) => {
-                        let done = runner.update(&choice);
+                        let done = runner.update(&choice)?;
                         if done {
                             *k = key.clone();
                         }
@@ -329,14 +330,14 @@ impl AnimatedTechnique {
                     None => true,
                 };
                 if rebuild {
-                    let runner = choice.gpu_runner(g)?.context("no GPU implementation")?;
+                    let runner = render::scattering(g, &choice)?.context("no GPU implementation")?;
                     self.gpu = Some((key, runner, g.create_output_texture(w, h)));
                 }
                 let (_, runner, out) = self.gpu.as_mut().context("no GPU runner")?;
                 let out_view = out.create_view(&Default::default());
                 let views = tex.views();
                 let gf = views.frame(&frame.desc);
-                let stats = runner.render(g, None, &gf, &out_view)?;
+                let stats = render::render_gpu(runner, None, &gf, &out_view)?;
                 (g.read_image(out)?, stats)
             }
             _ => {
@@ -344,7 +345,7 @@ impl AnimatedTechnique {
                 let sm = frame.shadow_map.as_ref().context("no shadow map")?;
                 let cf =
                     CpuFrame { desc: &frame.desc, depth: &frame.depth, shadow_map: sm, surface: Some(&frame.surface) };
-                choice.run_cpu(&cf, None, progress)?
+                render::render_cpu(&choice, &cf, None, progress)?
             }
         };
         if !img.all_finite() {
@@ -549,7 +550,7 @@ pub struct AnimateReport {
     /// Scene name.
     pub scene: String,
     /// Technique and frame 0's settings.
-    pub settings: TechniqueChoice,
+    pub settings: TechniqueSettings,
     /// Whether frames advanced `frame_index`.
     pub frame_index_advanced: bool,
     /// The path.

@@ -11,8 +11,9 @@
 
 use crate::animate::{AnimatedTechnique, Flicker, FlickerMeter, MotionPath, PathRenderer, frame_time};
 use crate::metrics::compare;
-use crate::render::{AdapterStats, TechniqueChoice, adapter_stats, frame_desc, load_scene};
+use crate::render::{self, AdapterStats, adapter_stats, frame_desc, load_scene, parse_technique};
 use anyhow::{Context, Result, bail};
+use crepuscular::TechniqueSettings;
 use crepuscular::frame::surface_transmittance;
 use crepuscular::gpu::GpuContext;
 use crepuscular::stats::TechniqueStats;
@@ -425,7 +426,7 @@ pub struct BenchRecord {
     /// Swept setting and value.
     pub sweep: Option<(String, f64)>,
     /// Full settings.
-    pub settings: TechniqueChoice,
+    pub settings: TechniqueSettings,
     /// Per pass over the timed frames.
     pub passes: Vec<PassSummary>,
     /// The whole technique per frame: median, min, max (ms).
@@ -655,13 +656,13 @@ pub fn run(
                 None
             };
             for v in &plan.variants {
-                let choice = TechniqueChoice::parse(&v.technique, &scene, &v.overrides)?;
+                let choice = parse_technique(&v.technique, &scene, &v.overrides)?;
                 progress(&format!("{} {w}×{h}: {} ×{}", scene.name, v.label(), plan.warmup + plan.repeat));
                 let mut frames = Vec::new();
                 let mut last: Option<(Image, TechniqueStats)> = None;
                 match (gpu, &gpu_tex) {
                     (Some(g), Some(t)) => {
-                        let Some(mut runner) = choice.gpu_runner(g)? else {
+                        let Some(mut runner) = render::scattering(g, &choice)? else {
                             bail!("`{}` has no GPU implementation; bench it with --backend cpu", v.technique)
                         };
                         let out = g.create_output_texture(w, h);
@@ -670,7 +671,7 @@ pub fn run(
                         let frame = views.frame(&desc);
                         let mut stats = None;
                         for i in 0..plan.warmup + plan.repeat {
-                            let s = runner.render(g, gpu_host.as_ref(), &frame, &out_view)?;
+                            let s = render::render_gpu(&mut runner, gpu_host.as_ref(), &frame, &out_view)?;
                             if i >= plan.warmup {
                                 timing = s.timing.clone();
                                 frames.push(s.passes.clone());
@@ -681,7 +682,7 @@ pub fn run(
                     }
                     _ => {
                         for i in 0..plan.warmup + plan.repeat {
-                            let (img, s) = choice.run_cpu(&cpu_frame, Some(&scene.geometry), &|_, _| {})?;
+                            let (img, s) = render::render_cpu(&choice, &cpu_frame, Some(&scene.geometry), &|_, _| {})?;
                             if i >= plan.warmup {
                                 frames.push(s.passes.clone());
                             }
@@ -1025,7 +1026,7 @@ fn paper_table(r: &BenchReport) -> String {
     }
     let settings = |x: &BenchRecord| -> Option<PrefilteredSettings> {
         match &x.settings {
-            TechniqueChoice::Prefiltered(p) => Some(p.clone()),
+            TechniqueSettings::Prefiltered(p) => Some(p.clone()),
             _ => None,
         }
     };

@@ -5,14 +5,12 @@ use anyhow::{Context, Result, bail};
 use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::GpuContext;
 use crepuscular::stats::{PassTime, TechniqueStats};
-use crepuscular::techniques::brute_force::{self, BruteForce, BruteForceSettings};
-use crepuscular::techniques::epipolar::{self, Epipolar, EpipolarSettings};
-use crepuscular::techniques::interleaved::{self, Interleaved, InterleavedSettings};
-use crepuscular::techniques::prefiltered::{self, Prefiltered, PrefilteredSettings};
-use crepuscular::techniques::reference::{self, ReferenceSettings};
-use crepuscular::techniques::subsampled::{self, Subsampled, SubsampledSettings};
+use crepuscular::techniques::{epipolar, interleaved, prefiltered};
 use crepuscular::tonemap::composite;
-use crepuscular::{CpuFrame, GpuFrame, Image, ShadowProjection};
+use crepuscular::{
+    AnyGpuTechnique, Composite, CompositeInputs, CompositeTarget, CpuFrame, GpuFrame, Image, Scattering,
+    ShadowProjection, StatsMode, TechniqueSettings,
+};
 use crepuscular_scene::{Geometry, GpuHost, Scene, builtin, file, host, host_cpu};
 use serde::Serialize;
 use std::path::Path;
@@ -42,201 +40,88 @@ pub fn load_scene(name_or_path: &str) -> Result<Scene> {
     bail!("{name_or_path}: no such built-in scene or scene file (built-in: {})", names.join(", "))
 }
 
-/// A technique with its parsed settings.
-#[derive(Clone, Debug, Serialize)]
-#[serde(tag = "technique", rename_all = "kebab-case")]
-pub enum TechniqueChoice {
-    /// `brute-force`.
-    BruteForce(BruteForceSettings),
-    /// `interleaved`.
-    Interleaved(InterleavedSettings),
-    /// `subsampled`.
-    Subsampled(SubsampledSettings),
-    /// `epipolar`.
-    Epipolar(EpipolarSettings),
-    /// `prefiltered`.
-    Prefiltered(PrefilteredSettings),
-    /// `reference`.
-    Reference(ReferenceSettings),
+/// A technique's settings from the scene's `[render.<name>]` table and `key=value` overrides
+/// (values in TOML syntax). Errors name the source, key and value.
+pub fn parse_technique(name: &str, scene: &Scene, overrides: &[String]) -> Result<TechniqueSettings> {
+    let mut table = scene.render.techniques.get(name).cloned().unwrap_or_default();
+    for o in overrides {
+        let (k, v) = o.split_once('=').with_context(|| format!("--set {o}: expected key=value"))?;
+        let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {v}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(v.to_string()));
+        table.insert(k.trim().to_string(), value);
+    }
+    let src = format!("{} [render.{name}]", scene.name);
+    let parse = || -> Result<TechniqueSettings> {
+        let settings = TechniqueSettings::deserialize_named(name, toml::Value::Table(table))
+            .with_context(|| src.clone())?
+            .ok_or_else(|| TechniqueSettings::named(name).expect_err("unknown name"))?;
+        settings.validate().with_context(|| src.clone())?;
+        Ok(settings)
+    };
+    parse().map_err(|e| anyhow::anyhow!("{}", format!("{e:#}").replace('\n', " ")))
 }
 
-/// A technique's GPU side, built once and rendered many times (bench, viewer).
-pub enum GpuRunner {
-    /// `brute-force`.
-    BruteForce(BruteForce),
-    /// `interleaved`.
-    Interleaved(Interleaved),
-    /// `subsampled`.
-    Subsampled(Subsampled),
-    /// `epipolar`.
-    Epipolar(Epipolar),
-    /// `prefiltered`.
-    Prefiltered(Prefiltered),
+/// How the tools measure a GPU technique: synchronised wall clock on software adapters (their
+/// timestamps mean nothing), timestamp queries read back after the frame on hardware.
+pub fn tool_stats_mode(gpu: &GpuContext) -> StatsMode {
+    if gpu.software { StatsMode::WallClock } else { StatsMode::Deferred }
 }
 
-impl GpuRunner {
-    /// Applies the settings of `choice` to this runner in place when it is the same technique,
-    /// and returns whether it did. Each technique keeps its pipelines and rebuilds on its next
-    /// render only what the changed settings need: `interleaved` its phase table (on
-    /// `phase_lut_size`), `subsampled` and `epipolar` their textures (on the grid, slice or
-    /// sample counts), `prefiltered` its maps (on `map_size`, `bases`, `bands`) and, on
-    /// `precision`, its pipelines (the storage format is in their layout). Everything else is
-    /// a uniform, written every frame. Returns false, changing nothing, for another technique
-    /// (build a new runner with [`TechniqueChoice::gpu_runner`]).
-    pub fn update(&mut self, choice: &TechniqueChoice) -> bool {
-        match (self, choice) {
-            (GpuRunner::BruteForce(t), TechniqueChoice::BruteForce(s)) => t.settings = s.clone(),
-            (GpuRunner::Interleaved(t), TechniqueChoice::Interleaved(s)) => t.settings = s.clone(),
-            (GpuRunner::Subsampled(t), TechniqueChoice::Subsampled(s)) => t.settings = s.clone(),
-            (GpuRunner::Epipolar(t), TechniqueChoice::Epipolar(s)) => t.settings = s.clone(),
-            (GpuRunner::Prefiltered(t), TechniqueChoice::Prefiltered(s)) => t.settings = s.clone(),
-            _ => return false,
-        }
-        true
+/// The technique's GPU side for the tools (pipelines built here); None for CPU-only techniques
+/// (the reference).
+pub fn scattering(gpu: &GpuContext, settings: &TechniqueSettings) -> Result<Option<Scattering>> {
+    if !settings.has_gpu() {
+        return Ok(None);
     }
-
-    /// Renders the in-scattering of `frame` into `output` (Rgba32Float storage, frame size).
-    /// `host` is the renderer that drew the frame's textures: `prefiltered` asks it to
-    /// rasterize its projective rectified shadow map (Klehm et al. 2014, §4.2); without one it
-    /// resamples the map from the shadow map.
-    pub fn render(
-        &mut self,
-        gpu: &GpuContext,
-        host: Option<&GpuHost>,
-        frame: &GpuFrame,
-        output: &wgpu::TextureView,
-    ) -> Result<TechniqueStats> {
-        if let GpuRunner::Prefiltered(t) = self {
-            let (Some(host), Some(request)) = (host, t.raster_request(frame.desc)) else {
-                return Ok(t.render(gpu, frame, output)?);
-            };
-            // The host's rectified raster is part of this technique's frame: timed as a pass by
-            // synchronised wall clock.
-            let start = std::time::Instant::now();
-            let map = host.render_rectified(gpu, &request)?;
-            gpu.wait()?;
-            let ms = start.elapsed().as_secs_f64() * 1e3;
-            let view = map.create_view(&wgpu::TextureViewDescriptor {
-                aspect: wgpu::TextureAspect::DepthOnly,
-                ..Default::default()
-            });
-            let mut stats = t.render_with(gpu, frame, Some(&view), output)?;
-            stats.passes.insert(0, PassTime { name: "rasterize (host)".into(), ms });
-            return Ok(stats);
-        }
-        Ok(match self {
-            GpuRunner::BruteForce(t) => t.render(gpu, frame, output)?,
-            GpuRunner::Interleaved(t) => t.render(gpu, frame, output)?,
-            GpuRunner::Subsampled(t) => t.render(gpu, frame, output)?,
-            GpuRunner::Epipolar(t) => t.render(gpu, frame, output)?,
-            GpuRunner::Prefiltered(t) => t.render(gpu, frame, output)?,
-        })
-    }
+    Ok(Some(Scattering::from_gpu(gpu, settings.clone())?.with_stats(tool_stats_mode(gpu))?))
 }
 
-impl TechniqueChoice {
-    /// Name.
-    pub fn name(&self) -> &'static str {
-        match self {
-            TechniqueChoice::BruteForce(_) => "brute-force",
-            TechniqueChoice::Interleaved(_) => "interleaved",
-            TechniqueChoice::Subsampled(_) => "subsampled",
-            TechniqueChoice::Epipolar(_) => "epipolar",
-            TechniqueChoice::Prefiltered(_) => "prefiltered",
-            TechniqueChoice::Reference(_) => "reference",
-        }
-    }
+/// Renders the in-scattering of `frame` into `output` (Rgba32Float storage, frame size) and
+/// waits for it. `host` is the renderer that drew the frame's textures: where the technique
+/// asks for a host raster (`prefiltered`'s projective rectified shadow map, Klehm et al. 2014,
+/// §4.2) the host draws it, timed by synchronised wall clock as the frame's first pass; without
+/// a host the technique resamples the map from the shadow map.
+pub fn render_gpu(
+    scattering: &mut Scattering,
+    host: Option<&GpuHost>,
+    frame: &GpuFrame,
+    output: &wgpu::TextureView,
+) -> Result<TechniqueStats> {
+    let (Some(host), Some(request)) = (host, scattering.raster_request(frame.desc)) else {
+        return Ok(scattering.render(frame, output)?);
+    };
+    let gpu = scattering.gpu().clone();
+    let start = std::time::Instant::now();
+    let map = host.render_rectified(&gpu, &request)?;
+    gpu.wait()?;
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+    let view =
+        map.create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() });
+    let mut stats = scattering.render(&GpuFrame { rectified_shadow_map: Some(&view), ..*frame }, output)?;
+    TechniqueSettings::with_host_raster(&mut stats, ms);
+    Ok(stats)
+}
 
-    /// The GPU side of the technique (pipelines built here); None for the CPU-only reference.
-    pub fn gpu_runner(&self, gpu: &GpuContext) -> Result<Option<GpuRunner>> {
-        Ok(match self {
-            TechniqueChoice::BruteForce(s) => Some(GpuRunner::BruteForce(BruteForce::new(gpu, s.clone())?)),
-            TechniqueChoice::Interleaved(s) => Some(GpuRunner::Interleaved(Interleaved::new(gpu, s.clone())?)),
-            TechniqueChoice::Subsampled(s) => Some(GpuRunner::Subsampled(Subsampled::new(gpu, s.clone())?)),
-            TechniqueChoice::Epipolar(s) => Some(GpuRunner::Epipolar(Epipolar::new(gpu, s.clone())?)),
-            TechniqueChoice::Prefiltered(s) => Some(GpuRunner::Prefiltered(Prefiltered::new(gpu, s.clone())?)),
-            TechniqueChoice::Reference(_) => None,
-        })
+/// Runs the technique's CPU implementation on a frame; `geometry` (the scene's) lets
+/// `prefiltered` rasterize its projective rectified shadow map as the GPU host does.
+pub fn render_cpu(
+    settings: &TechniqueSettings,
+    frame: &CpuFrame,
+    geometry: Option<&Geometry>,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<(Image, TechniqueStats)> {
+    let raster = geometry.zip(settings.raster_request(frame.desc)).map(|(g, request)| {
+        let start = std::time::Instant::now();
+        let map = crepuscular_scene::raster::rasterize_rectified(g, &request);
+        (map, start.elapsed().as_secs_f64() * 1e3)
+    });
+    let (img, mut stats) = settings.render_cpu(frame, raster.as_ref().map(|(m, _)| m.as_slice()), progress)?;
+    if let Some((_, ms)) = raster {
+        TechniqueSettings::with_host_raster(&mut stats, ms);
     }
-
-    /// Runs the technique's CPU implementation on a frame; `geometry` (the scene's) lets
-    /// `prefiltered` rasterize its projective rectified shadow map as the GPU host does.
-    pub fn run_cpu(
-        &self,
-        frame: &CpuFrame,
-        geometry: Option<&Geometry>,
-        progress: &(dyn Fn(u64, u64) + Sync),
-    ) -> Result<(Image, TechniqueStats)> {
-        if let (TechniqueChoice::Prefiltered(s), Some(g)) = (self, geometry) {
-            let rect = prefiltered::Rectification::new(frame.desc, &s.rectify_options());
-            if let Some(request) = rect.raster() {
-                let start = std::time::Instant::now();
-                let map = crepuscular_scene::raster::rasterize_rectified(g, &request);
-                let ms = start.elapsed().as_secs_f64() * 1e3;
-                let (img, mut stats) = prefiltered::cpu::render_with(frame, s, Some(&map))?;
-                stats.passes.insert(0, PassTime { name: "rasterize (host)".into(), ms });
-                return Ok((img, stats));
-            }
-        }
-        Ok(match self {
-            TechniqueChoice::BruteForce(s) => brute_force::cpu::march(frame, s)?,
-            TechniqueChoice::Interleaved(s) => interleaved::cpu::render(frame, s)?,
-            TechniqueChoice::Subsampled(s) => subsampled::cpu::render(frame, s)?,
-            TechniqueChoice::Epipolar(s) => epipolar::cpu::render(frame, s)?,
-            TechniqueChoice::Prefiltered(s) => prefiltered::cpu::render(frame, s)?,
-            TechniqueChoice::Reference(s) => reference::render(frame, s, progress)?,
-        })
-    }
-
-    /// Parses a technique's settings from the scene's `[render.<name>]` table and `key=value`
-    /// overrides (values in TOML syntax). Errors name the source, key and value.
-    pub fn parse(name: &str, scene: &Scene, overrides: &[String]) -> Result<Self> {
-        let mut table = scene.render.techniques.get(name).cloned().unwrap_or_default();
-        for o in overrides {
-            let (k, v) = o.split_once('=').with_context(|| format!("--set {o}: expected key=value"))?;
-            let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {v}"))
-                .ok()
-                .and_then(|mut t| t.remove("v"))
-                .unwrap_or_else(|| toml::Value::String(v.to_string()));
-            table.insert(k.trim().to_string(), value);
-        }
-        let src = format!("{} [render.{name}]", scene.name);
-        let parse = |t: toml::Table| -> Result<TechniqueChoice> {
-            Ok(match name {
-                "brute-force" => {
-                    let s: BruteForceSettings = t.try_into().with_context(|| src.clone())?;
-                    s.validate().with_context(|| src.clone())?;
-                    TechniqueChoice::BruteForce(s)
-                }
-                "interleaved" => {
-                    let s: InterleavedSettings = t.try_into().with_context(|| src.clone())?;
-                    s.validate().with_context(|| src.clone())?;
-                    TechniqueChoice::Interleaved(s)
-                }
-                "subsampled" => {
-                    let s: SubsampledSettings = t.try_into().with_context(|| src.clone())?;
-                    s.validate().with_context(|| src.clone())?;
-                    TechniqueChoice::Subsampled(s)
-                }
-                "epipolar" => {
-                    let s: EpipolarSettings = t.try_into().with_context(|| src.clone())?;
-                    s.validate().with_context(|| src.clone())?;
-                    TechniqueChoice::Epipolar(s)
-                }
-                "prefiltered" => {
-                    let s: PrefilteredSettings = t.try_into().with_context(|| src.clone())?;
-                    s.validate().with_context(|| src.clone())?;
-                    TechniqueChoice::Prefiltered(s)
-                }
-                "reference" => TechniqueChoice::Reference(t.try_into().with_context(|| src.clone())?),
-                other => {
-                    let known: Vec<_> = crepuscular::techniques::TECHNIQUES.iter().map(|t| t.name).collect();
-                    bail!("unknown technique `{other}` (known: {})", known.join(", "))
-                }
-            })
-        };
-        parse(table).map_err(|e| anyhow::anyhow!("{}", format!("{e:#}").replace('\n', " ")))
-    }
+    Ok((img, stats))
 }
 
 /// Everything a render produced.
@@ -282,7 +167,7 @@ pub struct RenderStats {
     /// Shadow-map size and layers.
     pub shadow_map: [u32; 2],
     /// Technique and its settings.
-    pub settings: TechniqueChoice,
+    pub settings: TechniqueSettings,
     /// Host renderer passes (shadow map, surface).
     pub host_passes: Vec<PassTime>,
     /// The technique's own stats (passes, samples, memory).
@@ -292,7 +177,7 @@ pub struct RenderStats {
 /// Options of one render.
 pub struct RenderOptions<'a> {
     /// Technique.
-    pub technique: TechniqueChoice,
+    pub technique: TechniqueSettings,
     /// Progress for long CPU work: (done, total).
     pub progress: &'a (dyn Fn(u64, u64) + Sync),
 }
@@ -353,6 +238,28 @@ pub fn open_gpu(backend: Backend, notice: &dyn Fn(&str)) -> Result<Option<GpuCon
     }
 }
 
+/// An error where a technique produced NaN or infinity.
+fn check_finite(inscatter: &Image, technique: &TechniqueSettings) -> Result<()> {
+    if !inscatter.all_finite() {
+        bail!("{}: the technique produced non-finite values (NaN/Inf) — a bug, please report it", technique.name());
+    }
+    Ok(())
+}
+
+/// A linear `Rgba32Float` render target the composite writes and a readback reads.
+pub fn composite_target(gpu: &GpuContext, width: u32, height: u32) -> wgpu::Texture {
+    gpu.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("final radiance"),
+        size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba32Float,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    })
+}
+
 /// Renders a scene with a technique.
 pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> Result<RenderOutput> {
     let desc = frame_desc(scene);
@@ -360,47 +267,65 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
         crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
         _ => None,
     };
-    let (inscatter, surface, depth, host_passes, technique, adapter) = match gpu {
+    let (inscatter, surface, depth, final_radiance, host_passes, technique, adapter) = match gpu {
         Some(gpu) => {
             let host = GpuHost::new(gpu, &scene.geometry)?;
             let tex = host.render(gpu, &desc, spot)?;
             let adapter = adapter_stats(Some(gpu));
             let depth = gpu.read_texture_f32(&tex.depth, 0)?;
             let surface = gpu.read_image(&tex.surface)?;
-            let (inscatter, stats) = match opts.technique.gpu_runner(gpu)? {
+            let (inscatter, final_radiance, stats) = match scattering(gpu, &opts.technique)? {
                 Some(mut runner) => {
                     let out = gpu.create_output_texture(desc.width, desc.height);
                     let out_view = out.create_view(&Default::default());
                     let views = tex.views();
                     let frame = views.frame(&desc);
-                    let stats = runner.render(gpu, Some(&host), &frame, &out_view)?;
-                    (gpu.read_image(&out)?, stats)
+                    let stats = render_gpu(&mut runner, Some(&host), &frame, &out_view)?;
+                    let inscatter = gpu.read_image(&out)?;
+                    check_finite(&inscatter, &opts.technique)?;
+                    // The library's GPU composite, into a linear Rgba32Float target.
+                    let target = composite_target(gpu, desc.width, desc.height);
+                    let mut enc = gpu.device.create_command_encoder(&Default::default());
+                    let surface_view = tex.surface.create_view(&Default::default());
+                    let inputs = CompositeInputs {
+                        desc: &desc,
+                        depth: frame.depth,
+                        inscatter: &out_view,
+                        surface: &surface_view,
+                    };
+                    let target_view = target.create_view(&Default::default());
+                    Composite::new(&gpu.device, &gpu.queue).encode(
+                        &mut enc,
+                        &inputs,
+                        CompositeTarget::Into(&target_view),
+                        None,
+                    )?;
+                    gpu.queue.submit([enc.finish()]);
+                    (inscatter, gpu.read_image(&target)?, stats)
                 }
                 None => {
-                    // CPU-only techniques (the reference) run over the very shadow map the GPU drew.
+                    // CPU-only techniques (the reference) run over the very shadow map the GPU
+                    // drew, and are composited by the CPU mirror of the composite.
                     let shadow_map = host::read_shadow_map(gpu, &tex, &desc)?;
                     let frame =
                         CpuFrame { desc: &desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
-                    opts.technique.run_cpu(&frame, Some(&scene.geometry), opts.progress)?
+                    let (inscatter, stats) = render_cpu(&opts.technique, &frame, Some(&scene.geometry), opts.progress)?;
+                    check_finite(&inscatter, &opts.technique)?;
+                    let final_radiance = composite(&surface, &inscatter, &surface_transmittance(&desc, &depth));
+                    (inscatter, final_radiance, stats)
                 }
             };
-            (inscatter, surface, depth, tex.passes, stats, adapter)
+            (inscatter, surface, depth, final_radiance, tex.passes, stats, adapter)
         }
         None => {
             let h = host_cpu::render(&scene.geometry, &desc);
             let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
-            let (inscatter, stats) = opts.technique.run_cpu(&frame, Some(&scene.geometry), opts.progress)?;
-            (inscatter, h.surface, h.depth, h.passes, stats, adapter_stats(None))
+            let (inscatter, stats) = render_cpu(&opts.technique, &frame, Some(&scene.geometry), opts.progress)?;
+            check_finite(&inscatter, &opts.technique)?;
+            let final_radiance = composite(&h.surface, &inscatter, &surface_transmittance(&desc, &h.depth));
+            (inscatter, h.surface, h.depth, final_radiance, h.passes, stats, adapter_stats(None))
         }
     };
-    if !inscatter.all_finite() {
-        bail!(
-            "{}: the technique produced non-finite values (NaN/Inf) — a bug, please report it",
-            opts.technique.name()
-        );
-    }
-    let t = surface_transmittance(&desc, &depth);
-    let final_radiance = composite(&surface, &inscatter, &t);
     let stats = RenderStats {
         backend: if gpu.is_some() { "gpu".into() } else { "cpu".into() },
         adapter,
@@ -454,11 +379,11 @@ impl DebugView {
     }
 
     /// The debug views `technique` has (empty: none).
-    pub fn of(technique: &TechniqueChoice) -> &'static [DebugView] {
+    pub fn of(technique: &TechniqueSettings) -> &'static [DebugView] {
         match technique {
-            TechniqueChoice::Epipolar(_) => &[DebugView::Classification, DebugView::Radiance],
-            TechniqueChoice::Interleaved(_) => &[DebugView::Pattern],
-            TechniqueChoice::Prefiltered(_) => &[DebugView::RectifiedMap, DebugView::Basis, DebugView::Visibility],
+            TechniqueSettings::Epipolar(_) => &[DebugView::Classification, DebugView::Radiance],
+            TechniqueSettings::Interleaved(_) => &[DebugView::Pattern],
+            TechniqueSettings::Prefiltered(_) => &[DebugView::RectifiedMap, DebugView::Basis, DebugView::Visibility],
             _ => &[],
         }
     }
@@ -478,14 +403,14 @@ fn offset_colour(k: u32, m2: u32) -> [f32; 3] {
 pub fn debug_view(
     scene: &Scene,
     gpu: Option<&GpuContext>,
-    technique: &TechniqueChoice,
+    technique: &TechniqueSettings,
     view: DebugView,
     final_radiance: &Image,
 ) -> Result<Image> {
     if !DebugView::of(technique).contains(&view) {
         bail!("--debug {}: not a debug view of `{}` ({})", view.name(), technique.name(), debug_view_list());
     }
-    if let TechniqueChoice::Interleaved(s) = technique {
+    if let TechniqueSettings::Interleaved(s) = technique {
         let m2 = s.block * s.block;
         let mut img = final_radiance.clone();
         for y in 0..img.height {
@@ -499,10 +424,10 @@ pub fn debug_view(
         }
         return Ok(img);
     }
-    if let TechniqueChoice::Prefiltered(s) = technique {
+    if let TechniqueSettings::Prefiltered(s) = technique {
         return prefiltered_debug_view(scene, gpu, s, view);
     }
-    let TechniqueChoice::Epipolar(settings) = technique else {
+    let TechniqueSettings::Epipolar(settings) = technique else {
         bail!("--debug {}: not a debug view of `{}`", view.name(), technique.name());
     };
     let desc = frame_desc(scene);
@@ -514,12 +439,13 @@ pub fn debug_view(
             };
             let host = GpuHost::new(gpu, &scene.geometry)?;
             let tex = host.render(gpu, &desc, spot)?;
-            let mut runner = Epipolar::new(gpu, settings.clone())?;
+            let mut runner = Scattering::from_gpu(gpu, technique.clone())?.with_stats(tool_stats_mode(gpu))?;
             let out = gpu.create_output_texture(desc.width, desc.height);
             let views = tex.views();
             let frame = views.frame(&desc);
-            runner.render(gpu, &frame, &out.create_view(&Default::default()))?;
-            runner.read_debug(gpu)?
+            runner.render(&frame, &out.create_view(&Default::default()))?;
+            let AnyGpuTechnique::Epipolar(t) = runner.technique() else { unreachable!("built above") };
+            t.read_debug(gpu)?
         }
         None => {
             let h = host_cpu::render(&scene.geometry, &desc);
@@ -542,7 +468,7 @@ pub fn debug_view(
 fn prefiltered_debug_view(
     scene: &Scene,
     gpu: Option<&GpuContext>,
-    settings: &PrefilteredSettings,
+    settings: &prefiltered::PrefilteredSettings,
     view: DebugView,
 ) -> Result<Image> {
     use prefiltered::debug;
@@ -555,11 +481,12 @@ fn prefiltered_debug_view(
             };
             let host = GpuHost::new(gpu, &scene.geometry)?;
             let tex = host.render(gpu, &desc, spot)?;
-            let mut runner = GpuRunner::Prefiltered(Prefiltered::new(gpu, settings.clone())?);
+            let mut runner = Scattering::from_gpu(gpu, TechniqueSettings::Prefiltered(settings.clone()))?
+                .with_stats(tool_stats_mode(gpu))?;
             let out = gpu.create_output_texture(desc.width, desc.height);
             let views = tex.views();
-            runner.render(gpu, Some(&host), &views.frame(&desc), &out.create_view(&Default::default()))?;
-            let GpuRunner::Prefiltered(t) = runner else { unreachable!("built above") };
+            render_gpu(&mut runner, Some(&host), &views.frame(&desc), &out.create_view(&Default::default()))?;
+            let AnyGpuTechnique::Prefiltered(t) = runner.technique() else { unreachable!("built above") };
             let rect = t.last_rectification().context("no frame rendered")?.clone();
             (
                 debug::passes_from_gpu(rect, settings.channels(&desc.light), t.read_maps(gpu)?),

@@ -5,15 +5,15 @@
 //! against `reference` and screenshots.
 //!
 //! Per frame: the host renderer draws the shadow map, depth and surface; the technique writes
-//! its in-scattering; a fullscreen pass of our own (`view_composite.wgsl`) composites
-//! T(s)·L_surface + L_scatt and tone-maps exactly as `render` does on the CPU, into an
-//! `Rgba8Unorm` texture that egui draws behind its panels. The technique's pipelines are built
+//! its in-scattering; the library's composite ([`crepuscular::Composite`]) adds
+//! T(s)·L_surface + L_scatt and tone-maps exactly as `render` does, into an `Rgba8Unorm`
+//! texture that egui draws behind its panels. The technique's pipelines are built
 //! once and rebuilt only when its settings change; the scene is re-rendered only when
 //! something changed (camera, light, medium, settings, size) unless "continuous" is on.
 
 use crate::metrics;
 use crate::output;
-use crate::render::{self, DebugView, GpuRunner, TechniqueChoice};
+use crate::render::{self, DebugView};
 use anyhow::{Context, Result, anyhow, bail};
 use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::GpuContext;
@@ -22,6 +22,7 @@ use crepuscular::techniques::presets::Preset;
 use crepuscular::techniques::reference::{self, ReferenceSettings};
 use crepuscular::tonemap::{ToneMap, composite};
 use crepuscular::{CpuFrame, Image, Light, Phase};
+use crepuscular::{Scattering, TechniqueSettings};
 use crepuscular_scene::{GpuHost, HostTextures, Scene, host};
 use glam::{Quat, Vec3};
 use std::collections::VecDeque;
@@ -32,9 +33,6 @@ use winit::application::ApplicationHandler;
 use winit::event::WindowEvent;
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::window::{Window, WindowId};
-
-/// The composite + tone-map pass.
-pub const COMPOSITE_WGSL: &str = include_str!("view_composite.wgsl");
 
 /// Default window size.
 pub const DEFAULT_SIZE: (u32, u32) = (960, 540);
@@ -137,10 +135,10 @@ pub fn parse_technique(
     scene: &Scene,
     preset: Option<Preset>,
     overrides: &[String],
-) -> Result<TechniqueChoice> {
+) -> Result<TechniqueSettings> {
     let mut all = preset.map(|p| preset_overrides(p, name)).unwrap_or_default();
     all.extend_from_slice(overrides);
-    TechniqueChoice::parse(name, scene, &all)
+    render::parse_technique(name, scene, &all)
 }
 
 /// Runs the viewer until the window is closed (or `screenshot_after` frames were rendered).
@@ -185,7 +183,7 @@ pub fn run(opts: ViewOptions) -> Result<()> {
 struct App {
     opts: ViewOptions,
     scene: Option<Scene>,
-    technique: Option<TechniqueChoice>,
+    technique: Option<TechniqueSettings>,
     viewer: Option<Viewer>,
     error: Option<anyhow::Error>,
 }
@@ -326,7 +324,7 @@ impl Controls {
     /// F12 or P asks for a screenshot, N / T (shift: backwards) cycle the built-in scenes and
     /// the techniques. Keys are ignored while a text field has focus.
     pub(crate) fn input(&mut self, ui: &mut egui::Ui, rect: egui::Rect, dt: f32) -> InputOutcome {
-        let resp = ui.interact(rect, egui::Id::unique("scene view"), egui::Sense::click_and_drag());
+        let resp = ui.interact(rect, egui::Id::new("scene view"), egui::Sense::click_and_drag());
         let (modifiers, scroll) = ui.input(|i| (i.modifiers, i.smooth_scroll_delta.y));
         let d = resp.drag_delta();
         let mut out = InputOutcome::default();
@@ -425,96 +423,6 @@ struct FrameTiming {
     wall_ms: f64,
 }
 
-/// The composite pass and its output.
-struct Composite {
-    pipeline: wgpu::RenderPipeline,
-    layout: wgpu::BindGroupLayout,
-    params: wgpu::Buffer,
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct CompositeParams {
-    inv_view_proj: [[f32; 4]; 4],
-    camera_pos: [f32; 4],
-    camera_fwd: [f32; 4],
-    sigma_t: [f32; 4],
-    size: [f32; 4],
-}
-
-impl Composite {
-    fn new(device: &wgpu::Device) -> Self {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("view composite"),
-            source: wgpu::ShaderSource::Wgsl(COMPOSITE_WGSL.into()),
-        });
-        let tex = |binding, sample_type| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Texture {
-                sample_type,
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        };
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("view composite"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                tex(1, wgpu::TextureSampleType::Float { filterable: false }),
-                tex(2, wgpu::TextureSampleType::Float { filterable: false }),
-                tex(3, wgpu::TextureSampleType::Depth),
-            ],
-        });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("view composite"),
-            layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("view composite"),
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            })),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: Default::default(),
-            depth_stencil: None,
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: wgpu::TextureFormat::Rgba8Unorm,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
-        let params = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("view composite params"),
-            size: std::mem::size_of::<CompositeParams>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        Self { pipeline, layout, params }
-    }
-}
-
 /// The textures of the current render size.
 struct Targets {
     width: u32,
@@ -540,7 +448,7 @@ struct Viewer {
     egui_state: egui_winit::State,
     renderer: egui_wgpu::Renderer,
     host: GpuHost,
-    composite: Composite,
+    composite: crepuscular::Composite,
     targets: Option<Targets>,
     display_id: Option<egui::TextureId>,
     /// The scene as loaded; camera, light and medium below override it.
@@ -549,8 +457,8 @@ struct Viewer {
     medium: crepuscular::Medium,
     exposure: f32,
     scale: f32,
-    technique: TechniqueChoice,
-    runner: Option<GpuRunner>,
+    technique: TechniqueSettings,
+    runner: Option<Scattering>,
     /// How many times a technique's pipelines were built (a settings change does not rebuild
     /// them; a technique switch or a new scene does), and how long the last build took.
     runner_builds: u32,
@@ -591,7 +499,12 @@ enum Action {
 }
 
 impl Viewer {
-    fn new(event_loop: &ActiveEventLoop, opts: &ViewOptions, scene: Scene, technique: TechniqueChoice) -> Result<Self> {
+    fn new(
+        event_loop: &ActiveEventLoop,
+        opts: &ViewOptions,
+        scene: Scene,
+        technique: TechniqueSettings,
+    ) -> Result<Self> {
         let (w, h) = opts.size;
         let attrs = Window::default_attributes()
             .with_title(format!("crepuscular — {} — {}", scene.name, technique.name()))
@@ -608,11 +521,11 @@ impl Viewer {
             power_preference: wgpu::PowerPreference::HighPerformance,
             force_fallback_adapter: false,
             compatible_surface: Some(&surface),
-            apply_limit_buckets: false,
         }))
         .map_err(|e| anyhow!("view: no GPU adapter that can present to a window ({e}); the viewer needs one"))?;
+        let adapter_for_caps = adapter.clone();
         let gpu = GpuContext::from_adapter(adapter).context("view")?;
-        let caps = surface.get_capabilities(&gpu.adapter);
+        let caps = surface.get_capabilities(&adapter_for_caps);
         let format = caps
             .formats
             .iter()
@@ -631,7 +544,6 @@ impl Viewer {
         let config = wgpu::SurfaceConfiguration {
             usage,
             format,
-            color_space: wgpu::SurfaceColorSpace::Auto,
             width: size.width.max(1),
             height: size.height.max(1),
             present_mode,
@@ -652,9 +564,9 @@ impl Viewer {
         );
         let renderer = egui_wgpu::Renderer::new(&gpu.device, format, egui_wgpu::RendererOptions::default());
         let host = GpuHost::new(&gpu, &scene.geometry)?;
-        let composite = Composite::new(&gpu.device);
+        let composite = crepuscular::Composite::new(&gpu.device, &gpu.queue);
         let built = Instant::now();
-        let runner = technique.gpu_runner(&gpu)?;
+        let runner = render::scattering(&gpu, &technique)?;
         let runner_build_ms = built.elapsed().as_secs_f64() * 1e3;
         let scale = opts.scale.unwrap_or(if gpu.software { 0.5 } else { 1.0 });
         let fields = settings_fields(&technique);
@@ -780,10 +692,8 @@ impl Viewer {
             wgpu::CurrentSurfaceTexture::Validation => bail!("view: the window surface reported a validation error"),
         };
         let ppp = full.pixels_per_point;
-        for (id, deltas) in &full.textures_delta.set {
-            for delta in deltas {
-                self.renderer.update_texture(&self.gpu.device, &self.gpu.queue, *id, delta);
-            }
+        for (id, delta) in &full.textures_delta.set {
+            self.renderer.update_texture(&self.gpu.device, &self.gpu.queue, *id, delta);
         }
         if let Some(frame) = frame {
             let prims = ctx.tessellate(full.shapes, ppp);
@@ -821,7 +731,7 @@ impl Viewer {
                 self.save_window(&frame.texture, std::path::Path::new(&path))?;
             }
             self.window.pre_present_notify();
-            self.gpu.queue.present(frame);
+            frame.present();
         }
         for id in &full.textures_delta.free {
             self.renderer.free_texture(id);
@@ -851,7 +761,7 @@ impl Viewer {
         let start = Instant::now();
         if self.runner.is_none() {
             let built = Instant::now();
-            self.runner = self.technique.gpu_runner(&self.gpu)?;
+            self.runner = render::scattering(&self.gpu, &self.technique)?;
             self.runner_builds += 1;
             self.runner_build_ms = built.elapsed().as_secs_f64() * 1e3;
         }
@@ -898,56 +808,25 @@ impl Viewer {
         let out_view = targets.inscatter.create_view(&Default::default());
         let views = tex.views();
         let frame = views.frame(&desc);
-        let stats = runner.render(&self.gpu, Some(&self.host), &frame, &out_view)?;
+        let stats = render::render_gpu(runner, Some(&self.host), &frame, &out_view)?;
 
-        // Composite + tone map.
+        // The library's composite, with the display transform, into the display texture.
         let composite_start = Instant::now();
-        let st = desc.medium.extinction();
-        let params = CompositeParams {
-            inv_view_proj: desc.camera.view_projection(desc.aspect()).inverse().to_cols_array_2d(),
-            camera_pos: [desc.camera.position.x, desc.camera.position.y, desc.camera.position.z, desc.camera.near],
-            camera_fwd: {
-                let f = desc.camera.forward();
-                [f.x, f.y, f.z, desc.camera.far]
-            },
-            sigma_t: [st.x, st.y, st.z, self.exposure],
-            size: [w as f32, h as f32, 0.0, 0.0],
-        };
-        self.gpu.queue.write_buffer(&self.composite.params, 0, bytemuck::bytes_of(&params));
         let surface_view = tex.surface.create_view(&Default::default());
-        let bind = self.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("view composite"),
-            layout: &self.composite.layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: self.composite.params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&surface_view) },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&out_view) },
-                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(frame.depth) },
-            ],
-        });
         let display_view = targets.display.create_view(&Default::default());
+        let inputs = crepuscular::CompositeInputs {
+            desc: &desc,
+            depth: frame.depth,
+            inscatter: &out_view,
+            surface: &surface_view,
+        };
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("view composite"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &display_view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&self.composite.pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.draw(0..3, 0..1);
-        }
+        self.composite.encode(
+            &mut enc,
+            &inputs,
+            crepuscular::CompositeTarget::Into(&display_view),
+            Some(ToneMap::new(self.exposure)),
+        )?;
         self.gpu.queue.submit([enc.finish()]);
         self.gpu.wait()?;
         let composite_ms = composite_start.elapsed().as_secs_f64() * 1e3;
@@ -1143,16 +1022,16 @@ impl Viewer {
         }
         let mut scene = self.scene.clone();
         scene.render.techniques.remove(self.technique.name());
-        self.set_technique(TechniqueChoice::parse(self.technique.name(), &scene, &overrides), false);
+        self.set_technique(render::parse_technique(self.technique.name(), &scene, &overrides), false);
     }
 
-    fn set_technique(&mut self, parsed: Result<TechniqueChoice>, refresh: bool) {
+    fn set_technique(&mut self, parsed: Result<TechniqueSettings>, refresh: bool) {
         match parsed {
             Ok(t) => {
                 let switched = t.name() != self.technique.name();
-                // Same technique: the runner keeps its pipelines (GpuRunner::update); another
+                // Same technique: the runner keeps its pipelines (Scattering::update); another
                 // technique: a new runner on the next frame.
-                if !self.runner.as_mut().is_some_and(|r| r.update(&t)) {
+                if !self.runner.as_mut().is_some_and(|r| r.update(&t).unwrap_or(false)) {
                     self.runner = None;
                 }
                 self.technique = t;
@@ -1359,7 +1238,7 @@ impl Viewer {
             ui.colored_label(egui::Color32::from_rgb(255, 110, 90), format!("settings not applied: {e}"));
         }
         if ui.button("reset to defaults").clicked() {
-            let parsed = TechniqueChoice::parse(self.technique.name(), &self.scene, &[]);
+            let parsed = render::parse_technique(self.technique.name(), &self.scene, &[]);
             self.preset = None;
             self.set_technique(parsed, true);
         }
@@ -1389,7 +1268,7 @@ impl Viewer {
                 open = Some(self.scene_path.trim().to_string());
             }
         });
-        if let Some(path) = ui.input(|i| i.raw.dropped_files.first().map(|f| f.path().to_path_buf())) {
+        if let Some(path) = ui.input(|i| i.raw.dropped_files.first().and_then(|f| f.path.clone())) {
             self.scene_path = path.display().to_string();
             open = Some(self.scene_path.clone());
         }
@@ -1585,7 +1464,7 @@ fn load_for_view(
     shadow_map_size: Option<u32>,
     name: &str,
     preset: Option<Preset>,
-) -> Result<(Scene, TechniqueChoice)> {
+) -> Result<(Scene, TechniqueSettings)> {
     let mut scene = render::load_scene(spec)?;
     if let Some(s) = shadow_map_size {
         scene.render.shadow.size = s;
@@ -1690,7 +1569,7 @@ fn pass_color(k: usize) -> egui::Color32 {
 }
 
 /// The technique's settings as a JSON object (without the `technique` tag).
-fn settings_fields(t: &TechniqueChoice) -> serde_json::Map<String, serde_json::Value> {
+fn settings_fields(t: &TechniqueSettings) -> serde_json::Map<String, serde_json::Value> {
     match serde_json::to_value(t) {
         Ok(serde_json::Value::Object(mut m)) => {
             m.remove("technique");
@@ -1724,7 +1603,7 @@ mod tests {
                 overrides.extend(
                     text_fields(&fields).into_iter().filter(|(_, v)| !v.is_empty()).map(|(k, v)| format!("{k}={v}")),
                 );
-                let back = TechniqueChoice::parse(t.name, &scene, &overrides).unwrap();
+                let back = render::parse_technique(t.name, &scene, &overrides).unwrap();
                 assert_eq!(serde_json::to_value(&back).unwrap(), serde_json::to_value(&choice).unwrap(), "{}", t.name);
             }
         }
@@ -1733,8 +1612,8 @@ mod tests {
     #[test]
     fn bad_values_are_errors_not_panics() {
         let scene = crepuscular_scene::builtin::builtin("colonnade").unwrap();
-        assert!(TechniqueChoice::parse("brute-force", &scene, &["steps=0".into()]).is_err());
-        assert!(TechniqueChoice::parse("epipolar", &scene, &["weighting=\"nope\"".into()]).is_err());
+        assert!(render::parse_technique("brute-force", &scene, &["steps=0".into()]).is_err());
+        assert!(render::parse_technique("epipolar", &scene, &["weighting=\"nope\"".into()]).is_err());
     }
 
     #[test]
@@ -1761,11 +1640,22 @@ mod tests {
         let ctx = egui::Context::default();
         let dt = 1.0 / 30.0;
         let mut outs = Vec::new();
+        // The modifiers held: those of the last button press, until its release (egui 0.35 reads
+        // them from the raw input, as egui-winit fills it, not from an event).
+        let mut held = egui::Modifiers::default();
         for (i, events) in frames.into_iter().enumerate() {
+            let mut modifiers = held;
+            for e in &events {
+                if let egui::Event::PointerButton { pressed, modifiers: m, .. } = e {
+                    modifiers = *m;
+                    held = if *pressed { *m } else { egui::Modifiers::default() };
+                }
+            }
             let raw = egui::RawInput {
                 screen_rect: Some(egui::Rect::from_min_size(egui::Pos2::ZERO, egui::vec2(320.0, 180.0))),
                 time: Some(i as f64 * dt as f64),
                 events,
+                modifiers,
                 ..Default::default()
             };
             let mut out = InputOutcome::default();
@@ -1800,7 +1690,7 @@ mod tests {
         to: egui::Pos2,
     ) -> Vec<Vec<egui::Event>> {
         let mut frames = vec![
-            vec![egui::Event::ModifiersChanged(modifiers), egui::Event::PointerMoved(from)],
+            vec![egui::Event::PointerMoved(from)],
             vec![egui::Event::PointerButton { pos: from, button, pressed: true, modifiers }],
         ];
         for k in 1..=8 {
@@ -1816,7 +1706,6 @@ mod tests {
             unit: egui::MouseWheelUnit::Point,
             delta: egui::vec2(0.0, dy),
             phase: egui::TouchPhase::Move,
-            source: egui::MouseWheelSource::Wheel,
             modifiers: Default::default(),
         }
     }

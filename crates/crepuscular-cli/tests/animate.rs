@@ -197,7 +197,7 @@ fn frame_zero_is_what_render_draws() {
     let mut path = PathRenderer::new(s.clone(), MotionPath::for_scene("stained-glass", &s), None).unwrap();
     let mut f = path.frame(0.0).unwrap();
     let (img, _) = t.render(None, &mut f, 0, &|_, _| {}).unwrap();
-    let technique = crepuscular_cli::render::TechniqueChoice::parse("subsampled", &s, &set).unwrap();
+    let technique = crepuscular_cli::render::parse_technique("subsampled", &s, &set).unwrap();
     let opts = crepuscular_cli::render::RenderOptions { technique, progress: &|_, _| {} };
     let out = crepuscular_cli::render::render(&s, None, &opts).unwrap();
     assert_eq!(img, out.inscatter);

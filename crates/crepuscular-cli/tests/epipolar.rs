@@ -10,13 +10,15 @@ use crepuscular::gpu::{GpuContext, UploadedFrame, test_gpu};
 use crepuscular::march::SpotSteps;
 use crepuscular::stats::TechniqueStats;
 use crepuscular::techniques::epipolar::{
-    self, Epipolar, EpipolarDebug, EpipolarLine, EpipolarParams, EpipolarSettings, MIN_LINE_LENGTH, SpotPrefilter,
-    Weighting, cpu,
+    self, EpipolarDebug, EpipolarLine, EpipolarParams, EpipolarSettings, MIN_LINE_LENGTH, SpotPrefilter, Weighting, cpu,
 };
 use crepuscular::techniques::reference::{self, ReferenceSettings};
-use crepuscular::testing::wall_closed_form;
+use crepuscular::testing::{gpu_scattering, wall_closed_form};
 use crepuscular::tonemap::{ToneMap, composite};
-use crepuscular::{Bounds, Camera, CpuFrame, Image, Light, Medium, ShadowMap, ShadowProjection};
+use crepuscular::{
+    AnyGpuTechnique, Bounds, Camera, CpuFrame, Image, Light, Medium, Scattering, ShadowMap, ShadowProjection,
+    TechniqueSettings,
+};
 use crepuscular_cli::metrics::compare;
 use crepuscular_cli::render::frame_desc;
 use crepuscular_scene::{GpuHost, builtin, host, host_cpu};
@@ -46,9 +48,21 @@ struct GpuRun {
     params: EpipolarParams,
 }
 
-fn run_gpu(gpu: &GpuContext, ep: &mut Epipolar, frame: &crepuscular::GpuFrame) -> GpuRun {
+/// `epipolar` at `s` on `gpu` (wall-clock stats: every count read back at once).
+fn epipolar_gpu(gpu: &GpuContext, s: EpipolarSettings) -> Scattering {
+    gpu_scattering(gpu, TechniqueSettings::Epipolar(s)).expect("pipelines")
+}
+
+/// Changes `sc`'s settings to `s` in place (the same GPU object: pipelines reused, textures
+/// reallocated as the settings need).
+fn set_settings(sc: &mut Scattering, s: &EpipolarSettings) {
+    assert!(sc.update(&TechniqueSettings::Epipolar(s.clone())).expect("settings"), "an epipolar object");
+}
+
+fn run_gpu(gpu: &GpuContext, sc: &mut Scattering, frame: &crepuscular::GpuFrame) -> GpuRun {
     let out = gpu.create_output_texture(frame.desc.width, frame.desc.height);
-    let stats = ep.render(gpu, frame, &out.create_view(&Default::default())).expect("render");
+    let stats = sc.render(frame, &out.create_view(&Default::default())).expect("render");
+    let AnyGpuTechnique::Epipolar(ep) = sc.technique() else { panic!("not epipolar") };
     let marched = gpu.read_image(ep.marched_texture().expect("marched texture")).unwrap();
     GpuRun {
         out: gpu.read_image(&out).unwrap(),
@@ -699,7 +713,7 @@ fn check_mirror(label: &str, frame: &CpuFrame, s: &EpipolarSettings, g: &GpuRun)
 fn epipolar_gpu_matches_its_cpu_mirror_pass_by_pass() {
     let Some(gpu) = test_gpu("epipolar_gpu_matches_its_cpu_mirror_pass_by_pass") else { return };
     // One GPU object for everything: settings changes, texture reallocation, pipeline reuse.
-    let mut ep = Epipolar::new(&gpu, EpipolarSettings::default()).unwrap();
+    let mut ep = epipolar_gpu(&gpu, EpipolarSettings::default());
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 512);
         let desc = frame_desc(&scene);
@@ -707,7 +721,7 @@ fn epipolar_gpu_matches_its_cpu_mirror_pass_by_pass() {
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
         for s in mirror_settings(name) {
-            ep.settings = s.clone();
+            set_settings(&mut ep, &s);
             let g = run_gpu(&gpu, &mut ep, &up.frame(&desc));
             let label = format!(
                 "{name} slices {} S {} K {} {:?} taps {} {:?} prefilter {:?}",
@@ -762,9 +776,9 @@ fn spot_step_policies_change_the_marched_samples_and_each_matches_the_mirror() {
         return;
     };
     let up = UploadedFrame::new(&gpu, &frame).unwrap();
-    let mut ep = Epipolar::new(&gpu, fs.clone()).unwrap();
+    let mut ep = epipolar_gpu(&gpu, fs.clone());
     for s in [fs, cs] {
-        ep.settings = s.clone();
+        set_settings(&mut ep, &s);
         let g = run_gpu(&gpu, &mut ep, &up.frame(&desc));
         eprintln!("{}", check_mirror(&format!("stained-glass {:?}", s.spot_steps), &frame, &s, &g));
     }
@@ -898,19 +912,19 @@ fn directional_epipolar_matches_the_closed_form_cpu() {
 #[test]
 fn directional_epipolar_matches_the_closed_form_gpu() {
     let Some(gpu) = test_gpu("directional_epipolar_matches_the_closed_form_gpu") else { return };
-    let mut ep = Epipolar::new(&gpu, EpipolarSettings::default()).unwrap();
+    let mut ep = epipolar_gpu(&gpu, EpipolarSettings::default());
     closed_form_check("gpu", &mut |frame, s| ep_render(&gpu, &mut ep, frame, s));
 }
 
 /// Runs `s` on the GPU over exactly the CPU frame's inputs: (output, debug readback, stats).
 fn ep_render(
     gpu: &GpuContext,
-    ep: &mut Epipolar,
+    ep: &mut Scattering,
     frame: &CpuFrame,
     s: &EpipolarSettings,
 ) -> (Image, EpipolarDebug, TechniqueStats) {
     let up = UploadedFrame::new(gpu, frame).unwrap();
-    ep.settings = s.clone();
+    set_settings(ep, s);
     let g = run_gpu(gpu, ep, &up.frame(frame.desc));
     (g.out, g.debug, g.stats)
 }
@@ -1012,7 +1026,7 @@ fn epipolar_vs_reference_on_every_builtin_scene_cpu() {
 #[test]
 fn epipolar_vs_reference_on_every_builtin_scene_gpu() {
     let Some(gpu) = test_gpu("epipolar_vs_reference_on_every_builtin_scene_gpu") else { return };
-    let mut ep = Epipolar::new(&gpu, EpipolarSettings::default()).unwrap();
+    let mut ep = epipolar_gpu(&gpu, EpipolarSettings::default());
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
@@ -1138,22 +1152,27 @@ fn invalid_settings_and_device_limits_are_errors_not_panics() {
     let up = UploadedFrame::new(&gpu, &frame).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
     let view = out.create_view(&Default::default());
-    // Bad settings are refused before the device is touched, by `new` and by `render` (the
-    // settings are public and may change between frames); the object stays usable.
-    let e = Epipolar::new(&gpu, EpipolarSettings { slices: Some(2), ..Default::default() }).err().unwrap();
+    // Bad settings are refused before the device is touched, on creation and by `update` (the
+    // settings may change between frames), which changes nothing; the object stays usable.
+    let settings = |s: EpipolarSettings| TechniqueSettings::Epipolar(s);
+    let e =
+        Scattering::from_gpu(&gpu, settings(EpipolarSettings { slices: Some(2), ..Default::default() })).err().unwrap();
     assert!(e.to_string().contains("epipolar.slices"), "{e}");
-    let mut ep = Epipolar::new(&gpu, EpipolarSettings::default()).unwrap();
-    ep.settings.taps = 4;
-    let e = ep.render(&gpu, &up.frame(&desc), &view).unwrap_err();
+    let mut ep = epipolar_gpu(&gpu, EpipolarSettings::default());
+    let e = ep.update(&settings(EpipolarSettings { taps: 4, ..Default::default() })).unwrap_err();
     assert!(e.to_string().contains("epipolar.taps"), "{e}");
-    ep.settings.taps = 3;
-    assert!(ep.render(&gpu, &up.frame(&desc), &view).is_ok());
+    assert_eq!(ep.settings(), settings(EpipolarSettings::default()), "a refused update changes nothing");
+    assert!(ep.render(&up.frame(&desc), &view).is_ok());
+    set_settings(&mut ep, &EpipolarSettings { taps: 3, ..Default::default() });
+    assert!(ep.render(&up.frame(&desc), &view).is_ok());
     // More lines than the device's largest texture: an error naming the limit (only reachable
     // on devices below 8192, the WebGPU default; llvmpipe has 16384).
     let max = gpu.device.limits().max_texture_dimension_2d;
     if max < epipolar::MAX_TEXELS_PER_SIDE {
-        ep.settings.slices = Some(max + 1);
-        let e = ep.render(&gpu, &up.frame(&desc), &view).unwrap_err();
+        let e = ep
+            .update(&settings(EpipolarSettings { slices: Some(max + 1), ..Default::default() }))
+            .and_then(|_| ep.render(&up.frame(&desc), &view))
+            .unwrap_err();
         assert!(e.to_string().contains("epipolar"), "{e}");
     }
     // cpu::render validates too.
@@ -1215,7 +1234,7 @@ fn camera_at_the_light_and_light_behind_the_camera_give_finite_output() {
         ),
     ];
     let gpu = test_gpu("camera_at_the_light_and_light_behind_the_camera_give_finite_output");
-    let mut ep = gpu.as_ref().map(|g| Epipolar::new(g, EpipolarSettings::default()).unwrap());
+    let mut ep = gpu.as_ref().map(|g| epipolar_gpu(g, EpipolarSettings::default()));
     for (what, degenerate, scene) in cases {
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &desc);

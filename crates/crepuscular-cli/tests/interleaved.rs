@@ -8,12 +8,12 @@ use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::{GpuContext, UploadedFrame, test_gpu};
 use crepuscular::march::SpotSteps;
 use crepuscular::stats::TechniqueStats;
-use crepuscular::techniques::brute_force::{self, BruteForce, BruteForceSettings};
-use crepuscular::techniques::interleaved::{Interleaved, InterleavedSettings, PhaseLut, cpu};
+use crepuscular::techniques::brute_force::{self, BruteForceSettings};
+use crepuscular::techniques::interleaved::{InterleavedSettings, PhaseLut, cpu};
 use crepuscular::techniques::reference::{self, ReferenceSettings};
-use crepuscular::testing::wall_frame;
+use crepuscular::testing::{gpu_render, gpu_scattering, wall_frame};
 use crepuscular::tonemap::{ToneMap, composite};
-use crepuscular::{CpuFrame, GpuFrame, Image, Light, Medium, Phase};
+use crepuscular::{AnyGpuTechnique, CpuFrame, GpuFrame, Image, Light, Medium, Phase, Scattering, TechniqueSettings};
 use crepuscular_cli::metrics::compare;
 use crepuscular_cli::render::frame_desc;
 use crepuscular_scene::{GpuHost, builtin, host, host_cpu};
@@ -37,9 +37,15 @@ struct GpuRun {
     stats: TechniqueStats,
 }
 
-fn run_gpu(gpu: &GpuContext, il: &mut Interleaved, frame: &GpuFrame) -> GpuRun {
+/// `interleaved` at `s` on `gpu` (wall-clock stats).
+fn interleaved_gpu(gpu: &GpuContext, s: &InterleavedSettings) -> Scattering {
+    gpu_scattering(gpu, TechniqueSettings::Interleaved(s.clone())).expect("pipelines")
+}
+
+fn run_gpu(gpu: &GpuContext, sc: &mut Scattering, frame: &GpuFrame) -> GpuRun {
     let out = gpu.create_output_texture(frame.desc.width, frame.desc.height);
-    let stats = il.render(gpu, frame, &out.create_view(&Default::default())).expect("render");
+    let stats = sc.render(frame, &out.create_view(&Default::default())).expect("render");
+    let AnyGpuTechnique::Interleaved(il) = sc.technique() else { panic!("not interleaved") };
     GpuRun {
         march: gpu.read_image(il.march_texture().expect("march texture")).unwrap(),
         rows: gpu.read_image(il.rows_texture().expect("rows texture")).unwrap(),
@@ -51,8 +57,7 @@ fn run_gpu(gpu: &GpuContext, il: &mut Interleaved, frame: &GpuFrame) -> GpuRun {
 /// Runs `interleaved` on the GPU over exactly the CPU frame's depth and shadow map.
 fn gpu_on_cpu_frame(gpu: &GpuContext, frame: &CpuFrame, s: &InterleavedSettings) -> GpuRun {
     let up = UploadedFrame::new(gpu, frame).expect("upload");
-    let mut il = Interleaved::new(gpu, s.clone()).expect("pipelines");
-    run_gpu(gpu, &mut il, &up.frame(frame.desc))
+    run_gpu(gpu, &mut interleaved_gpu(gpu, s), &up.frame(frame.desc))
 }
 
 /// Brute-force's mirror criterion on rgb: (fraction of values differing by more than 1e-3
@@ -109,14 +114,14 @@ fn interleaved_gpu_matches_its_cpu_mirror_pass_by_pass() {
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
         // One GPU object for every setting: settings changes, texture reuse and table rebuilds.
-        let mut il = Interleaved::new(&gpu, InterleavedSettings::default()).unwrap();
+        let mut il = interleaved_gpu(&gpu, &InterleavedSettings::default());
         for s in mirror_settings() {
             let cpu_march = cpu::march(&frame, &s).unwrap();
             let cpu_rows = cpu::sum_rows(&frame, &s, &cpu_march);
             let cpu_out = cpu::sum_columns(&frame, &s, &cpu_march, &cpu_rows);
             let (cpu_full, cpu_stats) = cpu::render(&frame, &s).unwrap();
             assert_eq!(cpu_full, cpu_out, "cpu::render runs the three passes");
-            il.settings = s.clone();
+            assert!(il.update(&TechniqueSettings::Interleaved(s.clone())).unwrap(), "the same technique");
             let g = run_gpu(&gpu, &mut il, &up.frame(&desc));
             let label = format!(
                 "{name} M={} N={} depth_aware={} lut={} jitter={} {:?}",
@@ -447,12 +452,10 @@ fn block_one_is_brute_force() {
                 "{name} N={steps}: cpu differs"
             );
             if let (Some(gpu), Some(up)) = (&gpu, &up) {
-                let g = run_gpu(gpu, &mut Interleaved::new(gpu, il.clone()).unwrap(), &up.frame(&desc));
+                let g = run_gpu(gpu, &mut interleaved_gpu(gpu, &il), &up.frame(&desc));
                 let out = gpu.create_output_texture(desc.width, desc.height);
-                BruteForce::new(gpu, bf.clone())
-                    .unwrap()
-                    .render(gpu, &up.frame(&desc), &out.create_view(&Default::default()))
-                    .unwrap();
+                let bf = TechniqueSettings::BruteForce(bf.clone());
+                gpu_render(gpu, bf, &up.frame(&desc), &out.create_view(&Default::default())).unwrap();
                 let b = gpu.read_image(&out).unwrap();
                 let e = max_rel(&g.out, &b, 0..3, 1e-6);
                 eprintln!("{name} N={steps}: gpu max rel {e:e}");
@@ -540,7 +543,7 @@ fn interleaved_vs_reference_on_every_builtin_scene_cpu() {
 #[test]
 fn interleaved_vs_reference_on_every_builtin_scene_gpu() {
     let Some(gpu) = test_gpu("interleaved_vs_reference_on_every_builtin_scene_gpu") else { return };
-    let mut il = Interleaved::new(&gpu, InterleavedSettings::default()).unwrap();
+    let mut il = interleaved_gpu(&gpu, &InterleavedSettings::default());
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);

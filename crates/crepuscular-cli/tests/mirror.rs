@@ -2,10 +2,11 @@
 //! pass, on small images — the host renderer's depth and shadow maps, and `brute-force` run on
 //! identical inputs, for every light kind.
 
-use crepuscular::CpuFrame;
 use crepuscular::gpu::{UploadedFrame, test_gpu};
 use crepuscular::march::SpotSteps;
-use crepuscular::techniques::brute_force::{self, BruteForce, BruteForceSettings};
+use crepuscular::techniques::brute_force::{self, BruteForceSettings};
+use crepuscular::testing::gpu_render;
+use crepuscular::{CpuFrame, TechniqueSettings};
 use crepuscular_cli::render::frame_desc;
 use crepuscular_scene::{GpuHost, builtin, host, host_cpu};
 
@@ -77,8 +78,8 @@ fn brute_force_gpu_matches_its_cpu_mirror() {
             let (cpu, _) = brute_force::cpu::march(&frame, &settings).unwrap();
             let up = UploadedFrame::new(&gpu, &frame).unwrap();
             let out = gpu.create_output_texture(desc.width, desc.height);
-            let mut bf = BruteForce::new(&gpu, settings.clone()).unwrap();
-            let stats = bf.render(&gpu, &up.frame(&desc), &out.create_view(&Default::default())).unwrap();
+            let bf = TechniqueSettings::BruteForce(settings.clone());
+            let (_, stats) = gpu_render(&gpu, bf, &up.frame(&desc), &out.create_view(&Default::default())).unwrap();
             let img = gpu.read_image(&out).unwrap();
             assert_eq!(stats.raymarched_samples, cpu.pixels.len() as u64 * settings.steps as u64);
             // Same samples, same shadow map: a sample may land on the other side of a shadow

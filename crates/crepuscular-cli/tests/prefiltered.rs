@@ -12,14 +12,16 @@ use crepuscular::frame::surface_transmittance;
 use crepuscular::gpu::{GpuContext, UploadedFrame, test_gpu};
 use crepuscular::stats::TechniqueStats;
 use crepuscular::techniques::prefiltered::{
-    self, BasisPrecision, Mode, Prefiltered, PrefilteredSettings, Rectification, RectificationChoice, ReferenceRay, cpu,
+    self, BasisPrecision, Mode, PrefilteredSettings, Rectification, RectificationChoice, ReferenceRay, cpu,
 };
 use crepuscular::techniques::reference::{self, ReferenceSettings};
-use crepuscular::testing::{wall_closed_form, wall_frame};
+use crepuscular::testing::{gpu_scattering, wall_closed_form, wall_frame};
 use crepuscular::tonemap::{ToneMap, composite};
-use crepuscular::{CpuFrame, Image, Light, Medium, Phase};
+use crepuscular::{AnyGpuTechnique, CpuFrame, GpuFrame, Image, Light, Medium, Phase, Scattering, TechniqueSettings};
 use crepuscular_cli::metrics::compare;
-use crepuscular_cli::render::{GpuRunner, RenderOptions, RenderOutput, TechniqueChoice, frame_desc, render};
+use crepuscular_cli::render::{
+    RenderOptions, RenderOutput, frame_desc, parse_technique, render, render_cpu, render_gpu, scattering,
+};
 use crepuscular_scene::{GpuHost, Scene, builtin, host, host_cpu, raster};
 use glam::Vec3;
 
@@ -94,14 +96,28 @@ struct GpuRun {
     rect: Rectification,
 }
 
-fn run_gpu(
-    gpu: &GpuContext,
-    pf: &mut Prefiltered,
-    frame: &crepuscular::GpuFrame,
-    host: Option<&wgpu::TextureView>,
-) -> GpuRun {
+/// `prefiltered` at `s` on `gpu` (wall-clock stats).
+fn prefiltered_gpu(gpu: &GpuContext, s: &PrefilteredSettings) -> Scattering {
+    gpu_scattering(gpu, TechniqueSettings::Prefiltered(s.clone())).expect("pipelines")
+}
+
+/// Changes `sc`'s settings to `s` in place (the same GPU object).
+fn set_settings(sc: &mut Scattering, s: &PrefilteredSettings) {
+    assert!(sc.update(&TechniqueSettings::Prefiltered(s.clone())).expect("settings"), "a prefiltered object");
+}
+
+/// The concrete technique inside `sc`.
+fn prefiltered_of(sc: &Scattering) -> &prefiltered::Prefiltered {
+    let AnyGpuTechnique::Prefiltered(pf) = sc.technique() else { panic!("not prefiltered") };
+    pf
+}
+
+/// One frame; `host`: the host's rasterized rectified map, handed in with the frame.
+fn run_gpu(gpu: &GpuContext, sc: &mut Scattering, frame: &GpuFrame, host: Option<&wgpu::TextureView>) -> GpuRun {
     let out = gpu.create_output_texture(frame.desc.width, frame.desc.height);
-    let stats = pf.render_with(gpu, frame, host, &out.create_view(&Default::default())).expect("render");
+    let frame = GpuFrame { rectified_shadow_map: host, ..*frame };
+    let stats = sc.render(&frame, &out.create_view(&Default::default())).expect("render");
+    let pf = prefiltered_of(sc);
     let (depth, basis, cumw) = pf.read_maps(gpu).expect("read maps");
     GpuRun {
         out: gpu.read_image(&out).unwrap(),
@@ -595,7 +611,7 @@ fn check_mirror(
 fn prefiltered_gpu_matches_its_cpu_mirror_pass_by_pass() {
     let Some(gpu) = test_gpu("prefiltered_gpu_matches_its_cpu_mirror_pass_by_pass") else { return };
     // One GPU object for everything: settings changes, map reallocation, pipeline rebuilds.
-    let mut pf = Prefiltered::new(&gpu, small_settings()).unwrap();
+    let mut pf = prefiltered_gpu(&gpu, &small_settings());
     for (name, _) in builtin::builtin_names() {
         let scene = scene_at(name, 96, 54, 512);
         let desc = frame_desc(&scene);
@@ -631,7 +647,7 @@ fn prefiltered_gpu_matches_its_cpu_mirror_pass_by_pass() {
             _ => {}
         }
         for (what, s) in cases {
-            pf.settings = s.clone();
+            set_settings(&mut pf, &s);
             let g = run_gpu(&gpu, &mut pf, &up.frame(&desc), None);
             eprintln!("{}", check_mirror(&format!("{name}, {what}"), &frame, &s, &g, None));
         }
@@ -656,7 +672,7 @@ fn prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map() {
         let label = format!("{}, {:?}, {} region(s), λ {}", scene.name, s.precision, s.regions, s.split_lambda);
         let rect = Rectification::new(&desc, &s.rectify_options());
         assert_eq!(rect.mode, Mode::Projective, "{label}: the side-lit sun is rectified projectively");
-        let mut pf = Prefiltered::new(&gpu, s.clone()).unwrap();
+        let mut pf = prefiltered_gpu(&gpu, &s);
         let request = pf.raster_request(&desc).expect("a projective frame has a raster request");
         assert_eq!(Some(&request), rect.raster().as_ref());
         // The two host rasterizers agree (edges may round differently)...
@@ -707,7 +723,7 @@ fn prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map() {
     }
     // A host map is ignored where the frame is not projective: the built-in colonnade (sun in
     // view) goes epipolar, has no raster request, and resamples its map even when handed one.
-    let mut pf = Prefiltered::new(&gpu, projective.clone()).unwrap();
+    let mut pf = prefiltered_gpu(&gpu, &projective);
     let request = pf.raster_request(&desc).unwrap();
     let gtex = host.render_rectified(&gpu, &request).unwrap();
     let view =
@@ -840,10 +856,10 @@ fn directional_prefiltered_matches_the_closed_form_cpu() {
 #[test]
 fn directional_prefiltered_matches_the_closed_form_gpu() {
     let Some(gpu) = test_gpu("directional_prefiltered_matches_the_closed_form_gpu") else { return };
-    let mut pf = Prefiltered::new(&gpu, small_settings()).unwrap();
+    let mut pf = prefiltered_gpu(&gpu, &small_settings());
     closed_form_check("gpu", &mut |frame, s| {
         let up = UploadedFrame::new(&gpu, frame).unwrap();
-        pf.settings = s.clone();
+        set_settings(&mut pf, s);
         let g = run_gpu(&gpu, &mut pf, &up.frame(frame.desc), None);
         (g.out, g.stats)
     });
@@ -897,7 +913,7 @@ fn threshold(name: &str) -> f64 {
     THRESHOLDS.iter().find(|t| t.0 == name).unwrap_or_else(|| panic!("no threshold for built-in scene {name}")).1
 }
 
-fn run_render(scene: &Scene, gpu: Option<&GpuContext>, technique: TechniqueChoice) -> RenderOutput {
+fn run_render(scene: &Scene, gpu: Option<&GpuContext>, technique: TechniqueSettings) -> RenderOutput {
     render(scene, gpu, &RenderOptions { technique, progress: &|_, _| {} }).unwrap()
 }
 
@@ -914,13 +930,13 @@ fn quality(scene: &Scene, rf: &RenderOutput, out: &RenderOutput) -> (f64, f64) {
 /// technique; `prefiltered` has the host rasterize a projective map), with the reference over
 /// the very same depth and shadow map: (PSNR of the in-scattering, FLIP of the final images,
 /// the technique's stats). The GPU runner is built once and reused across scenes.
-fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut GpuRunner)>) -> (f64, f64, TechniqueStats) {
+fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut Scattering)>) -> (f64, f64, TechniqueStats) {
     let desc = frame_desc(scene);
     // Side-lit variants ask for the projective map (`auto` goes epipolar at their far/near).
     let side = scene.name.contains("side-lit");
     let overrides = if side { vec!["rectification=\"projective\"".to_string()] } else { vec![] };
-    let choice = TechniqueChoice::parse("prefiltered", scene, &overrides).unwrap();
-    let TechniqueChoice::Prefiltered(s) = &choice else { unreachable!() };
+    let choice = parse_technique("prefiltered", scene, &overrides).unwrap();
+    let TechniqueSettings::Prefiltered(s) = &choice else { unreachable!() };
     let expected = PrefilteredSettings {
         rectification: if side { RectificationChoice::Projective } else { RectificationChoice::Auto },
         ..Default::default()
@@ -928,9 +944,7 @@ fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut GpuRunner)>) -> (
     assert_eq!(*s, expected, "{}: the built-in scenes keep the defaults", scene.name);
     let (img, stats, depth, surface, shadow_map) = match gpu {
         Some((gpu, runner)) => {
-            if let GpuRunner::Prefiltered(r) = runner {
-                r.settings = s.clone();
-            }
+            assert!(runner.update(&choice).unwrap(), "the runner is prefiltered's");
             let spot = match &scene.light {
                 Light::Spot { texture, .. } => texture.as_deref(),
                 _ => None,
@@ -940,7 +954,7 @@ fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut GpuRunner)>) -> (
             let views = tex.views();
             let out = gpu.create_output_texture(desc.width, desc.height);
             let stats =
-                runner.render(gpu, Some(&host), &views.frame(&desc), &out.create_view(&Default::default())).unwrap();
+                render_gpu(runner, Some(&host), &views.frame(&desc), &out.create_view(&Default::default())).unwrap();
             let img = gpu.read_image(&out).unwrap();
             let depth = gpu.read_texture_f32(&tex.depth, 0).unwrap();
             let surface = gpu.read_image(&tex.surface).unwrap();
@@ -949,7 +963,7 @@ fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut GpuRunner)>) -> (
         None => {
             let h = host_cpu::render(&scene.geometry, &desc);
             let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
-            let (img, stats) = choice.run_cpu(&frame, Some(&scene.geometry), &|_, _| {}).unwrap();
+            let (img, stats) = render_cpu(&choice, &frame, Some(&scene.geometry), &|_, _| {}).unwrap();
             (img, stats, h.depth, h.surface, h.shadow_map)
         }
     };
@@ -963,7 +977,7 @@ fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut GpuRunner)>) -> (
     (psnr, flip, stats)
 }
 
-fn quality_check(backend: &str, mut gpu: Option<(&GpuContext, &mut GpuRunner)>) {
+fn quality_check(backend: &str, mut gpu: Option<(&GpuContext, &mut Scattering)>) {
     let mut run = |scene: &Scene| {
         let t = std::time::Instant::now();
         let r = quality_frame(scene, gpu.as_mut().map(|(g, r)| (*g, &mut **r)));
@@ -1019,7 +1033,8 @@ fn prefiltered_vs_reference_on_every_builtin_scene_cpu() {
 #[test]
 fn prefiltered_vs_reference_on_every_builtin_scene_gpu() {
     let Some(gpu) = test_gpu("prefiltered_vs_reference_on_every_builtin_scene_gpu") else { return };
-    let mut runner = TechniqueChoice::Prefiltered(PrefilteredSettings::default()).gpu_runner(&gpu).unwrap().unwrap();
+    let mut runner =
+        scattering(&gpu, &TechniqueSettings::Prefiltered(PrefilteredSettings::default())).unwrap().unwrap();
     quality_check("gpu", Some((&gpu, &mut runner)));
 }
 
@@ -1033,13 +1048,13 @@ fn transmittance_weights_beat_average_visibility_in_a_dense_medium() {
     let mut scene = scene_at("colonnade", 160, 90, 1024);
     scene.medium.scattering *= 4.0;
     scene.medium.absorption *= 4.0;
-    let rf = run_render(&scene, None, TechniqueChoice::Reference(REFERENCE));
+    let rf = run_render(&scene, None, TechniqueSettings::Reference(REFERENCE));
     let mut psnr = vec![];
     for (what, bands, weights) in
         [("weights, 1 band", 1, true), ("average visibility", 1, false), ("weights, 4 bands", 4, true)]
     {
         let set = [format!("transmittance_weights={weights}"), format!("bands={bands}"), "map_size=[512, 512]".into()];
-        let out = run_render(&scene, None, TechniqueChoice::parse("prefiltered", &scene, &set).unwrap());
+        let out = run_render(&scene, None, parse_technique("prefiltered", &scene, &set).unwrap());
         let (p, flip) = quality(&scene, &rf, &out);
         eprintln!("colonnade, σt ×4, {what}: PSNR {p:.2} dB, FLIP {flip:.4}");
         psnr.push(p);
@@ -1107,7 +1122,7 @@ fn validate_rejects_bad_settings_naming_the_key() {
     assert!(e.contains("prefiltered.regions"), "{e}");
     // So does the scene-file / --set path.
     let scene = scene_at("cage", 16, 9, 64);
-    let e = TechniqueChoice::parse("prefiltered", &scene, &["bases_per_thread=12".into()]).unwrap_err().to_string();
+    let e = parse_technique("prefiltered", &scene, &["bases_per_thread=12".into()]).unwrap_err().to_string();
     assert!(e.contains("prefiltered.bases_per_thread"), "{e}");
 }
 
@@ -1155,28 +1170,30 @@ fn settings_round_trip_through_toml() {
     assert!(toml::from_str::<PrefilteredSettings>("rectification = \"rasterized\"").is_err());
     // --set overrides reach the settings.
     let scene = scene_at("cage", 16, 9, 64);
-    let t = TechniqueChoice::parse("prefiltered", &scene, &["regions=2".into(), "precision=float16".into()]).unwrap();
-    let TechniqueChoice::Prefiltered(s) = t else { panic!("not prefiltered") };
+    let t = parse_technique("prefiltered", &scene, &["regions=2".into(), "precision=float16".into()]).unwrap();
+    let TechniqueSettings::Prefiltered(s) = t else { panic!("not prefiltered") };
     assert_eq!((s.regions, s.precision), (2, BasisPrecision::Float16));
 }
 
 #[test]
 fn gpu_refuses_bad_settings_and_stays_usable() {
     let Some(gpu) = test_gpu("gpu_refuses_bad_settings_and_stays_usable") else { return };
-    let e = Prefiltered::new(&gpu, PrefilteredSettings { bases: 6, ..Default::default() }).err().unwrap();
+    let settings = |s: PrefilteredSettings| TechniqueSettings::Prefiltered(s);
+    let e = Scattering::from_gpu(&gpu, settings(PrefilteredSettings { bases: 6, ..Default::default() })).err().unwrap();
     assert!(e.to_string().contains("prefiltered.bases"), "{e}");
     let (desc, depth, sm) = wall_frame(sun(Vec3::new(1.0, -0.5, -0.2)), dense(), 32, 18);
     let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &sm, surface: None };
     let up = UploadedFrame::new(&gpu, &frame).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
     let view = out.create_view(&Default::default());
-    let mut pf = Prefiltered::new(&gpu, PrefilteredSettings { map_size: [64, 32], ..Default::default() }).unwrap();
-    assert!(pf.read_maps(&gpu).is_err(), "no maps before the first frame");
-    pf.settings.split_lambda = 1.5;
-    let e = pf.render(&gpu, &up.frame(&desc), &view).unwrap_err();
+    let small = PrefilteredSettings { map_size: [64, 32], ..Default::default() };
+    let mut pf = prefiltered_gpu(&gpu, &small);
+    assert!(prefiltered_of(&pf).read_maps(&gpu).is_err(), "no maps before the first frame");
+    let e = pf.update(&settings(PrefilteredSettings { split_lambda: 1.5, ..small.clone() })).unwrap_err();
     assert!(e.to_string().contains("prefiltered.split_lambda"), "{e}");
-    pf.settings.split_lambda = 0.0;
-    let stats = pf.render(&gpu, &up.frame(&desc), &view).unwrap();
+    assert_eq!(pf.settings(), settings(small.clone()), "a refused update changes nothing");
+    set_settings(&mut pf, &PrefilteredSettings { split_lambda: 0.0, ..small });
+    let stats = pf.render(&up.frame(&desc), &view).unwrap();
     assert_eq!(stats.extra["map_columns"], 64.0);
     assert!(gpu.read_image(&out).unwrap().all_finite());
 }

@@ -7,9 +7,9 @@ use crepuscular::gpu::test_gpu;
 use crepuscular::techniques::brute_force::BruteForceSettings;
 use crepuscular::techniques::reference::ReferenceSettings;
 use crepuscular::tonemap::{ToneMap, composite};
-use crepuscular::{CpuFrame, Image};
+use crepuscular::{CpuFrame, Image, TechniqueSettings};
 use crepuscular_cli::metrics::compare;
-use crepuscular_cli::render::{RenderOptions, TechniqueChoice, frame_desc, render};
+use crepuscular_cli::render::{RenderOptions, frame_desc, render};
 use crepuscular_scene::{builtin, host_cpu};
 
 /// (scene, minimum PSNR dB, maximum FLIP mean) for brute-force at its default 64 steps,
@@ -70,8 +70,8 @@ fn brute_force_vs_reference_on_every_builtin_scene_gpu() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name);
         let run = |technique| render(&scene, Some(&gpu), &RenderOptions { technique, progress: &|_, _| {} }).unwrap();
-        let bf = run(TechniqueChoice::BruteForce(BruteForceSettings::default()));
-        let rf = run(TechniqueChoice::Reference(REFERENCE));
+        let bf = run(TechniqueSettings::BruteForce(BruteForceSettings::default()));
+        let rf = run(TechniqueSettings::Reference(REFERENCE));
         assert_eq!(bf.stats.backend, "gpu");
         check(name, "gpu", &rf.inscatter, &bf.inscatter, &rf.final_radiance, &bf.final_radiance, scene.render.exposure);
     }

@@ -1,8 +1,8 @@
 //! Robustness sweep (docs/ROBUSTNESS.md): every technique, on both backends, over the known
 //! hard views and lights and over seeded random ones. For each case: no panic, no NaN or Inf in
 //! the in-scattering or the final image, and an error against `reference` inside a bound
-//! written here. The sweep goes through `TechniqueChoice`, so every technique the tool knows is
-//! swept without changes here.
+//! written here. The sweep goes through `TechniqueSettings`, so every technique the tool knows
+//! is swept without changes here.
 //!
 //! Error measure: the normalised mean absolute error of the in-scattering,
 //! NMAE = Σ|L_t − L_ref| / Σ|L_ref| over all pixels and channels, the denominator floored at a
@@ -10,8 +10,8 @@
 
 use crepuscular::gpu::test_gpu;
 use crepuscular::techniques::reference::ReferenceSettings;
-use crepuscular::{Camera, Image, Light, Medium, Phase};
-use crepuscular_cli::render::{RenderOptions, RenderOutput, TechniqueChoice, render};
+use crepuscular::{Camera, Image, Light, Medium, Phase, TechniqueSettings};
+use crepuscular_cli::render::{RenderOptions, RenderOutput, parse_technique, render};
 use crepuscular_scene::{Scene, builtin};
 use glam::Vec3;
 
@@ -229,12 +229,12 @@ impl Lcg {
 }
 
 /// Every technique the tool knows, at its default settings (the reference at the sweep's).
-fn techniques() -> Vec<TechniqueChoice> {
+fn techniques() -> Vec<TechniqueSettings> {
     let empty = builtin::builtin("colonnade").expect("colonnade");
     crepuscular::techniques::TECHNIQUES
         .iter()
         .filter(|t| t.name != "reference")
-        .map(|t| TechniqueChoice::parse(t.name, &Scene { render: Default::default(), ..empty.clone() }, &[]).unwrap())
+        .map(|t| parse_technique(t.name, &Scene { render: Default::default(), ..empty.clone() }, &[]).unwrap())
         .collect()
 }
 
@@ -272,7 +272,7 @@ fn sweep(gpu: Option<&crepuscular::gpu::GpuContext>, backend: &str) {
     let mut worst: Vec<(f64, String)> = vec![(0.0, String::new()); techniques.len()];
     for c in cases() {
         let opts = |technique| RenderOptions { technique, progress: &|_, _| {} };
-        let reference = render(&c.scene, None, &opts(TechniqueChoice::Reference(REFERENCE)))
+        let reference = render(&c.scene, None, &opts(TechniqueSettings::Reference(REFERENCE)))
             .unwrap_or_else(|e| panic!("reference on `{}`: {e:#}", c.name));
         assert!(finite(&reference.inscatter), "reference on `{}`: NaN or Inf", c.name);
         let mut line = format!("{backend} {:<40}", c.name);

@@ -5,8 +5,9 @@
 use crepuscular::frame::surface_transmittance;
 use crepuscular::techniques::reference::ReferenceSettings;
 use crepuscular::techniques::subsampled::{self, SubsampledSettings};
+use crepuscular::testing::{gpu_render, gpu_scattering};
 use crepuscular::tonemap::{ToneMap, composite};
-use crepuscular::{CpuFrame, Image};
+use crepuscular::{AnyGpuTechnique, CpuFrame, Image, Scattering, TechniqueSettings};
 use crepuscular_cli::metrics::compare;
 use crepuscular_cli::render::frame_desc;
 use crepuscular_scene::{builtin, host_cpu};
@@ -25,6 +26,12 @@ fn small(name: &str, shadow: u32) -> crepuscular_scene::Scene {
 
 // ---- (2) GPU vs CPU mirror, pass by pass ----
 
+/// The grid texture of `sc`'s `subsampled` (None before its first frame).
+fn grid_texture(sc: &Scattering) -> Option<&wgpu::Texture> {
+    let AnyGpuTechnique::Subsampled(ss) = sc.technique() else { panic!("not subsampled") };
+    ss.grid_texture()
+}
+
 /// Runs `subsampled` on the GPU over exactly the CPU frame's inputs: (grid, final, stats).
 fn gpu_subsampled(
     gpu: &crepuscular::GpuContext,
@@ -33,9 +40,10 @@ fn gpu_subsampled(
 ) -> (Image, Image, crepuscular::stats::TechniqueStats) {
     let up = crepuscular::gpu::UploadedFrame::new(gpu, frame).expect("upload");
     let out = gpu.create_output_texture(frame.desc.width, frame.desc.height);
-    let mut ss = subsampled::Subsampled::new(gpu, settings.clone()).expect("pipelines");
-    let stats = ss.render(gpu, &up.frame(frame.desc), &out.create_view(&Default::default())).expect("render");
-    let grid = gpu.read_image(ss.grid_texture().expect("grid after a render")).expect("grid readback");
+    let settings = TechniqueSettings::Subsampled(settings.clone());
+    let (ss, stats) = gpu_render(gpu, settings, &up.frame(frame.desc), &out.create_view(&Default::default()))
+        .expect("pipelines and render");
+    let grid = gpu.read_image(grid_texture(&ss).expect("grid after a render")).expect("grid readback");
     (grid, gpu.read_image(&out).expect("readback"), stats)
 }
 
@@ -141,18 +149,19 @@ fn the_grid_is_reallocated_only_when_its_size_changes() {
     let up = crepuscular::gpu::UploadedFrame::new(&gpu, &frame).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
     let view = out.create_view(&Default::default());
-    let mut ss = subsampled::Subsampled::new(&gpu, SubsampledSettings { steps: 8, ..Default::default() }).unwrap();
-    assert!(ss.grid_texture().is_none());
-    let a = ss.render(&gpu, &up.frame(&desc), &view).unwrap();
-    let first = ss.grid_texture().unwrap().clone();
-    let b = ss.render(&gpu, &up.frame(&desc), &view).unwrap();
-    assert!(*ss.grid_texture().unwrap() == first, "same size: the grid texture is kept");
+    let eight = SubsampledSettings { steps: 8, ..Default::default() };
+    let mut ss = gpu_scattering(&gpu, TechniqueSettings::Subsampled(eight.clone())).unwrap();
+    assert!(grid_texture(&ss).is_none());
+    let a = ss.render(&up.frame(&desc), &view).unwrap();
+    let first = grid_texture(&ss).unwrap().clone();
+    let b = ss.render(&up.frame(&desc), &view).unwrap();
+    assert!(*grid_texture(&ss).unwrap() == first, "same size: the grid texture is kept");
     // Two frames of the same input count the same re-marched pixels (the counter is cleared).
     assert_eq!(a.extra["remarched_pixels"], b.extra["remarched_pixels"]);
     assert_eq!(a.raymarched_samples, b.raymarched_samples);
-    ss.settings.factor = 8;
-    let c = ss.render(&gpu, &up.frame(&desc), &view).unwrap();
-    let g = ss.grid_texture().unwrap();
+    assert!(ss.update(&TechniqueSettings::Subsampled(SubsampledSettings { factor: 8, ..eight })).unwrap());
+    let c = ss.render(&up.frame(&desc), &view).unwrap();
+    let g = grid_texture(&ss).unwrap();
     assert_eq!((g.width(), g.height()), (20, 12));
     assert_eq!((c.extra["grid_width"], c.extra["grid_height"]), (20.0, 12.0));
     assert!(c.gpu_memory_bytes < a.gpu_memory_bytes);
@@ -379,8 +388,8 @@ fn factor_one_is_brute_force_gpu() {
         for (s, b) in factor_one_settings() {
             let (_, img, stats) = gpu_subsampled(&gpu, &frame, &s);
             let out = gpu.create_output_texture(desc.width, desc.height);
-            let mut bf = crepuscular::techniques::brute_force::BruteForce::new(&gpu, b).unwrap();
-            bf.render(&gpu, &up.frame(&desc), &out.create_view(&Default::default())).unwrap();
+            gpu_render(&gpu, TechniqueSettings::BruteForce(b), &up.frame(&desc), &out.create_view(&Default::default()))
+                .unwrap();
             let bf = gpu.read_image(&out).unwrap();
             // The same WGSL march in two pipelines: equal up to the shader compiler's freedom
             // to contract or reorder f32 arithmetic differently in each.
@@ -459,7 +468,7 @@ fn subsampled_vs_reference_on_every_builtin_scene_cpu() {
 
 #[test]
 fn subsampled_vs_reference_on_every_builtin_scene_gpu() {
-    use crepuscular_cli::render::{RenderOptions, TechniqueChoice, render};
+    use crepuscular_cli::render::{RenderOptions, render};
     let Some(gpu) = crepuscular::gpu::test_gpu("subsampled_vs_reference_on_every_builtin_scene_gpu") else { return };
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 1024);
@@ -468,7 +477,7 @@ fn subsampled_vs_reference_on_every_builtin_scene_gpu() {
         let rf = render(
             &scene,
             Some(&gpu),
-            &RenderOptions { technique: TechniqueChoice::Reference(REFERENCE), progress: &|_, _| {} },
+            &RenderOptions { technique: TechniqueSettings::Reference(REFERENCE), progress: &|_, _| {} },
         )
         .unwrap();
         let spot = match &scene.light {
@@ -479,8 +488,8 @@ fn subsampled_vs_reference_on_every_builtin_scene_gpu() {
         let views = tex.views();
         let frame = views.frame(&desc);
         let out = gpu.create_output_texture(desc.width, desc.height);
-        let mut ss = subsampled::Subsampled::new(&gpu, SubsampledSettings::default()).unwrap();
-        let stats = ss.render(&gpu, &frame, &out.create_view(&Default::default())).unwrap();
+        let ss = TechniqueSettings::Subsampled(SubsampledSettings::default());
+        let (_, stats) = gpu_render(&gpu, ss, &frame, &out.create_view(&Default::default())).unwrap();
         assert_eq!(stats.backend, "gpu");
         let img = gpu.read_image(&out).unwrap();
         assert!(img.all_finite());

@@ -1,10 +1,12 @@
-//! Settings changed in place (`GpuRunner::update`, what the viewer does when a setting is
+//! Settings changed in place (`Scattering::update`, what the viewer does when a setting is
 //! edited) render exactly what a runner built fresh with the new settings renders: a technique
 //! that kept a stale table, texture or pipeline across the change would differ here. And
-//! `StatsMode::Off` (render without waiting for the GPU) renders the same image as measured.
+//! `StatsMode::Off` (nothing measured) and `StatsMode::Deferred` (timings and counters read back
+//! frames later) render the same image as `StatsMode::WallClock` (each pass waited for).
 
 use crepuscular::gpu::{GpuContext, test_gpu};
-use crepuscular_cli::render::{GpuRunner, TechniqueChoice, frame_desc};
+use crepuscular::{Scattering, StatsMode, TechniqueSettings};
+use crepuscular_cli::render::{frame_desc, parse_technique, render_gpu, scattering};
 use crepuscular_scene::{GpuHost, Scene, builtin};
 
 fn small(name: &str) -> Scene {
@@ -16,7 +18,7 @@ fn small(name: &str) -> Scene {
 }
 
 /// One frame of `scene` through `runner`, read back as raw f32 bits.
-fn render(gpu: &GpuContext, scene: &Scene, host: &GpuHost, runner: &mut GpuRunner) -> Vec<u32> {
+fn render(gpu: &GpuContext, scene: &Scene, host: &GpuHost, runner: &mut Scattering) -> Vec<u32> {
     render_stats(gpu, scene, host, runner).0
 }
 
@@ -25,7 +27,7 @@ fn render_stats(
     gpu: &GpuContext,
     scene: &Scene,
     host: &GpuHost,
-    runner: &mut GpuRunner,
+    runner: &mut Scattering,
 ) -> (Vec<u32>, crepuscular::stats::TechniqueStats) {
     let desc = frame_desc(scene);
     let spot = match &scene.light {
@@ -35,13 +37,13 @@ fn render_stats(
     let tex = host.render(gpu, &desc, spot).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
     let views = tex.views();
-    let stats = runner.render(gpu, Some(host), &views.frame(&desc), &out.create_view(&Default::default())).unwrap();
+    let stats = render_gpu(runner, Some(host), &views.frame(&desc), &out.create_view(&Default::default())).unwrap();
     (gpu.read_texture_f32(&out, 0).unwrap().into_iter().map(f32::to_bits).collect(), stats)
 }
 
-fn parse(technique: &str, scene: &Scene, set: &[&str]) -> TechniqueChoice {
+fn parse(technique: &str, scene: &Scene, set: &[&str]) -> TechniqueSettings {
     let set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
-    TechniqueChoice::parse(technique, scene, &set).unwrap_or_else(|e| panic!("{technique} {set:?}: {e:#}"))
+    parse_technique(technique, scene, &set).unwrap_or_else(|e| panic!("{technique} {set:?}: {e:#}"))
 }
 
 #[test]
@@ -85,13 +87,13 @@ fn settings_changed_in_place_render_what_a_fresh_runner_renders() {
         let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
         for (technique, chain) in chains {
             let first = parse(technique, &scene, chain[0]);
-            let mut runner = first.gpu_runner(&gpu).unwrap().expect("a GPU technique");
+            let mut runner = scattering(&gpu, &first).unwrap().expect("a GPU technique");
             let mut previous = render(&gpu, &scene, &host, &mut runner);
             for set in &chain[1..] {
                 let next = parse(technique, &scene, set);
-                assert!(runner.update(&next), "{technique}: update refused its own settings");
+                assert!(runner.update(&next).unwrap(), "{technique}: update refused its own settings");
                 let in_place = render(&gpu, &scene, &host, &mut runner);
-                let mut fresh_runner = next.gpu_runner(&gpu).unwrap().expect("a GPU technique");
+                let mut fresh_runner = scattering(&gpu, &next).unwrap().expect("a GPU technique");
                 let fresh = render(&gpu, &scene, &host, &mut fresh_runner);
                 let differ = in_place.iter().zip(&fresh).filter(|(a, b)| a != b).count();
                 eprintln!("{scene_name} {technique} → {set:?}: {differ} of {} values differ", fresh.len());
@@ -102,14 +104,14 @@ fn settings_changed_in_place_render_what_a_fresh_runner_renders() {
             }
             // Another technique's settings are refused and change nothing.
             let other = parse(if *technique == "brute-force" { "epipolar" } else { "brute-force" }, &scene, &[]);
-            assert!(!runner.update(&other), "{technique} accepted another technique's settings");
+            assert!(!runner.update(&other).unwrap(), "{technique} accepted another technique's settings");
         }
     }
 }
 
 #[test]
 fn stats_off_renders_the_same_image_without_timing_or_readbacks() {
-    let Some(mut gpu) = test_gpu("stats_off_renders_the_same_image_without_timing_or_readbacks") else { return };
+    let Some(gpu) = test_gpu("stats_off_renders_the_same_image_without_timing_or_readbacks") else { return };
     for scene_name in ["colonnade", "cage"] {
         let scene = small(scene_name);
         let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
@@ -121,11 +123,18 @@ fn stats_off_renders_the_same_image_without_timing_or_readbacks() {
             ("prefiltered", &["map_size=[128, 128]"]),
         ] {
             let choice = parse(technique, &scene, set);
-            gpu.stats = crepuscular::StatsMode::Measured;
-            let mut runner = choice.gpu_runner(&gpu).unwrap().expect("a GPU technique");
+            let mut runner = scattering(&gpu, &choice).unwrap().expect("a GPU technique");
+            runner.set_stats_mode(StatsMode::WallClock).unwrap();
             let (measured, ms) = render_stats(&gpu, &scene, &host, &mut runner);
-            gpu.stats = crepuscular::StatsMode::Off;
+            runner.set_stats_mode(StatsMode::Off).unwrap();
             let (off, os) = render_stats(&gpu, &scene, &host, &mut runner);
+            // Deferred: the counters arrive after the frame (here: after the wait in `render`)
+            // and are the ones measured at once.
+            runner.set_stats_mode(StatsMode::Deferred).unwrap();
+            let (deferred, ds) = render_stats(&gpu, &scene, &host, &mut runner);
+            assert!(deferred == measured, "{scene_name} {technique}: StatsMode::Deferred changed the image");
+            assert_eq!(ds.raymarched_samples, ms.raymarched_samples, "{scene_name} {technique}: deferred counts");
+            assert_eq!(ds.extra, ms.extra, "{scene_name} {technique}: deferred counts");
             eprintln!(
                 "{scene_name} {technique}: measured {} samples {:?}; off {} samples {:?}",
                 ms.raymarched_samples, ms.timing, os.raymarched_samples, os.timing

@@ -4,7 +4,7 @@
 
 use crate::scene::{Geometry, Vertex};
 use crepuscular::frame::FrameDesc;
-use crepuscular::gpu::{GpuContext, PassTimer};
+use crepuscular::gpu::{GpuContext, Recorder};
 use crepuscular::stats::PassTime;
 use crepuscular::techniques::prefiltered::raster::RectifiedRaster;
 use crepuscular::{Error, GpuFrame, RgbTexture, ShadowMap};
@@ -84,6 +84,7 @@ impl HostViews {
             depth: &self.depth,
             shadow_map: &self.shadow_map,
             spot_texture: textured.then_some(&self.spot_texture),
+            rectified_shadow_map: None,
         }
     }
 }
@@ -147,11 +148,11 @@ impl GpuHost {
                     module: &shadow_module,
                     entry_point: Some("vs"),
                     compilation_options: Default::default(),
-                    buffers: &[Some(wgpu::VertexBufferLayout {
+                    buffers: &[wgpu::VertexBufferLayout {
                         array_stride: std::mem::size_of::<Vertex>() as u64,
                         step_mode: wgpu::VertexStepMode::Vertex,
                         attributes: &VERTEX_ATTRIBUTES[..1],
-                    })],
+                    }],
                 },
                 primitive,
                 depth_stencil: Some(depth_state.clone()),
@@ -193,7 +194,7 @@ impl GpuHost {
                     module: &surface_module,
                     entry_point: Some("vs"),
                     compilation_options: Default::default(),
-                    buffers: &[Some(vertex_layout)],
+                    buffers: &[vertex_layout],
                 },
                 primitive,
                 depth_stencil: Some(depth_state),
@@ -371,11 +372,11 @@ impl GpuHost {
                     module: &module,
                     entry_point: Some(if shader_clamp { "vs_clamped" } else { "vs" }),
                     compilation_options: Default::default(),
-                    buffers: &[Some(wgpu::VertexBufferLayout {
+                    buffers: &[wgpu::VertexBufferLayout {
                         array_stride: std::mem::size_of::<Vertex>() as u64,
                         step_mode: wgpu::VertexStepMode::Vertex,
                         attributes: &VERTEX_ATTRIBUTES[..1],
-                    })],
+                    }],
                 },
                 primitive: wgpu::PrimitiveState {
                     cull_mode: None,
@@ -432,7 +433,9 @@ impl GpuHost {
             )
         })?;
         let spot_texture = gpu.upload_rgb_texture(spot);
-        let mut timer = PassTimer::new(gpu, 2);
+        // The host is the tools' own renderer: its passes are submitted one by one and timed by
+        // synchronised wall clock.
+        let mut timer = Recorder::wall_clock(gpu);
         let layer_groups: Vec<(wgpu::TextureView, wgpu::BindGroup)> = (0..sp.layers)
             .map(|l| {
                 let buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -454,19 +457,8 @@ impl GpuHost {
                 (view, bg)
             })
             .collect();
-        timer.pass(gpu, "shadow map", |enc, ts| {
-            for (l, (view, bg)) in layer_groups.iter().enumerate() {
-                let last = l + 1 == layer_groups.len();
-                let writes = ts.map(|t| {
-                    let mut w = t.render();
-                    if l != 0 {
-                        w.beginning_of_pass_write_index = None;
-                    }
-                    if !last {
-                        w.end_of_pass_write_index = None;
-                    }
-                    w
-                });
+        timer.pass("shadow map", |enc, _| {
+            for (view, bg) in &layer_groups {
                 let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("shadow map layer"),
                     color_attachments: &[],
@@ -478,7 +470,7 @@ impl GpuHost {
                         }),
                         stencil_ops: None,
                     }),
-                    timestamp_writes: writes,
+                    timestamp_writes: None,
                     occlusion_query_set: None,
                     multiview_mask: None,
                 });
@@ -507,7 +499,7 @@ impl GpuHost {
         });
         let depth_view = depth.create_view(&Default::default());
         let surface_view = surface.create_view(&Default::default());
-        timer.pass(gpu, "surface", |enc, ts| {
+        timer.pass("surface", |enc, ts| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("surface"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -524,7 +516,7 @@ impl GpuHost {
                     depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
                     stencil_ops: None,
                 }),
-                timestamp_writes: ts.map(|t| t.render()),
+                timestamp_writes: ts.and_then(|t| t.render()),
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
@@ -534,7 +526,7 @@ impl GpuHost {
             pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
             pass.draw_indexed(0..self.index_count, 0, 0..1);
         })?;
-        let passes = timer.finish(gpu)?;
+        let passes = timer.into_passes();
         Ok(HostTextures { depth, surface, shadow_map, spot_texture, passes })
     }
 }

@@ -17,8 +17,7 @@
 //! `own_renderer.ppm`); it exits with an error when a check fails.
 
 use crepuscular::frame::{FrameDesc, GpuFrame};
-use crepuscular::techniques::brute_force::BruteForce;
-use crepuscular::{Camera, GpuContext, Light, Medium, ShadowProjection};
+use crepuscular::{Camera, GpuContext, Light, Medium, Scattering, ShadowProjection, TechniqueSettings};
 use glam::{Mat4, Vec3};
 use wgpu::util::DeviceExt;
 
@@ -181,11 +180,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 module: &module,
                 entry_point: Some("vs"),
                 compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
+                buffers: &[wgpu::VertexBufferLayout {
                     array_stride: 12,
                     step_mode: wgpu::VertexStepMode::Vertex,
                     attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                })],
+                }],
             },
             primitive: wgpu::PrimitiveState::default(), // cull_mode: None
             depth_stencil: Some(wgpu::DepthStencilState {
@@ -325,14 +324,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     });
     let output = gpu.create_output_texture(WIDTH, HEIGHT);
     let output_view = output.create_view(&Default::default());
-    let frame = GpuFrame { desc: &desc, depth: &depth_view, shadow_map: &shadow_view, spot_texture: None };
+    let frame = GpuFrame {
+        desc: &desc,
+        depth: &depth_view,
+        shadow_map: &shadow_view,
+        spot_texture: None,
+        rectified_shadow_map: None,
+    };
     // Build once, call every frame. The result is in-scattered radiance only: the engine adds it
     // to its lit surfaces attenuated by exp(-σt·distance) (see crepuscular::tonemap::composite).
-    let mut technique = BruteForce::new(&gpu, Default::default())?;
-    // An engine's frame loop would set `gpu.stats = crepuscular::StatsMode::Off` once: `render`
-    // then only records and submits, without waiting for the GPU (the stats carry no pass
-    // times). This example keeps the default, measured, to print them.
-    let stats = technique.render(&gpu, &frame, &output_view)?;
+    let mut technique = Scattering::new(&gpu.device, &gpu.queue, TechniqueSettings::named("brute-force")?)?;
+    let stats = technique.render(&frame, &output_view)?;
 
     // 4. The engine's composite: its surface colour, attenuated by the fog between the eye and
     //    the surface, plus crepuscular's in-scattering; then a tone curve.

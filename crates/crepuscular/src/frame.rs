@@ -177,6 +177,12 @@ pub struct GpuFrame<'a> {
     /// The spot light's projected texture (`Rgba8UnormSrgb`/`Rgba16Float`/`Rgba32Float`, read
     /// with `textureLoad`), if the light has one.
     pub spot_texture: Option<&'a wgpu::TextureView>,
+    /// A shadow map the host rasterized from the matrices of
+    /// [`crate::Scattering::raster_request`] (a `D2` view of a `Depth32Float` or `R32Float`
+    /// texture of the request's size): `prefiltered`'s projective rectified map (Klehm et al.
+    /// 2014, §4.2). `None` (the default for a host that does not offer it): the technique
+    /// resamples the ordinary shadow map instead. Other techniques ignore it.
+    pub rectified_shadow_map: Option<&'a wgpu::TextureView>,
 }
 
 /// Transmittance T(s) = exp(−σt·s) to the visible surface per pixel, computed from the depth

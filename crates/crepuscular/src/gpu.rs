@@ -1,32 +1,37 @@
 //! The GPU context, readbacks, and per-pass timing.
 
 use crate::error::Error;
-use crate::stats::PassTime;
-use std::time::Instant;
 
-/// Whether a technique's `render` waits for the GPU to report the frame's statistics.
+/// How a [`crate::Scattering`] measures its frames: per-pass GPU times and the counts only the
+/// GPU knows (epipolar's classified and re-marched samples, subsampled's re-marched pixels).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum StatsMode {
-    /// Time every pass and read the GPU's counters (epipolar's sample classification,
-    /// subsampled's re-marched pixels): complete [`crate::stats::TechniqueStats`], at the price of
-    /// waiting for the GPU at the end of each frame — and after each pass on software
-    /// adapters, which are timed by synchronised wall clock. The default; what the command
-    /// line's `render`, `bench` and the viewer use.
+    /// The engine's mode, and the default: timestamp queries (where the device has
+    /// `TIMESTAMP_QUERY` and is not a software adapter) and counter copies are recorded into
+    /// the caller's encoder, and read back one or more frames later (a ring of query sets and
+    /// readback buffers, through wgpu-profiler): [`crate::Scattering::encode`] never submits,
+    /// polls or maps, and [`crate::Scattering::stats`] returns the newest frame whose results
+    /// have arrived. Cost: two timestamps per pass and one small buffer copy per frame.
     #[default]
-    Measured,
-    /// Record and submit only: `render` returns once its passes are submitted, so the CPU
-    /// prepares the next frame while the GPU works (no CPU–GPU synchronisation per frame: what
-    /// an engine wants, and the only way a browser allows). The stats then list the passes
-    /// with `ms` = 0 and `timing` = `"off"`; counts that need a readback (epipolar's and
-    /// subsampled's GPU-classified pixels) are left out of `raymarched_samples` and `extra`.
+    Deferred,
+    /// The tools' mode on software adapters, whose timestamps mean nothing: every pass is
+    /// recorded into its own encoder, submitted and waited for, and timed by synchronised wall
+    /// clock; counters are read back at once. `encode` then submits (one submit per pass) and
+    /// waits: never use it in a frame loop. Opt-in only.
+    WallClock,
+    /// Nothing measured: the passes are listed with 0 ms and `timing` = `"off"`, and the
+    /// GPU-only counts are left out of `raymarched_samples` and `extra`.
     Off,
 }
 
-/// An adapter, device and queue, and what they can do.
+/// A device and queue — the caller's own ([`GpuContext::from_device`]), or one this library
+/// opened for a tool ([`GpuContext::new`], [`GpuContext::from_adapter`]) — and what they can do.
+/// Cloning it clones the handles (wgpu's device and queue are reference-counted).
+#[derive(Clone)]
 pub struct GpuContext {
-    /// The adapter.
-    pub adapter: wgpu::Adapter,
+    /// The adapter, when this library opened the device (`None` for the caller's device).
+    pub adapter: Option<wgpu::Adapter>,
     /// The device.
     pub device: wgpu::Device,
     /// The queue.
@@ -34,17 +39,17 @@ pub struct GpuContext {
     /// Adapter information (name, backend, driver).
     pub info: wgpu::AdapterInfo,
     /// True for a software rasterizer (lavapipe, WARP, SwiftShader): its timestamp queries are
-    /// not meaningful, so passes are timed by synchronised wall clock.
+    /// not meaningful, so tools time passes by synchronised wall clock
+    /// ([`StatsMode::WallClock`]).
     pub software: bool,
-    /// True when passes are timed with timestamp queries.
+    /// True when the device can time passes with timestamp queries (it has `TIMESTAMP_QUERY`
+    /// and is not a software adapter).
     pub timestamps: bool,
-    /// Whether techniques wait for the GPU to report statistics; default
-    /// [`StatsMode::Measured`]. Set [`StatsMode::Off`] to render without synchronising.
-    pub stats: StatsMode,
     /// The first error wgpu reported outside any error scope, or the device-lost reason: set
     /// by the handlers [`GpuContext::from_adapter`] installs (wgpu's default handler panics),
-    /// turned into an [`Error::Gpu`] by [`GpuContext::wait`].
-    fault: std::sync::Arc<std::sync::Mutex<Option<String>>>,
+    /// turned into an [`Error::Gpu`] by [`GpuContext::wait`]. `None` on the caller's device,
+    /// whose handlers stay the caller's.
+    fault: Option<std::sync::Arc<std::sync::Mutex<Option<String>>>>,
 }
 
 impl std::fmt::Debug for GpuContext {
@@ -101,7 +106,6 @@ impl GpuContext {
                     power_preference: wgpu::PowerPreference::HighPerformance,
                     force_fallback_adapter: false,
                     compatible_surface: None,
-                    apply_limit_buckets: false,
                 })
                 .await
             {
@@ -120,10 +124,6 @@ impl GpuContext {
 
     /// [`GpuContext::from_adapter`] as a future.
     pub async fn from_adapter_async(adapter: wgpu::Adapter) -> Result<Self, Error> {
-        let info = adapter.get_info();
-        let software = info.device_type == wgpu::DeviceType::Cpu
-            || info.name.to_lowercase().contains("llvmpipe")
-            || info.name.to_lowercase().contains("swiftshader");
         let wanted = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::DEPTH_CLIP_CONTROL;
         let features = adapter.features() & wanted;
         let (device, queue) = adapter
@@ -135,7 +135,6 @@ impl GpuContext {
             })
             .await
             .map_err(|e| Error::Device(e.to_string()))?;
-        let timestamps = !software && features.contains(wgpu::Features::TIMESTAMP_QUERY);
         let fault = std::sync::Arc::new(std::sync::Mutex::new(None::<String>));
         let record = |slot: &std::sync::Arc<std::sync::Mutex<Option<String>>>, message: String| {
             if let Ok(mut f) = slot.lock()
@@ -149,14 +148,30 @@ impl GpuContext {
         device.set_device_lost_callback(move |reason, message| {
             record(&on_lost, format!("device lost ({reason:?}): {message}"))
         });
-        Ok(Self { adapter, device, queue, info, software, timestamps, stats: StatsMode::Measured, fault })
+        let mut gpu = Self::from_device(&device, &queue);
+        gpu.adapter = Some(adapter);
+        gpu.fault = Some(fault);
+        Ok(gpu)
+    }
+
+    /// Wraps the caller's own device and queue (an engine's: the effect then reads the
+    /// engine's depth and shadow textures directly). Nothing is created or changed on the
+    /// device: its error handlers stay the caller's. The optional features it has — see
+    /// [`crate::Scattering`] for which ones a technique uses — choose code paths, never results.
+    pub fn from_device(device: &wgpu::Device, queue: &wgpu::Queue) -> Self {
+        let info = device.adapter_info();
+        let name = info.name.to_lowercase();
+        let software =
+            info.device_type == wgpu::DeviceType::Cpu || name.contains("llvmpipe") || name.contains("swiftshader");
+        let timestamps = !software && device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        Self { adapter: None, device: device.clone(), queue: queue.clone(), info, software, timestamps, fault: None }
     }
 
     /// Waits for the GPU ([`wait_idle`]), then reports a lost device or an error wgpu raised
     /// outside an error scope since the last call, as [`Error::Gpu`].
     pub fn wait(&self) -> Result<(), Error> {
         let waited = wait_idle(&self.device);
-        let fault = self.fault.lock().ok().and_then(|mut f| f.take());
+        let fault = self.fault.as_ref().and_then(|f| f.lock().ok().and_then(|mut f| f.take()));
         match fault {
             Some(message) => Err(Error::Gpu { context: "the last GPU work".into(), message }),
             None => waited,
@@ -287,9 +302,9 @@ impl GpuContext {
         self.wait()?;
         // Unmap only what was mapped: a failed map leaves the buffer unmapped.
         rx.try_recv().map_err(|e| err(format!("map_async did not complete: {e}")))?.map_err(|e| err(e.to_string()))?;
-        let value = slice.get_mapped_range().map(|data| f(&data));
+        let value = f(&slice.get_mapped_range());
         buffer.unmap();
-        value.map_err(|e| err(e.to_string()))
+        Ok(value)
     }
 
     /// Reads back an `Rgba32Float` texture as an [`crate::Image`].
@@ -395,171 +410,7 @@ pub fn storage_texture(
     })
 }
 
-/// Timestamp slots for one pass, handed to the pass descriptor.
-#[derive(Clone, Copy)]
-pub struct TimestampSlot<'a> {
-    set: &'a wgpu::QuerySet,
-    index: u32,
-}
-
-impl<'a> TimestampSlot<'a> {
-    /// For a compute pass descriptor.
-    pub fn compute(self) -> wgpu::ComputePassTimestampWrites<'a> {
-        wgpu::ComputePassTimestampWrites {
-            query_set: self.set,
-            beginning_of_pass_write_index: Some(self.index),
-            end_of_pass_write_index: Some(self.index + 1),
-        }
-    }
-    /// For a render pass descriptor.
-    pub fn render(self) -> wgpu::RenderPassTimestampWrites<'a> {
-        wgpu::RenderPassTimestampWrites {
-            query_set: self.set,
-            beginning_of_pass_write_index: Some(self.index),
-            end_of_pass_write_index: Some(self.index + 1),
-        }
-    }
-}
-
-/// Begins a compute pass labelled `label` that writes `ts`'s timestamps, if any.
-pub fn compute_pass<'e>(
-    enc: &'e mut wgpu::CommandEncoder,
-    label: &str,
-    ts: Option<TimestampSlot<'_>>,
-) -> wgpu::ComputePass<'e> {
-    enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-        label: Some(label),
-        timestamp_writes: ts.map(|t| t.compute()),
-    })
-}
-
-/// Times passes. On hardware adapters with timestamp queries each pass writes begin/end
-/// timestamps; elsewhere (software adapters) each pass is submitted on its own and waited for,
-/// and its synchronised wall-clock time is recorded. With [`StatsMode::Off`] it only submits.
-pub struct PassTimer {
-    off: bool,
-    query_set: Option<wgpu::QuerySet>,
-    names: Vec<String>,
-    wall_ms: Vec<f64>,
-    capacity: u32,
-}
-
-impl PassTimer {
-    /// A timer for up to `max_passes` passes.
-    pub fn new(gpu: &GpuContext, max_passes: u32) -> Self {
-        let off = gpu.stats == StatsMode::Off;
-        let query_set = (gpu.timestamps && !off).then(|| {
-            gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("pass timestamps"),
-                ty: wgpu::QueryType::Timestamp,
-                count: max_passes * 2,
-            })
-        });
-        Self { off, query_set, names: Vec::new(), wall_ms: Vec::new(), capacity: max_passes }
-    }
-
-    /// "timestamp-queries", "wall-clock" or "off".
-    pub fn mode(&self) -> &'static str {
-        match (self.off, &self.query_set) {
-            (true, _) => "off",
-            (false, Some(_)) => "timestamp-queries",
-            (false, None) => "wall-clock",
-        }
-    }
-
-    /// False with [`StatsMode::Off`]: the frame's counters should not be read back either.
-    pub fn measuring(&self) -> bool {
-        !self.off
-    }
-
-    /// Records one pass: `record` gets a fresh encoder (inside a debug group named `name`) and
-    /// the timestamp slot to put in its pass descriptor; the encoder is submitted afterwards.
-    pub fn pass(
-        &mut self,
-        gpu: &GpuContext,
-        name: &str,
-        record: impl FnOnce(&mut wgpu::CommandEncoder, Option<TimestampSlot<'_>>),
-    ) -> Result<(), Error> {
-        let index = self.names.len() as u32;
-        let slot = match &self.query_set {
-            Some(set) if index < self.capacity => Some(TimestampSlot { set, index: index * 2 }),
-            _ => None,
-        };
-        // No clock with StatsMode::Off: std's Instant panics on wasm32.
-        let start = (!self.off).then(Instant::now);
-        gpu.scoped(name, || {
-            let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(name) });
-            enc.push_debug_group(name);
-            record(&mut enc, slot);
-            enc.pop_debug_group();
-            gpu.queue.submit([enc.finish()]);
-        })?;
-        if self.query_set.is_none() && !self.off {
-            gpu.wait()?;
-        }
-        self.wall_ms.push(start.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3));
-        self.names.push(name.to_string());
-        Ok(())
-    }
-
-    /// Records one pass named `name` that is a single compute dispatch: `pipeline` with
-    /// `bind_group` at group 0 and `groups` workgroups, in a compute pass labelled `label`.
-    pub fn dispatch(
-        &mut self,
-        gpu: &GpuContext,
-        name: &str,
-        label: &str,
-        pipeline: &wgpu::ComputePipeline,
-        bind_group: &wgpu::BindGroup,
-        groups: [u32; 3],
-    ) -> Result<(), Error> {
-        self.pass(gpu, name, |enc, ts| {
-            let mut pass = compute_pass(enc, label, ts);
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, bind_group, &[]);
-            pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
-        })
-    }
-
-    /// Waits for the passes and returns their times (with [`StatsMode::Off`]: their names, 0 ms,
-    /// without waiting).
-    pub fn finish(self, gpu: &GpuContext) -> Result<Vec<PassTime>, Error> {
-        let Some(set) = &self.query_set else {
-            return Ok(self.names.into_iter().zip(self.wall_ms).map(|(name, ms)| PassTime { name, ms }).collect());
-        };
-        let n = (self.names.len() as u32).min(self.capacity) * 2;
-        let resolve = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("timestamps"),
-            size: (n.max(2) * 8) as u64,
-            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let read = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("timestamps readback"),
-            size: (n.max(2) * 8) as u64,
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        enc.resolve_query_set(set, 0..n, &resolve, 0);
-        enc.copy_buffer_to_buffer(&resolve, 0, &read, 0, (n * 8) as u64);
-        gpu.queue.submit([enc.finish()]);
-        let period = gpu.queue.get_timestamp_period() as f64;
-        let ticks: Vec<u64> = gpu.read_mapped(&read, "reading timestamps", |d| bytemuck::cast_slice(d).to_vec())?;
-        Ok(self
-            .names
-            .into_iter()
-            .enumerate()
-            .map(|(i, name)| {
-                let ms = match (ticks.get(2 * i), ticks.get(2 * i + 1)) {
-                    (Some(a), Some(b)) => b.saturating_sub(*a) as f64 * period * 1e-6,
-                    _ => self.wall_ms[i],
-                };
-                PassTime { name, ms }
-            })
-            .collect())
-    }
-}
+pub use crate::record::{Recorder, TimestampSlot, compute_pass};
 
 /// The GPU adapter for tests: `Some` when one exists; `None` with a printed reason when none
 /// does — unless `CREPUSCULAR_REQUIRE_GPU=1`, in which case a missing adapter fails the test.
@@ -638,6 +489,7 @@ impl UploadedFrame {
             depth: &self.depth,
             shadow_map: &self.shadow_map,
             spot_texture: self.spot_texture.as_ref(),
+            rectified_shadow_map: None,
         }
     }
 }

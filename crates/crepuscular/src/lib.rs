@@ -7,6 +7,7 @@
 //! shadow map) through one boundary, [`frame`], and writes an in-scattering texture.
 #![deny(missing_docs)]
 
+pub mod composite;
 pub mod error;
 pub mod frame;
 pub mod gpu;
@@ -14,6 +15,8 @@ pub mod image;
 pub mod integrand;
 pub mod march;
 pub mod model;
+pub mod record;
+pub mod scattering;
 pub mod shaders;
 pub mod shadow;
 pub mod stats;
@@ -22,9 +25,12 @@ pub mod techniques;
 pub mod testing;
 pub mod tonemap;
 
+pub use composite::{Composite, CompositeInputs, CompositeTarget};
 pub use error::Error;
 pub use frame::{CpuFrame, FrameUniforms, GpuFrame};
 pub use gpu::{GpuContext, StatsMode};
 pub use image::Image;
 pub use model::{Camera, Light, Medium, Phase, RgbTexture};
+pub use scattering::Scattering;
 pub use shadow::{Bounds, ShadowMap, ShadowProjection, ShadowSettings};
+pub use techniques::{AnyGpuTechnique, TechniqueSettings};

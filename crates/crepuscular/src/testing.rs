@@ -1,8 +1,13 @@
 //! Fixtures shared by the test suites of this workspace (not part of the supported API): the
-//! occluder-free "wall frame" and its closed form, DESIGN.md §4 rung 2.
+//! occluder-free "wall frame" and its closed form, DESIGN.md §4 rung 2, and a technique's GPU
+//! frame as the tests run it.
 
 use crate::frame::FrameDesc;
-use crate::{Bounds, Camera, Light, Medium, Phase, ShadowMap, ShadowProjection};
+use crate::stats::TechniqueStats;
+use crate::{
+    Bounds, Camera, Error, GpuContext, GpuFrame, Light, Medium, Phase, Scattering, ShadowMap, ShadowProjection,
+    StatsMode, TechniqueSettings,
+};
 use glam::{DVec3, Vec3};
 
 /// Distance of the wall from the camera, metres.
@@ -81,4 +86,24 @@ pub fn wall_media() -> Vec<Medium> {
             phase: Phase::HenyeyGreenstein { g: -0.3 },
         },
     ]
+}
+
+/// `settings`' technique on `gpu` as the tests run it: [`StatsMode::WallClock`], so every frame
+/// of [`Scattering::render`] has its passes timed and the GPU's counters read at once (complete
+/// stats on any adapter, software ones included).
+pub fn gpu_scattering(gpu: &GpuContext, settings: TechniqueSettings) -> Result<Scattering, Error> {
+    Scattering::from_gpu(gpu, settings)?.with_stats(StatsMode::WallClock)
+}
+
+/// One frame of `settings`' technique on `gpu` ([`gpu_scattering`]) into `output`, waited for:
+/// the [`Scattering`] (for the technique's intermediates and debug readbacks) and the stats.
+pub fn gpu_render(
+    gpu: &GpuContext,
+    settings: TechniqueSettings,
+    frame: &GpuFrame,
+    output: &wgpu::TextureView,
+) -> Result<(Scattering, TechniqueStats), Error> {
+    let mut scattering = gpu_scattering(gpu, settings)?;
+    let stats = scattering.render(frame, output)?;
+    Ok((scattering, stats))
 }

@@ -9,7 +9,7 @@ use crepuscular::gpu::test_gpu;
 use crepuscular::techniques::brute_force::{self, BruteForceSettings};
 use crepuscular::techniques::reference::{self, ReferenceSettings};
 use crepuscular::testing::{WALL_DISTANCE, wall_closed_form, wall_frame};
-use crepuscular::{CpuFrame, Image, Light, Medium, Phase, ShadowMap};
+use crepuscular::{CpuFrame, Image, Light, Medium, ShadowMap};
 use glam::{DVec3, Vec3};
 
 const W: u32 = 64;

@@ -2,15 +2,16 @@
 #![allow(dead_code)]
 
 use crepuscular::gpu::{GpuContext, UploadedFrame};
-use crepuscular::techniques::brute_force::{BruteForce, BruteForceSettings};
-use crepuscular::{CpuFrame, Image};
+use crepuscular::techniques::brute_force::BruteForceSettings;
+use crepuscular::testing::gpu_render;
+use crepuscular::{CpuFrame, Image, TechniqueSettings};
 
 /// Runs `brute-force` on the GPU over exactly the CPU frame's depth and shadow map.
 pub fn gpu_brute_force(gpu: &GpuContext, frame: &CpuFrame, settings: &BruteForceSettings) -> Image {
     let up = UploadedFrame::new(gpu, frame).expect("upload");
     let out = gpu.create_output_texture(frame.desc.width, frame.desc.height);
-    let mut bf = BruteForce::new(gpu, settings.clone()).expect("pipeline");
-    bf.render(gpu, &up.frame(frame.desc), &out.create_view(&Default::default())).expect("render");
+    let settings = TechniqueSettings::BruteForce(settings.clone());
+    gpu_render(gpu, settings, &up.frame(frame.desc), &out.create_view(&Default::default())).expect("render");
     gpu.read_image(&out).expect("readback")
 }
 

@@ -1,6 +1,12 @@
 //! The techniques, one folder each: settings, GPU passes with their WGSL beside them, and
 //! `cpu.rs`, the CPU mirror with the same sample placement and function names.
 
+use crate::error::Error;
+use crate::frame::{CpuFrame, FrameDesc, GpuFrame};
+use crate::gpu::{GpuContext, Recorder};
+use crate::image::Image;
+use crate::stats::TechniqueStats;
+
 pub mod brute_force;
 pub mod epipolar;
 pub mod interleaved;
@@ -25,51 +31,235 @@ pub struct TechniqueInfo {
     pub cpu: bool,
 }
 
-/// Every technique, in the order the tool lists them.
-pub const TECHNIQUES: &[TechniqueInfo] = &[
-    TechniqueInfo {
-        name: "brute-force",
-        summary: "per-pixel ray marching through the shadow map, N steps per pixel (GPU + CPU mirror)",
-        paper: "Tóth & Umenhoffer 2009, §3–4, eq. 1",
-        gpu: true,
-        cpu: true,
-    },
-    TechniqueInfo {
-        name: "interleaved",
-        summary: "M×M interleaved sampling: each pixel marches N/M² of the N steps, a separable (optionally depth-aware) block sum adds them (GPU + CPU mirror)",
-        paper: "Tóth & Umenhoffer 2009, §4.1",
-        gpu: true,
-        cpu: true,
-    },
-    TechniqueInfo {
-        name: "subsampled",
-        summary: "ray marching on a reduced grid, joint-bilateral upsampling by depth, silhouette pixels re-marched at full resolution (GPU + CPU mirror)",
-        paper: "the baseline of Engelhardt & Dachsbacher 2010 §6 / Fig. 9",
-        gpu: true,
-        cpu: true,
-    },
-    TechniqueInfo {
-        name: "epipolar",
-        summary: "epipolar sampling: ray-march samples on epipolar lines refined at depth discontinuities, interpolated along and bilaterally between the lines (GPU: lines, refine, indirect march over a compacted list, interpolate, upsample; CPU mirror)",
-        paper: "Engelhardt & Dachsbacher 2010, §4–5",
-        gpu: true,
-        cpu: true,
-    },
-    TechniqueInfo {
-        name: "prefiltered",
-        summary: "filter-based single scattering: Fourier-expanded visibility on a rectified shadow map, prefix-summed per row with transmittance weights, one filtered lookup and dot product per pixel (GPU: rectify, prefilter, evaluate; CPU mirror)",
-        paper: "Klehm, Seidel & Eisemann 2014, §3–5",
-        gpu: true,
-        cpu: true,
-    },
-    TechniqueInfo {
-        name: "reference",
-        summary: "ground truth: f64, many stratified steps per pixel over the same shadow map, with a convergence estimate (CPU only)",
-        paper: "DESIGN.md §1 (the integral itself)",
-        gpu: false,
-        cpu: true,
-    },
-];
+/// What a technique's folder provides to the registry ([`registry!`]): its description, its
+/// settings' checks, its CPU mirror and (for GPU techniques) its GPU side. Implemented on the
+/// technique's settings type.
+pub trait Technique: Clone + std::fmt::Debug + Default + serde::Serialize + serde::de::DeserializeOwned {
+    /// Name, summary and paper.
+    const INFO: TechniqueInfo;
+    /// Checks the ranges; the error names the setting and value.
+    fn validate(&self) -> Result<(), Error>;
+    /// The CPU implementation of the technique on a frame; `rectified` as in
+    /// [`TechniqueSettings::render_cpu`].
+    fn render_cpu(
+        &self,
+        frame: &CpuFrame,
+        rectified: Option<&[f32]>,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(Image, TechniqueStats), Error>;
+    /// The host raster the technique wants for this frame (only `prefiltered` has one).
+    fn raster_request(&self, _desc: &FrameDesc) -> Option<prefiltered::RectifiedRaster> {
+        None
+    }
+}
+
+/// A technique's GPU side, built once on a device and recorded every frame.
+pub trait GpuTechnique: Sized {
+    /// Its settings.
+    type Settings: Technique;
+    /// Builds pipelines and size-independent buffers.
+    fn new(gpu: &GpuContext, settings: Self::Settings) -> Result<Self, Error>;
+    /// The settings used from the next frame on.
+    fn settings_mut(&mut self) -> &mut Self::Settings;
+    /// The current settings.
+    fn settings(&self) -> &Self::Settings;
+    /// Records one frame through `rec` (pass times and counters are filled in by
+    /// [`crate::Scattering`]).
+    fn encode(
+        &mut self,
+        gpu: &GpuContext,
+        rec: &mut Recorder,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<TechniqueStats, Error>;
+    /// Bytes of GPU memory held.
+    fn gpu_memory_bytes(&self) -> u64;
+    /// How many times the frame's bind groups were built (on the first frame, a resize, a
+    /// settings change that reallocates, or other input textures; not per frame).
+    fn bind_group_builds(&self) -> u64;
+}
+
+/// Generates the technique registry from one line per technique: [`TechniqueSettings`] (a
+/// technique and its settings), [`AnyGpuTechnique`] (its built GPU side) and [`TECHNIQUES`].
+macro_rules! registry {
+    (gpu: [$($variant:ident($module:ident::$settings:ident) => $gpu:ident),* $(,)?],
+     cpu: [$($cvariant:ident($cmodule:ident::$csettings:ident)),* $(,)?]) => {
+        /// A technique and its settings: what a scene file's `[render.<name>]` table, a
+        /// `--set key=value` and [`crate::Scattering::new`] take.
+        #[derive(Clone, Debug, PartialEq, serde::Serialize)]
+        #[serde(tag = "technique", rename_all = "kebab-case")]
+        pub enum TechniqueSettings {
+            $(#[doc = concat!("`", stringify!($module), "`: [`", stringify!($module), "::", stringify!($settings), "`].")]
+              $variant($module::$settings),)*
+            $(#[doc = concat!("`", stringify!($cmodule), "` (CPU only).")]
+              $cvariant($cmodule::$csettings),)*
+        }
+
+        /// Every technique, in the order the tool lists them.
+        pub const TECHNIQUES: &[TechniqueInfo] = &[
+            $(<$module::$settings as Technique>::INFO,)* $(<$cmodule::$csettings as Technique>::INFO,)*
+        ];
+
+        impl TechniqueSettings {
+            /// The technique's name (`brute-force`, …).
+            pub fn name(&self) -> &'static str {
+                match self {
+                    $(Self::$variant(_) => <$module::$settings as Technique>::INFO.name,)*
+                    $(Self::$cvariant(_) => <$cmodule::$csettings as Technique>::INFO.name,)*
+                }
+            }
+
+            /// The technique called `name` at its default settings; an error lists the names.
+            pub fn named(name: &str) -> Result<Self, Error> {
+                $(if name == <$module::$settings as Technique>::INFO.name {
+                    return Ok(Self::$variant(Default::default()));
+                })*
+                $(if name == <$cmodule::$csettings as Technique>::INFO.name {
+                    return Ok(Self::$cvariant(Default::default()));
+                })*
+                Err(unknown(name))
+            }
+
+            /// The technique called `name` with its settings read from `d` (a scene file's table:
+            /// every field optional, unknown fields refused). `Ok(None)`: no such technique.
+            pub fn deserialize_named<'de, D: serde::Deserializer<'de>>(
+                name: &str,
+                d: D,
+            ) -> Result<Option<Self>, D::Error> {
+                use serde::Deserialize;
+                $(if name == <$module::$settings as Technique>::INFO.name {
+                    return $module::$settings::deserialize(d).map(|s| Some(Self::$variant(s)));
+                })*
+                $(if name == <$cmodule::$csettings as Technique>::INFO.name {
+                    return $cmodule::$csettings::deserialize(d).map(|s| Some(Self::$cvariant(s)));
+                })*
+                Ok(None)
+            }
+
+            /// Checks the ranges; the error names the setting and value.
+            pub fn validate(&self) -> Result<(), Error> {
+                match self {
+                    $(Self::$variant(s) => s.validate(),)*
+                    $(Self::$cvariant(s) => s.validate(),)*
+                }
+            }
+
+            /// True for the techniques with a GPU side.
+            pub fn has_gpu(&self) -> bool {
+                !matches!(self, $(Self::$cvariant(_))|*)
+            }
+
+            /// The host raster this frame would use (see [`crate::Scattering::raster_request`]).
+            pub fn raster_request(&self, desc: &FrameDesc) -> Option<prefiltered::RectifiedRaster> {
+                match self {
+                    $(Self::$variant(s) => s.raster_request(desc),)*
+                    $(Self::$cvariant(s) => s.raster_request(desc),)*
+                }
+            }
+
+            pub(crate) fn render_cpu_unchecked(
+                &self,
+                frame: &CpuFrame,
+                rectified: Option<&[f32]>,
+                progress: &(dyn Fn(u64, u64) + Sync),
+            ) -> Result<(Image, TechniqueStats), Error> {
+                match self {
+                    $(Self::$variant(s) => s.render_cpu(frame, rectified, progress),)*
+                    $(Self::$cvariant(s) => s.render_cpu(frame, rectified, progress),)*
+                }
+            }
+        }
+
+        /// A technique's built GPU side (inside a [`crate::Scattering`]); match on it for a
+        /// technique's own debug readbacks and intermediate textures.
+        pub enum AnyGpuTechnique {
+            $(#[doc = concat!("[`", stringify!($module), "::", stringify!($gpu), "`].")]
+              $variant($module::$gpu),)*
+        }
+
+        impl AnyGpuTechnique {
+            pub(crate) fn new(gpu: &GpuContext, settings: TechniqueSettings) -> Result<Self, Error> {
+                match settings {
+                    $(TechniqueSettings::$variant(s) => Ok(Self::$variant($module::$gpu::new(gpu, s)?)),)*
+                    other => Err(Error::invalid(
+                        "technique",
+                        other.name(),
+                        "runs on the CPU only (TechniqueSettings::render_cpu)",
+                    )),
+                }
+            }
+
+            /// The technique's name.
+            pub fn name(&self) -> &'static str {
+                match self {
+                    $(Self::$variant(_) => <$module::$settings as Technique>::INFO.name,)*
+                }
+            }
+
+            /// Its current settings.
+            pub fn settings(&self) -> TechniqueSettings {
+                match self {
+                    $(Self::$variant(t) => TechniqueSettings::$variant(t.settings().clone()),)*
+                }
+            }
+
+            pub(crate) fn update(&mut self, settings: &TechniqueSettings) -> bool {
+                match (self, settings) {
+                    $((Self::$variant(t), TechniqueSettings::$variant(s)) => *t.settings_mut() = s.clone(),)*
+                    _ => return false,
+                }
+                true
+            }
+
+            pub(crate) fn encode(
+                &mut self,
+                gpu: &GpuContext,
+                rec: &mut Recorder,
+                frame: &GpuFrame,
+                output: &wgpu::TextureView,
+            ) -> Result<TechniqueStats, Error> {
+                match self {
+                    $(Self::$variant(t) => t.encode(gpu, rec, frame, output),)*
+                }
+            }
+
+            /// Bytes of GPU memory held.
+            pub fn gpu_memory_bytes(&self) -> u64 {
+                match self {
+                    $(Self::$variant(t) => t.gpu_memory_bytes(),)*
+                }
+            }
+
+            /// How many times the frame's bind groups were built (see
+            /// [`GpuTechnique::bind_group_builds`]).
+            pub fn bind_group_builds(&self) -> u64 {
+                match self {
+                    $(Self::$variant(t) => t.bind_group_builds(),)*
+                }
+            }
+        }
+    };
+}
+
+fn unknown(name: &str) -> Error {
+    let known: Vec<_> = TECHNIQUES.iter().map(|t| t.name).collect();
+    Error::invalid("technique", name, format!("unknown (known: {})", known.join(", ")))
+}
+
+// The registry: one line per technique (its folder implements `Technique` on its settings and,
+// for the GPU techniques, `GpuTechnique` on its GPU side).
+registry! {
+    gpu: [
+        BruteForce(brute_force::BruteForceSettings) => BruteForce,
+        Interleaved(interleaved::InterleavedSettings) => Interleaved,
+        Subsampled(subsampled::SubsampledSettings) => Subsampled,
+        Epipolar(epipolar::EpipolarSettings) => Epipolar,
+        Prefiltered(prefiltered::PrefilteredSettings) => Prefiltered,
+    ],
+    cpu: [
+        Reference(reference::ReferenceSettings),
+    ]
+}
 
 /// Looks a technique up by name.
 pub fn find(name: &str) -> Option<&'static TechniqueInfo> {

@@ -140,3 +140,63 @@ pub fn uniform_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Bu
         mapped_at_creation: false,
     })
 }
+
+/// One resource a bind group refers to, compared by identity (or a choice that selects one).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Bound {
+    /// A texture view.
+    View(wgpu::TextureView),
+    /// A buffer.
+    Buffer(wgpu::Buffer),
+    /// A choice between resources (a sampler, a table or none).
+    Choice(u32),
+}
+
+/// The resources of a frame's bind groups that may change between frames: the frame's views
+/// (depth, shadow map, spot texture, host raster) and the output. A technique adds its own
+/// size- or settings-dependent resources.
+pub fn frame_key(frame: &GpuFrame, output: &wgpu::TextureView) -> Vec<Bound> {
+    let mut key = vec![Bound::View(frame.depth.clone()), Bound::View(frame.shadow_map.clone())];
+    key.push(frame.spot_texture.map_or(Bound::Choice(0), |v| Bound::View(v.clone())));
+    key.push(frame.rectified_shadow_map.map_or(Bound::Choice(0), |v| Bound::View(v.clone())));
+    key.push(Bound::View(output.clone()));
+    key
+}
+
+/// A technique's bind groups, rebuilt only when a resource they bind changed (a resize, a
+/// settings change that reallocates, other textures from the caller) — not every frame.
+pub struct BindCache<T> {
+    key: Vec<Bound>,
+    value: Option<T>,
+    builds: u64,
+}
+
+impl<T> Default for BindCache<T> {
+    fn default() -> Self {
+        Self { key: Vec::new(), value: None, builds: 0 }
+    }
+}
+
+impl<T> BindCache<T> {
+    /// True when the cached bind groups were built for exactly these resources.
+    pub fn is_current(&self, key: &[Bound]) -> bool {
+        self.value.is_some() && self.key == key
+    }
+
+    /// Keeps `value`, built for `key`.
+    pub fn store(&mut self, key: Vec<Bound>, value: T) {
+        self.key = key;
+        self.value = Some(value);
+        self.builds += 1;
+    }
+
+    /// The cached bind groups (call after [`BindCache::store`] or a true [`BindCache::is_current`]).
+    pub fn value(&self) -> &T {
+        self.value.as_ref().expect("bind groups built before use")
+    }
+
+    /// How many times the bind groups were built.
+    pub fn builds(&self) -> u64 {
+        self.builds
+    }
+}

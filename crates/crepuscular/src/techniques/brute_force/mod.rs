@@ -11,7 +11,7 @@ pub mod cpu;
 
 use crate::error::Error;
 use crate::frame::GpuFrame;
-use crate::gpu::{GpuContext, PassTimer};
+use crate::gpu::{GpuContext, Recorder};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
 use crate::stats::TechniqueStats;
 use crate::techniques::pass;
@@ -111,13 +111,14 @@ impl From<&BruteForceSettings> for MarchParams {
 
 /// The GPU side of `brute-force`: its pipeline and uniform buffers, built once and reused.
 pub struct BruteForce {
-    /// Current settings; changes apply on the next [`BruteForce::render`].
+    /// Current settings; changes apply on the next [`BruteForce::encode`].
     pub settings: BruteForceSettings,
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     frame_buffer: wgpu::Buffer,
     params_buffer: wgpu::Buffer,
     white: wgpu::TextureView,
+    binds: pass::BindCache<wgpu::BindGroup>,
 }
 
 impl BruteForce {
@@ -132,7 +133,7 @@ impl BruteForce {
                 pass::uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64);
             let params_buffer = pass::uniform_buffer(device, "march params", std::mem::size_of::<MarchParams>() as u64);
             let white = gpu.upload_rgb_texture(None).create_view(&Default::default());
-            Self { settings, pipeline, layout, frame_buffer, params_buffer, white }
+            Self { settings, pipeline, layout, frame_buffer, params_buffer, white, binds: Default::default() }
         })
     }
 
@@ -141,43 +142,96 @@ impl BruteForce {
         self.frame_buffer.size() + self.params_buffer.size() + 16
     }
 
-    /// Renders the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
-    /// the frame's size). Pass list: `march`.
-    pub fn render(
+    /// Records the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
+    /// the frame's size) through `rec`. Pass list: `march`.
+    pub fn encode(
         &mut self,
         gpu: &GpuContext,
+        rec: &mut Recorder,
         frame: &GpuFrame,
         output: &wgpu::TextureView,
     ) -> Result<TechniqueStats, Error> {
         self.settings.validate()?;
         let desc = frame.desc;
-        gpu.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&desc.uniforms()));
-        gpu.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&MarchParams::from(&self.settings)));
-        let bind = gpu.scoped("binding the brute-force inputs", || {
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("brute-force"),
-                layout: &self.layout,
-                entries: &pass::frame_pass_bindings(
-                    &self.frame_buffer,
-                    &self.params_buffer,
-                    frame,
-                    &self.white,
-                    output,
-                ),
-            })
-        })?;
-        let mut timer = PassTimer::new(gpu, 1);
+        rec.write_buffer(&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()));
+        rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&MarchParams::from(&self.settings)));
+        let key = pass::frame_key(frame, output);
+        if !self.binds.is_current(&key) {
+            let bind = gpu.scoped("binding the brute-force inputs", || {
+                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("brute-force"),
+                    layout: &self.layout,
+                    entries: &pass::frame_pass_bindings(
+                        &self.frame_buffer,
+                        &self.params_buffer,
+                        frame,
+                        &self.white,
+                        output,
+                    ),
+                })
+            })?;
+            self.binds.store(key, bind);
+        }
+        let bind = self.binds.value();
         let groups = [desc.width.div_ceil(8), desc.height.div_ceil(8), 1];
-        timer.dispatch(gpu, "march", "brute-force march", &self.pipeline, &bind, groups)?;
-        let mode = timer.mode().to_string();
+        rec.dispatch("march", "brute-force march", &self.pipeline, bind, groups)?;
         Ok(TechniqueStats {
             technique: "brute-force".into(),
             backend: "gpu".into(),
-            timing: mode,
-            passes: timer.finish(gpu)?,
+            timing: String::new(),
+            passes: Vec::new(),
             raymarched_samples: desc.width as u64 * desc.height as u64 * self.settings.steps as u64,
             gpu_memory_bytes: self.gpu_memory_bytes(),
             extra: Default::default(),
         })
+    }
+}
+
+impl crate::techniques::Technique for BruteForceSettings {
+    const INFO: crate::techniques::TechniqueInfo = crate::techniques::TechniqueInfo {
+        name: "brute-force",
+        summary: "per-pixel ray marching through the shadow map, N steps per pixel (GPU + CPU mirror)",
+        paper: "Tóth & Umenhoffer 2009, §3–4, eq. 1",
+        gpu: true,
+        cpu: true,
+    };
+    fn validate(&self) -> Result<(), Error> {
+        BruteForceSettings::validate(self)
+    }
+    fn render_cpu(
+        &self,
+        frame: &crate::CpuFrame,
+        _rectified: Option<&[f32]>,
+        _progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(crate::Image, TechniqueStats), Error> {
+        cpu::march(frame, self)
+    }
+}
+
+impl crate::techniques::GpuTechnique for BruteForce {
+    type Settings = BruteForceSettings;
+    fn new(gpu: &GpuContext, settings: BruteForceSettings) -> Result<Self, Error> {
+        BruteForce::new(gpu, settings)
+    }
+    fn settings_mut(&mut self) -> &mut BruteForceSettings {
+        &mut self.settings
+    }
+    fn settings(&self) -> &BruteForceSettings {
+        &self.settings
+    }
+    fn encode(
+        &mut self,
+        gpu: &GpuContext,
+        rec: &mut Recorder,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<TechniqueStats, Error> {
+        BruteForce::encode(self, gpu, rec, frame, output)
+    }
+    fn gpu_memory_bytes(&self) -> u64 {
+        BruteForce::gpu_memory_bytes(self)
+    }
+    fn bind_group_builds(&self) -> u64 {
+        self.binds.builds()
     }
 }

@@ -842,7 +842,7 @@ pub fn render_with_debug(
         passes,
         raymarched_samples: (marched_n + remarched) * p.steps as u64,
         gpu_memory_bytes: 0,
-        extra: stats_extra(&p, desc, valid, marched_n, remarched, refined.sample_texels),
+        extra: stats_extra(&p, (desc.width, desc.height), valid, marched_n, remarched, refined.sample_texels),
     };
     let interp = refined.interp;
     Ok((img, stats, EpipolarDebug { params: p, lines, coords, interp, radiance }))

@@ -81,11 +81,11 @@ pub mod debug;
 
 use crate::error::Error;
 use crate::frame::{FrameDesc, GpuFrame};
-use crate::gpu::{GpuContext, PassTimer, compute_pass};
+use crate::gpu::{GpuContext, Recorder, compute_pass};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
 use crate::model::Light;
 use crate::stats::TechniqueStats;
-use crate::techniques::pass;
+use crate::techniques::pass::{self, Bound};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 pub use debug::{EpipolarDebug, classification_view, radiance_view};
@@ -646,13 +646,13 @@ impl EpipolarLine {
 /// `degenerate` (1 when the camera is at the light), `spot_prefilter_level`.
 pub(crate) fn stats_extra(
     params: &EpipolarParams,
-    desc: &FrameDesc,
+    (width, height): (u32, u32),
     valid_lines: u64,
     marched: u64,
     remarched: u64,
     sample_texels: u64,
 ) -> std::collections::BTreeMap<String, f64> {
-    let pixels = (desc.width as f64 * desc.height as f64).max(1.0);
+    let pixels = (width as f64 * height as f64).max(1.0);
     [
         ("slices", params.slices as f64),
         ("samples", params.samples as f64),
@@ -679,6 +679,8 @@ struct Sized {
     interp: wgpu::Texture,
     marched: wgpu::Texture,
     radiance: wgpu::Texture,
+    /// Views of coords, interp, marched, radiance (made once, so the bind groups stay valid).
+    views: [wgpu::TextureView; 4],
 }
 
 impl Sized {
@@ -706,12 +708,22 @@ pub struct Epipolar {
     frame_buffer: wgpu::Buffer,
     params_buffer: wgpu::Buffer,
     counters: wgpu::Buffer,
-    counters_readback: wgpu::Buffer,
     indirect: wgpu::Buffer,
     white: wgpu::TextureView,
     sized: Option<Sized>,
     prefiltered: Option<Prefiltered>,
     last_params: Option<EpipolarParams>,
+    binds: pass::BindCache<Binds>,
+}
+
+/// The bind groups of one frame's passes (`prefilter` only with a prefiltered spot texture).
+struct Binds {
+    prefilter: Option<wgpu::BindGroup>,
+    lines: wgpu::BindGroup,
+    refine: wgpu::BindGroup,
+    march: wgpu::BindGroup,
+    interpolate: wgpu::BindGroup,
+    upsample: wgpu::BindGroup,
 }
 
 struct Layouts {
@@ -855,12 +867,12 @@ impl Epipolar {
                     std::mem::size_of::<EpipolarParams>() as u64,
                 ),
                 counters: buf("epipolar counters", 16, U::STORAGE | U::COPY_DST | U::COPY_SRC),
-                counters_readback: buf("epipolar counters readback", 16, U::COPY_DST | U::MAP_READ),
                 indirect: buf("epipolar march dispatch", 12, U::STORAGE | U::INDIRECT),
                 white: gpu.upload_rgb_texture(None).create_view(&Default::default()),
                 sized: None,
                 prefiltered: None,
                 last_params: None,
+                binds: Default::default(),
             }
         })
     }
@@ -874,7 +886,6 @@ impl Epipolar {
         self.frame_buffer.size()
             + self.params_buffer.size()
             + self.counters.size()
-            + self.counters_readback.size()
             + self.indirect.size()
             + 16
             + self.sized.as_ref().map_or(0, Sized::bytes)
@@ -961,27 +972,35 @@ impl Epipolar {
                 })
             };
             use wgpu::TextureFormat as F;
+            let coords = texture("epipolar coordinates", F::Rgba32Float, samples, slices);
+            let interp = texture("epipolar interpolation", F::R32Uint, samples, slices);
+            let marched = texture("epipolar marched radiance", F::Rgba32Float, width, height);
+            let radiance = texture("epipolar radiance", F::Rgba32Float, samples, slices);
+            let views = [&coords, &interp, &marched, &radiance].map(|t| t.create_view(&Default::default()));
             Sized {
                 key,
                 lines: buffer("epipolar lines", slices as u64 * 32),
                 list: buffer("epipolar sample list", list_bytes.max(4)),
                 claims: buffer("epipolar pixel claims", pixels * 4),
-                coords: texture("epipolar coordinates", F::Rgba32Float, samples, slices),
-                interp: texture("epipolar interpolation", F::R32Uint, samples, slices),
-                marched: texture("epipolar marched radiance", F::Rgba32Float, width, height),
-                radiance: texture("epipolar radiance", F::Rgba32Float, samples, slices),
+                coords,
+                interp,
+                marched,
+                radiance,
+                views,
             }
         })?);
         Ok(())
     }
 
-    /// Renders the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
-    /// the frame's size). Passes, each timed: `prefilter` (when it runs), `lines`, `refine`,
-    /// `march`, `interpolate`, `upsample` (see the module documentation). The stats' counts
-    /// are read back from the GPU's counters (the fields: module documentation, Stats).
-    pub fn render(
+    /// Records the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
+    /// the frame's size) through `rec`. Passes, each timed: `prefilter` (when it runs),
+    /// `lines`, `refine`, `march`, `interpolate`, `upsample` (see the module documentation).
+    /// The stats' counts come from the GPU's counters once they are read back (the fields:
+    /// module documentation, Stats).
+    pub fn encode(
         &mut self,
         gpu: &GpuContext,
+        rec: &mut Recorder,
         frame: &GpuFrame,
         output: &wgpu::TextureView,
     ) -> Result<TechniqueStats, Error> {
@@ -1019,172 +1038,163 @@ impl Epipolar {
             }
             None => self.prefiltered = None,
         }
-        gpu.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&desc.uniforms()));
-        gpu.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
+        rec.write_buffer(&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()));
+        rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&params));
         let sized = self.sized.as_ref().expect("allocated above");
-        let views =
-            [&sized.coords, &sized.interp, &sized.marched, &sized.radiance].map(|t| t.create_view(&Default::default()));
-        let [coords, interp, marched, radiance] = &views;
+        let [coords, interp, marched, radiance] = &sized.views;
         let frame_spot = frame.spot_texture.unwrap_or(&self.white);
         let march_spot = self.prefiltered.as_ref().map_or(frame_spot, |p| &p.view);
-        let binds = gpu.scoped("binding the epipolar inputs", || {
-            use wgpu::BindingResource as R;
-            let device = &gpu.device;
-            let group = |label, layout, entries: &[wgpu::BindGroupEntry]| {
-                device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries })
-            };
-            let e = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-            let fb = || self.frame_buffer.as_entire_binding();
-            let pb = || self.params_buffer.as_entire_binding();
-            let prefilter = match (&self.prefiltered, spot) {
-                (Some(p), Some(src)) => Some(group(
-                    "epipolar prefilter",
-                    &self.layouts.prefilter,
-                    &[e(0, pb()), e(1, R::TextureView(src)), e(2, R::TextureView(&p.view))],
-                )),
-                _ => None,
-            };
-            let lines = group(
-                "epipolar lines",
-                &self.layouts.lines,
-                &[
-                    e(0, fb()),
-                    e(1, pb()),
-                    e(2, R::TextureView(frame.depth)),
-                    e(3, sized.lines.as_entire_binding()),
-                    e(4, R::TextureView(coords)),
-                    e(5, self.counters.as_entire_binding()),
-                ],
-            );
-            let refine = group(
-                "epipolar refine",
-                &self.layouts.refine,
-                &[
-                    e(0, fb()),
-                    e(1, pb()),
-                    e(2, R::TextureView(coords)),
-                    e(3, sized.lines.as_entire_binding()),
-                    e(4, R::TextureView(interp)),
-                    e(5, sized.list.as_entire_binding()),
-                    e(6, self.counters.as_entire_binding()),
-                    e(7, self.indirect.as_entire_binding()),
-                    e(8, sized.claims.as_entire_binding()),
-                ],
-            );
-            let mut me =
-                pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, marched)
-                    .to_vec();
-            me[4] = e(4, R::TextureView(march_spot));
-            me.extend([e(7, sized.list.as_entire_binding()), e(8, self.counters.as_entire_binding())]);
-            let march = group("epipolar march", &self.layouts.march, &me);
-            let interpolate = group(
-                "epipolar interpolate",
-                &self.layouts.interpolate,
-                &[
-                    e(0, fb()),
-                    e(1, pb()),
-                    e(2, R::TextureView(coords)),
-                    e(3, R::TextureView(interp)),
-                    e(4, R::TextureView(marched)),
-                    e(5, R::TextureView(radiance)),
-                ],
-            );
-            let mut ue =
-                pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, output).to_vec();
-            ue.extend([
-                e(6, R::TextureView(radiance)),
-                e(7, sized.lines.as_entire_binding()),
-                e(8, self.counters.as_entire_binding()),
-            ]);
-            let upsample = group("epipolar upsample", &self.layouts.upsample, &ue);
-            (prefilter, lines, refine, march, interpolate, upsample)
-        })?;
-        let (prefilter_bind, lines_bind, refine_bind, march_bind, interpolate_bind, upsample_bind) = binds;
+        let mut key = pass::frame_key(frame, output);
+        key.extend([Bound::View(coords.clone()), Bound::View(march_spot.clone())]);
+        key.push(match (&self.prefiltered, spot) {
+            (Some(p), Some(_)) => Bound::View(p.view.clone()),
+            _ => Bound::Choice(0),
+        });
+        if !self.binds.is_current(&key) {
+            let binds = gpu.scoped("binding the epipolar inputs", || {
+                use wgpu::BindingResource as R;
+                let device = &gpu.device;
+                let group = |label, layout, entries: &[wgpu::BindGroupEntry]| {
+                    device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries })
+                };
+                let e = |binding, resource| wgpu::BindGroupEntry { binding, resource };
+                let fb = || self.frame_buffer.as_entire_binding();
+                let pb = || self.params_buffer.as_entire_binding();
+                let prefilter = match (&self.prefiltered, spot) {
+                    (Some(p), Some(src)) => Some(group(
+                        "epipolar prefilter",
+                        &self.layouts.prefilter,
+                        &[e(0, pb()), e(1, R::TextureView(src)), e(2, R::TextureView(&p.view))],
+                    )),
+                    _ => None,
+                };
+                let lines = group(
+                    "epipolar lines",
+                    &self.layouts.lines,
+                    &[
+                        e(0, fb()),
+                        e(1, pb()),
+                        e(2, R::TextureView(frame.depth)),
+                        e(3, sized.lines.as_entire_binding()),
+                        e(4, R::TextureView(coords)),
+                        e(5, self.counters.as_entire_binding()),
+                    ],
+                );
+                let refine = group(
+                    "epipolar refine",
+                    &self.layouts.refine,
+                    &[
+                        e(0, fb()),
+                        e(1, pb()),
+                        e(2, R::TextureView(coords)),
+                        e(3, sized.lines.as_entire_binding()),
+                        e(4, R::TextureView(interp)),
+                        e(5, sized.list.as_entire_binding()),
+                        e(6, self.counters.as_entire_binding()),
+                        e(7, self.indirect.as_entire_binding()),
+                        e(8, sized.claims.as_entire_binding()),
+                    ],
+                );
+                let mut me =
+                    pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, marched)
+                        .to_vec();
+                me[4] = e(4, R::TextureView(march_spot));
+                me.extend([e(7, sized.list.as_entire_binding()), e(8, self.counters.as_entire_binding())]);
+                let march = group("epipolar march", &self.layouts.march, &me);
+                let interpolate = group(
+                    "epipolar interpolate",
+                    &self.layouts.interpolate,
+                    &[
+                        e(0, fb()),
+                        e(1, pb()),
+                        e(2, R::TextureView(coords)),
+                        e(3, R::TextureView(interp)),
+                        e(4, R::TextureView(marched)),
+                        e(5, R::TextureView(radiance)),
+                    ],
+                );
+                let mut ue =
+                    pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, output)
+                        .to_vec();
+                ue.extend([
+                    e(6, R::TextureView(radiance)),
+                    e(7, sized.lines.as_entire_binding()),
+                    e(8, self.counters.as_entire_binding()),
+                ]);
+                let upsample = group("epipolar upsample", &self.layouts.upsample, &ue);
+                Binds { prefilter, lines, refine, march, interpolate, upsample }
+            })?;
+            self.binds.store(key, binds);
+        }
+        let Binds {
+            prefilter: prefilter_bind,
+            lines: lines_bind,
+            refine: refine_bind,
+            march: march_bind,
+            interpolate: interpolate_bind,
+            upsample: upsample_bind,
+        } = self.binds.value();
         let (samples, slices) = (params.samples, params.slices);
         let (w, h) = (desc.width, desc.height);
         let p = &self.pipelines;
-        let mut timer = PassTimer::new(gpu, 6);
         if let (Some(bind), Some(pre)) = (&prefilter_bind, &self.prefiltered) {
             let (pw, ph) = (pre.texture.width(), pre.texture.height());
-            timer.dispatch(
-                gpu,
-                "prefilter",
-                "epipolar prefilter",
-                &p.prefilter,
-                bind,
-                [pw.div_ceil(8), ph.div_ceil(8), 1],
-            )?;
+            rec.dispatch("prefilter", "epipolar prefilter", &p.prefilter, bind, [pw.div_ceil(8), ph.div_ceil(8), 1])?;
         }
-        timer.pass(gpu, "lines", |enc, ts| {
+        rec.pass("lines", |enc, ts| {
             enc.clear_buffer(&self.counters, 0, None);
             let mut pass = compute_pass(enc, "epipolar lines", ts);
-            pass.set_bind_group(0, &lines_bind, &[]);
+            pass.set_bind_group(0, lines_bind, &[]);
             pass.set_pipeline(&p.lines);
             pass.dispatch_workgroups(slices.div_ceil(64), 1, 1);
             pass.set_pipeline(&p.coordinates);
             pass.dispatch_workgroups(samples.div_ceil(8), slices.div_ceil(8), 1);
         })?;
-        timer.pass(gpu, "refine", |enc, ts| {
+        rec.pass("refine", |enc, ts| {
             enc.clear_buffer(&sized.claims, 0, None);
             let mut pass = compute_pass(enc, "epipolar refine", ts);
-            pass.set_bind_group(0, &refine_bind, &[]);
+            pass.set_bind_group(0, refine_bind, &[]);
             pass.set_pipeline(&p.refine);
             pass.dispatch_workgroups(samples.div_ceil(8), slices.div_ceil(8), 1);
             pass.set_pipeline(&p.args);
             pass.dispatch_workgroups(1, 1, 1);
         })?;
-        timer.pass(gpu, "march", |enc, ts| {
+        rec.pass("march", |enc, ts| {
             let mut pass = compute_pass(enc, "epipolar march", ts);
             pass.set_pipeline(&p.march);
-            pass.set_bind_group(0, &march_bind, &[]);
+            pass.set_bind_group(0, march_bind, &[]);
             pass.dispatch_workgroups_indirect(&self.indirect, 0);
         })?;
         let groups = [samples.div_ceil(8), slices.div_ceil(8), 1];
-        timer.dispatch(gpu, "interpolate", "epipolar interpolate", &p.interpolate, &interpolate_bind, groups)?;
-        timer.pass(gpu, "upsample", |enc, ts| {
-            {
-                let mut pass = compute_pass(enc, "epipolar upsample", ts);
-                pass.set_pipeline(&p.upsample);
-                pass.set_bind_group(0, &upsample_bind, &[]);
-                pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-            }
-            enc.copy_buffer_to_buffer(&self.counters, 0, &self.counters_readback, 0, 16);
+        rec.dispatch("interpolate", "epipolar interpolate", &p.interpolate, interpolate_bind, groups)?;
+        rec.pass("upsample", |enc, ts| {
+            let mut pass = compute_pass(enc, "epipolar upsample", ts);
+            pass.set_pipeline(&p.upsample);
+            pass.set_bind_group(0, upsample_bind, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         })?;
-        let mode = timer.mode().to_string();
-        let measuring = timer.measuring();
-        let passes = timer.finish(gpu)?;
         self.last_params = Some(params);
-        // StatsMode::Off: no readback, so no GPU-classified counts (they would stall the frame).
-        let (raymarched_samples, extra) = if measuring {
-            let [marched_n, remarched, valid_lines, sample_texels] = self.read_counters(gpu)?;
-            (
-                (marched_n + remarched) * s.steps as u64,
-                stats_extra(&params, desc, valid_lines, marched_n, remarched, sample_texels),
-            )
-        } else {
-            let mut extra = stats_extra(&params, desc, 0, 0, 0, 0);
-            for k in ["valid_lines", "marched_samples", "sample_texels", "remarched_pixels", "marched_share"] {
-                extra.remove(k);
-            }
-            (0, extra)
-        };
+        // The GPU-classified counts join the stats once the counters are read back (never with
+        // StatsMode::Off: reading them at once would stall the frame).
+        let steps = s.steps as u64;
+        rec.read_counters(&self.counters, move |data, stats| {
+            let v: &[u32] = bytemuck::cast_slice(&data[..16]);
+            let [marched_n, remarched, valid_lines, sample_texels] = [v[0], v[1], v[2], v[3]].map(u64::from);
+            stats.raymarched_samples = (marched_n + remarched) * steps;
+            stats.extra = stats_extra(&params, (w, h), valid_lines, marched_n, remarched, sample_texels);
+        });
+        let mut extra = stats_extra(&params, (w, h), 0, 0, 0, 0);
+        for k in ["valid_lines", "marched_samples", "sample_texels", "remarched_pixels", "marched_share"] {
+            extra.remove(k);
+        }
         Ok(TechniqueStats {
             technique: "epipolar".into(),
             backend: "gpu".into(),
-            timing: mode,
-            passes,
-            raymarched_samples,
+            timing: String::new(),
+            passes: Vec::new(),
+            raymarched_samples: 0,
             gpu_memory_bytes: self.gpu_memory_bytes(),
             extra,
-        })
-    }
-
-    /// Maps the counters' readback copy: [marched pixels, re-marched pixels, valid lines,
-    /// ray-march texels].
-    fn read_counters(&self, gpu: &GpuContext) -> Result<[u64; 4], Error> {
-        gpu.read_mapped(&self.counters_readback, "reading the epipolar counters", |data| {
-            let v: &[u32] = bytemuck::cast_slice(data);
-            [v[0] as u64, v[1] as u64, v[2] as u64, v[3] as u64]
         })
     }
 }
@@ -1201,4 +1211,53 @@ fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, Error
     enc.copy_buffer_to_buffer(buffer, 0, &read, 0, buffer.size());
     gpu.queue.submit([enc.finish()]);
     gpu.read_mapped(&read, "reading back a buffer", |d| d.to_vec())
+}
+
+impl crate::techniques::Technique for EpipolarSettings {
+    const INFO: crate::techniques::TechniqueInfo = crate::techniques::TechniqueInfo {
+        name: "epipolar",
+        summary: "epipolar sampling: ray-march samples on epipolar lines refined at depth discontinuities, interpolated along and bilaterally between the lines (GPU: lines, refine, indirect march over a compacted list, interpolate, upsample; CPU mirror)",
+        paper: "Engelhardt & Dachsbacher 2010, §4–5",
+        gpu: true,
+        cpu: true,
+    };
+    fn validate(&self) -> Result<(), Error> {
+        EpipolarSettings::validate(self)
+    }
+    fn render_cpu(
+        &self,
+        frame: &crate::CpuFrame,
+        _rectified: Option<&[f32]>,
+        _progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(crate::Image, TechniqueStats), Error> {
+        cpu::render(frame, self)
+    }
+}
+
+impl crate::techniques::GpuTechnique for Epipolar {
+    type Settings = EpipolarSettings;
+    fn new(gpu: &GpuContext, settings: EpipolarSettings) -> Result<Self, Error> {
+        Epipolar::new(gpu, settings)
+    }
+    fn settings_mut(&mut self) -> &mut EpipolarSettings {
+        &mut self.settings
+    }
+    fn settings(&self) -> &EpipolarSettings {
+        &self.settings
+    }
+    fn encode(
+        &mut self,
+        gpu: &GpuContext,
+        rec: &mut Recorder,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<TechniqueStats, Error> {
+        Epipolar::encode(self, gpu, rec, frame, output)
+    }
+    fn gpu_memory_bytes(&self) -> u64 {
+        Epipolar::gpu_memory_bytes(self)
+    }
+    fn bind_group_builds(&self) -> u64 {
+        self.binds.builds()
+    }
 }

@@ -43,11 +43,11 @@ pub mod cpu;
 
 use crate::error::Error;
 use crate::frame::GpuFrame;
-use crate::gpu::{GpuContext, PassTimer};
+use crate::gpu::{GpuContext, Recorder};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
 use crate::model::Phase;
 use crate::stats::TechniqueStats;
-use crate::techniques::pass;
+use crate::techniques::pass::{self, Bound};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -329,7 +329,7 @@ struct GpuLut {
 /// textures (reallocated only when the frame size changes) and the phase table (rebuilt only
 /// when the phase function or table size changes).
 pub struct Interleaved {
-    /// Current settings; changes apply on the next [`Interleaved::render`].
+    /// Current settings; changes apply on the next [`Interleaved::encode`].
     pub settings: InterleavedSettings,
     march_pipeline: wgpu::ComputePipeline,
     rows_pipeline: wgpu::ComputePipeline,
@@ -343,6 +343,7 @@ pub struct Interleaved {
     no_lut: wgpu::Buffer,
     lut: Option<GpuLut>,
     targets: Option<Targets>,
+    binds: pass::BindCache<[wgpu::BindGroup; 3]>,
 }
 
 /// The march pass's layout: the frame-pass bindings 0–5 (frame, params, depth, shadow map,
@@ -406,6 +407,7 @@ impl Interleaved {
                 no_lut,
                 lut: None,
                 targets: None,
+                binds: Default::default(),
             }
         })
     }
@@ -474,11 +476,12 @@ impl Interleaved {
         Ok(table.max_rel_error)
     }
 
-    /// Renders the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
-    /// the frame's size). Pass list: `march`, `sum_rows`, `sum_columns`.
-    pub fn render(
+    /// Records the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
+    /// the frame's size) through `rec`. Pass list: `march`, `sum_rows`, `sum_columns`.
+    pub fn encode(
         &mut self,
         gpu: &GpuContext,
+        rec: &mut Recorder,
         frame: &GpuFrame,
         output: &wgpu::TextureView,
     ) -> Result<TechniqueStats, Error> {
@@ -486,73 +489,126 @@ impl Interleaved {
         let desc = frame.desc;
         self.ensure_targets(gpu, desc.width, desc.height)?;
         let lut_error = if self.settings.phase_lut { Some(self.ensure_lut(gpu, &desc.medium.phase)?) } else { None };
-        gpu.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&desc.uniforms()));
-        gpu.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&InterleavedParams::from(&self.settings)));
+        rec.write_buffer(&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()));
+        rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&InterleavedParams::from(&self.settings)));
         let targets = self.targets.as_ref().expect("allocated above");
         let lut = match (&self.lut, self.settings.phase_lut) {
             (Some(l), true) => &l.buffer,
             _ => &self.no_lut,
         };
         let view = wgpu::BindingResource::TextureView;
-        let (march_bind, rows_bind, columns_bind) = gpu.scoped("binding the interleaved inputs", || {
-            let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-            let frame_entry = || entry(0, self.frame_buffer.as_entire_binding());
-            let params_entry = || entry(1, self.params_buffer.as_entire_binding());
-            let mut march_entries = pass::frame_pass_bindings(
-                &self.frame_buffer,
-                &self.params_buffer,
-                frame,
-                &self.white,
-                &targets.march_view,
-            )
-            .to_vec();
-            march_entries.push(entry(6, lut.as_entire_binding()));
-            let march = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("interleaved march"),
-                layout: &self.march_layout,
-                entries: &march_entries,
-            });
-            let rows = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("interleaved sum_rows"),
-                layout: &self.rows_layout,
-                entries: &[
-                    frame_entry(),
-                    params_entry(),
-                    entry(2, view(&targets.march_view)),
-                    entry(3, view(&targets.rows_view)),
-                ],
-            });
-            let columns = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("interleaved sum_columns"),
-                layout: &self.columns_layout,
-                entries: &[
-                    frame_entry(),
-                    params_entry(),
-                    entry(2, view(&targets.rows_view)),
-                    entry(3, view(&targets.march_view)),
-                    entry(4, view(output)),
-                ],
-            });
-            (march, rows, columns)
-        })?;
-        let groups = (desc.width.div_ceil(8), desc.height.div_ceil(8));
-        let mut timer = PassTimer::new(gpu, 3);
-        for (name, pipeline, bind) in [
-            ("march", &self.march_pipeline, &march_bind),
-            ("sum_rows", &self.rows_pipeline, &rows_bind),
-            ("sum_columns", &self.columns_pipeline, &columns_bind),
-        ] {
-            timer.dispatch(gpu, name, &format!("interleaved {name}"), pipeline, bind, [groups.0, groups.1, 1])?;
+        let mut key = pass::frame_key(frame, output);
+        key.extend([Bound::View(targets.march_view.clone()), Bound::Buffer(lut.clone())]);
+        if !self.binds.is_current(&key) {
+            let binds = gpu.scoped("binding the interleaved inputs", || {
+                let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
+                let frame_entry = || entry(0, self.frame_buffer.as_entire_binding());
+                let params_entry = || entry(1, self.params_buffer.as_entire_binding());
+                let mut march_entries = pass::frame_pass_bindings(
+                    &self.frame_buffer,
+                    &self.params_buffer,
+                    frame,
+                    &self.white,
+                    &targets.march_view,
+                )
+                .to_vec();
+                march_entries.push(entry(6, lut.as_entire_binding()));
+                let march = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("interleaved march"),
+                    layout: &self.march_layout,
+                    entries: &march_entries,
+                });
+                let rows = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("interleaved sum_rows"),
+                    layout: &self.rows_layout,
+                    entries: &[
+                        frame_entry(),
+                        params_entry(),
+                        entry(2, view(&targets.march_view)),
+                        entry(3, view(&targets.rows_view)),
+                    ],
+                });
+                let columns = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("interleaved sum_columns"),
+                    layout: &self.columns_layout,
+                    entries: &[
+                        frame_entry(),
+                        params_entry(),
+                        entry(2, view(&targets.rows_view)),
+                        entry(3, view(&targets.march_view)),
+                        entry(4, view(output)),
+                    ],
+                });
+                [march, rows, columns]
+            })?;
+            self.binds.store(key, binds);
         }
-        let mode = timer.mode().to_string();
+        let [march_bind, rows_bind, columns_bind] = self.binds.value();
+        let groups = (desc.width.div_ceil(8), desc.height.div_ceil(8));
+        for (name, pipeline, bind) in [
+            ("march", &self.march_pipeline, march_bind),
+            ("sum_rows", &self.rows_pipeline, rows_bind),
+            ("sum_columns", &self.columns_pipeline, columns_bind),
+        ] {
+            rec.dispatch(name, &format!("interleaved {name}"), pipeline, bind, [groups.0, groups.1, 1])?;
+        }
         Ok(TechniqueStats {
             technique: "interleaved".into(),
             backend: "gpu".into(),
-            timing: mode,
-            passes: timer.finish(gpu)?,
+            timing: String::new(),
+            passes: Vec::new(),
             raymarched_samples: self.settings.raymarched_samples(desc.width, desc.height),
             gpu_memory_bytes: self.gpu_memory_bytes(),
             extra: self.settings.extra_stats(lut_error),
         })
+    }
+}
+
+impl crate::techniques::Technique for InterleavedSettings {
+    const INFO: crate::techniques::TechniqueInfo = crate::techniques::TechniqueInfo {
+        name: "interleaved",
+        summary: "M×M interleaved sampling: each pixel marches N/M² of the N steps, a separable (optionally depth-aware) block sum adds them (GPU + CPU mirror)",
+        paper: "Tóth & Umenhoffer 2009, §4.1",
+        gpu: true,
+        cpu: true,
+    };
+    fn validate(&self) -> Result<(), Error> {
+        InterleavedSettings::validate(self)
+    }
+    fn render_cpu(
+        &self,
+        frame: &crate::CpuFrame,
+        _rectified: Option<&[f32]>,
+        _progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(crate::Image, TechniqueStats), Error> {
+        cpu::render(frame, self)
+    }
+}
+
+impl crate::techniques::GpuTechnique for Interleaved {
+    type Settings = InterleavedSettings;
+    fn new(gpu: &GpuContext, settings: InterleavedSettings) -> Result<Self, Error> {
+        Interleaved::new(gpu, settings)
+    }
+    fn settings_mut(&mut self) -> &mut InterleavedSettings {
+        &mut self.settings
+    }
+    fn settings(&self) -> &InterleavedSettings {
+        &self.settings
+    }
+    fn encode(
+        &mut self,
+        gpu: &GpuContext,
+        rec: &mut Recorder,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<TechniqueStats, Error> {
+        Interleaved::encode(self, gpu, rec, frame, output)
+    }
+    fn gpu_memory_bytes(&self) -> u64 {
+        Interleaved::gpu_memory_bytes(self)
+    }
+    fn bind_group_builds(&self) -> u64 {
+        self.binds.builds()
     }
 }

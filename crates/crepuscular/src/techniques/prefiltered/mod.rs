@@ -29,11 +29,11 @@ pub use settings::{BasisPrecision, PrefilteredParams, PrefilteredSettings};
 
 use crate::error::Error;
 use crate::frame::{FrameDesc, GpuFrame};
-use crate::gpu::{GpuContext, PassTimer};
+use crate::gpu::{GpuContext, Recorder};
 use crate::march::mean_extinction;
 use crate::stats::TechniqueStats;
 use crate::techniques::pass;
-use raster::RectifiedRaster;
+pub use raster::RectifiedRaster;
 use std::collections::BTreeMap;
 
 /// The rectification and Fourier basis shared by the passes (prepended to each).
@@ -158,6 +158,7 @@ pub struct Prefiltered {
     white: wgpu::TextureView,
     maps: Option<Maps>,
     last: Option<Rectification>,
+    binds: pass::BindCache<[wgpu::BindGroup; 3]>,
 }
 
 fn storage_entry(
@@ -287,13 +288,15 @@ impl Prefiltered {
                 white: gpu.upload_rgb_texture(None).create_view(&Default::default()),
                 maps: None,
                 last: None,
+                binds: Default::default(),
             }
         })
     }
 
     /// The rectification this frame would use, and the host raster request when it is the
     /// projective one (§4.2): a host that rasterizes it (depth-clamped, see [`RectifiedRaster`])
-    /// passes the result to [`Prefiltered::render_with`] and the `rectify` pass is skipped.
+    /// passes the result as [`crate::GpuFrame::rectified_shadow_map`] and the `rectify` pass is
+    /// skipped.
     pub fn raster_request(&self, desc: &FrameDesc) -> Option<RectifiedRaster> {
         Rectification::new(desc, &self.settings.rectify_options()).raster()
     }
@@ -334,27 +337,19 @@ impl Prefiltered {
         Ok((depth, basis, cumw))
     }
 
-    /// Renders the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of the
-    /// frame's size), resampling the rectified map from the shadow map.
-    pub fn render(
+    /// Records the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of the
+    /// frame's size) through `rec`. Passes: `rectify` (skipped when the frame carries the
+    /// host's rectified raster, [`crate::GpuFrame::rectified_shadow_map`], and this frame's
+    /// rectification is projective), `prefilter`, `evaluate`, `epipole` (when the sun's disc
+    /// is on screen).
+    pub fn encode(
         &mut self,
         gpu: &GpuContext,
+        rec: &mut Recorder,
         frame: &GpuFrame,
         output: &wgpu::TextureView,
     ) -> Result<TechniqueStats, Error> {
-        self.render_with(gpu, frame, None, output)
-    }
-
-    /// [`Prefiltered::render`] with the rectified map a host rasterized from
-    /// [`Prefiltered::raster_request`] (a `D2` view of a `Depth32Float` or `R32Float` texture of
-    /// `map_size`); ignored when this frame's rectification is not projective.
-    pub fn render_with(
-        &mut self,
-        gpu: &GpuContext,
-        frame: &GpuFrame,
-        host_depth: Option<&wgpu::TextureView>,
-        output: &wgpu::TextureView,
-    ) -> Result<TechniqueStats, Error> {
+        let host_depth = frame.rectified_shadow_map;
         self.settings.validate()?;
         let s = self.settings.clone();
         let desc = frame.desc;
@@ -381,7 +376,7 @@ impl Prefiltered {
             }));
         }
         let rows = self.rows_buffer.as_ref().expect("allocated above");
-        gpu.queue.write_buffer(rows, 0, bytemuck::cast_slice(&rect.rows));
+        rec.write_buffer(rows, bytemuck::cast_slice(&rect.rows));
         let epipole = epipole_pixel(desc, s.epipole_radius);
         let channels = s.channels(&desc.light);
         let params = PrefilteredParams::new(
@@ -393,75 +388,83 @@ impl Prefiltered {
             host.is_some(),
             channels,
         );
-        gpu.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&desc.uniforms()));
-        gpu.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
+        rec.write_buffer(&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()));
+        rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&params));
         let maps = self.maps.as_ref().expect("allocated above");
         let view = wgpu::BindingResource::TextureView;
-        let (rectify_bind, prefilter_bind, evaluate_bind) = gpu.scoped("binding the prefiltered inputs", || {
-            let bind = |label, layout, entries: &[wgpu::BindGroupEntry]| {
-                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries })
-            };
-            let rectify = bind(
-                "prefiltered rectify",
-                &self.rectify_layout,
-                &[
-                    wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: view(frame.shadow_map) },
-                    wgpu::BindGroupEntry { binding: 3, resource: rows.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 4, resource: view(&maps.depth_view) },
-                ],
-            );
-            let prefilter = bind(
-                "prefiltered prefilter",
-                &self.prefilter_layout,
-                &[
-                    wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: view(frame.spot_texture.unwrap_or(&self.white)) },
-                    wgpu::BindGroupEntry { binding: 3, resource: rows.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 4, resource: view(host.unwrap_or(&maps.depth_view)) },
-                    wgpu::BindGroupEntry { binding: 5, resource: view(&maps.basis_store) },
-                    wgpu::BindGroupEntry { binding: 6, resource: view(&maps.cumw_view) },
-                ],
-            );
-            let mut entries =
-                pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, output).to_vec();
-            let sampler = if rect.full_circle { &self.wrap_sampler } else { &self.clamp_sampler };
-            entries.extend([
-                wgpu::BindGroupEntry { binding: 6, resource: rows.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 7, resource: view(&maps.basis_sample) },
-                wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::Sampler(sampler) },
-                wgpu::BindGroupEntry { binding: 9, resource: view(&maps.cumw_view) },
-            ]);
-            let evaluate = bind("prefiltered evaluate", &self.evaluate_layout, &entries);
-            (rectify, prefilter, evaluate)
-        })?;
-        let mut timer = PassTimer::new(gpu, 4);
+        let mut key = pass::frame_key(frame, output);
+        key.extend([
+            pass::Bound::View(maps.depth_view.clone()),
+            pass::Bound::Buffer(rows.clone()),
+            pass::Bound::Choice(rect.full_circle as u32 + 2 * host.is_some() as u32),
+        ]);
+        if !self.binds.is_current(&key) {
+            let binds = gpu.scoped("binding the prefiltered inputs", || {
+                let bind = |label, layout, entries: &[wgpu::BindGroupEntry]| {
+                    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries })
+                };
+                let rectify = bind(
+                    "prefiltered rectify",
+                    &self.rectify_layout,
+                    &[
+                        wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 2, resource: view(frame.shadow_map) },
+                        wgpu::BindGroupEntry { binding: 3, resource: rows.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 4, resource: view(&maps.depth_view) },
+                    ],
+                );
+                let prefilter = bind(
+                    "prefiltered prefilter",
+                    &self.prefilter_layout,
+                    &[
+                        wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 2, resource: view(frame.spot_texture.unwrap_or(&self.white)) },
+                        wgpu::BindGroupEntry { binding: 3, resource: rows.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 4, resource: view(host.unwrap_or(&maps.depth_view)) },
+                        wgpu::BindGroupEntry { binding: 5, resource: view(&maps.basis_store) },
+                        wgpu::BindGroupEntry { binding: 6, resource: view(&maps.cumw_view) },
+                    ],
+                );
+                let mut entries =
+                    pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, output)
+                        .to_vec();
+                let sampler = if rect.full_circle { &self.wrap_sampler } else { &self.clamp_sampler };
+                entries.extend([
+                    wgpu::BindGroupEntry { binding: 6, resource: rows.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 7, resource: view(&maps.basis_sample) },
+                    wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::Sampler(sampler) },
+                    wgpu::BindGroupEntry { binding: 9, resource: view(&maps.cumw_view) },
+                ]);
+                let evaluate = bind("prefiltered evaluate", &self.evaluate_layout, &entries);
+                [rectify, prefilter, evaluate]
+            })?;
+            self.binds.store(key, binds);
+        }
+        let [rectify_bind, prefilter_bind, evaluate_bind] = self.binds.value();
         if host.is_none() {
             let groups = [w.div_ceil(8), h.div_ceil(8), 1];
-            timer.dispatch(gpu, "rectify", "prefiltered rectify", &self.rectify_pipeline, &rectify_bind, groups)?;
+            rec.dispatch("rectify", "prefiltered rectify", &self.rectify_pipeline, rectify_bind, groups)?;
         }
         let threads = h * s.regions * (s.bases / s.bases_per_thread) * sets;
         let groups = threads.div_ceil(64);
         let groups = [groups.min(65535), groups.div_ceil(65535), 1];
-        timer.dispatch(gpu, "prefilter", "prefiltered prefilter", &self.prefilter_pipeline, &prefilter_bind, groups)?;
+        rec.dispatch("prefilter", "prefiltered prefilter", &self.prefilter_pipeline, prefilter_bind, groups)?;
         let groups = [desc.width.div_ceil(8), desc.height.div_ceil(8), 1];
-        timer.dispatch(gpu, "evaluate", "prefiltered evaluate", &self.evaluate_pipeline, &evaluate_bind, groups)?;
+        rec.dispatch("evaluate", "prefiltered evaluate", &self.evaluate_pipeline, evaluate_bind, groups)?;
         if let Some([x0, y0, x1, y1]) = epipole_box(desc, s.epipole_radius, epipole) {
             let (bw, bh) = (x1 - x0, y1 - y0);
             let groups = [bw.div_ceil(8), bh.div_ceil(8), 1];
-            timer.dispatch(gpu, "epipole", "prefiltered epipole", &self.epipole_pipeline, &evaluate_bind, groups)?;
+            rec.dispatch("epipole", "prefiltered epipole", &self.epipole_pipeline, evaluate_bind, groups)?;
         }
-        let mode = timer.mode().to_string();
-        let passes = timer.finish(gpu)?;
         let extra = stats_extra(&s, &rect, host.is_some());
         self.last = Some(rect);
         Ok(TechniqueStats {
             technique: "prefiltered".into(),
             backend: "gpu".into(),
-            timing: mode,
-            passes,
+            timing: String::new(),
+            passes: Vec::new(),
             raymarched_samples: epipole_samples(desc, &s, epipole),
             gpu_memory_bytes: self.gpu_memory_bytes(),
             extra,
@@ -529,5 +532,57 @@ fn f16_to_f32(h: u16) -> f32 {
         0 => man * 2f32.powi(-24),
         31 => f32::INFINITY,
         e => (1.0 + man / 1024.0) * 2f32.powi(e - 15),
+    }
+}
+
+impl crate::techniques::Technique for PrefilteredSettings {
+    const INFO: crate::techniques::TechniqueInfo = crate::techniques::TechniqueInfo {
+        name: "prefiltered",
+        summary: "filter-based single scattering: Fourier-expanded visibility on a rectified shadow map, prefix-summed per row with transmittance weights, one filtered lookup and dot product per pixel (GPU: rectify, prefilter, evaluate; CPU mirror)",
+        paper: "Klehm, Seidel & Eisemann 2014, §3–5",
+        gpu: true,
+        cpu: true,
+    };
+    fn validate(&self) -> Result<(), Error> {
+        PrefilteredSettings::validate(self)
+    }
+    fn render_cpu(
+        &self,
+        frame: &crate::CpuFrame,
+        rectified: Option<&[f32]>,
+        _progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(crate::Image, TechniqueStats), Error> {
+        cpu::render_with(frame, self, rectified)
+    }
+    fn raster_request(&self, desc: &crate::frame::FrameDesc) -> Option<RectifiedRaster> {
+        Rectification::new(desc, &self.rectify_options()).raster()
+    }
+}
+
+impl crate::techniques::GpuTechnique for Prefiltered {
+    type Settings = PrefilteredSettings;
+    fn new(gpu: &GpuContext, settings: PrefilteredSettings) -> Result<Self, Error> {
+        Prefiltered::new(gpu, settings)
+    }
+    fn settings_mut(&mut self) -> &mut PrefilteredSettings {
+        &mut self.settings
+    }
+    fn settings(&self) -> &PrefilteredSettings {
+        &self.settings
+    }
+    fn encode(
+        &mut self,
+        gpu: &GpuContext,
+        rec: &mut Recorder,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<TechniqueStats, Error> {
+        Prefiltered::encode(self, gpu, rec, frame, output)
+    }
+    fn gpu_memory_bytes(&self) -> u64 {
+        Prefiltered::gpu_memory_bytes(self)
+    }
+    fn bind_group_builds(&self) -> u64 {
+        self.binds.builds()
     }
 }

@@ -139,15 +139,23 @@ impl<'a> Integrand<'a> {
     }
 }
 
+impl ReferenceSettings {
+    /// Checks the ranges.
+    pub fn validate(&self) -> Result<(), Error> {
+        if self.steps < 2 || self.steps % 2 != 0 || self.steps > 1 << 20 {
+            return Err(Error::invalid("reference.steps", self.steps, "must be even and in 2..=1048576"));
+        }
+        Ok(())
+    }
+}
+
 /// Renders the reference. `progress(rows_done, rows_total)` is called as rows finish.
 pub fn render(
     frame: &CpuFrame,
     settings: &ReferenceSettings,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<(Image, TechniqueStats), Error> {
-    if settings.steps < 2 || settings.steps % 2 != 0 || settings.steps > 1 << 20 {
-        return Err(Error::invalid("reference.steps", settings.steps, "must be even and in 2..=1048576"));
-    }
+    settings.validate()?;
     let desc = frame.desc;
     let start = std::time::Instant::now();
     let integrand = Integrand::new(frame);
@@ -269,4 +277,25 @@ pub fn render(
         extra,
     };
     Ok((img, stats))
+}
+
+impl crate::techniques::Technique for ReferenceSettings {
+    const INFO: crate::techniques::TechniqueInfo = crate::techniques::TechniqueInfo {
+        name: "reference",
+        summary: "ground truth: f64, many stratified steps per pixel over the same shadow map, with a convergence estimate (CPU only)",
+        paper: "the integral itself (docs/MODEL.md)",
+        gpu: false,
+        cpu: true,
+    };
+    fn validate(&self) -> Result<(), Error> {
+        ReferenceSettings::validate(self)
+    }
+    fn render_cpu(
+        &self,
+        frame: &crate::CpuFrame,
+        _rectified: Option<&[f32]>,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(crate::Image, TechniqueStats), Error> {
+        render(frame, self, progress)
+    }
 }

@@ -24,7 +24,7 @@ pub mod cpu;
 
 use crate::error::Error;
 use crate::frame::GpuFrame;
-use crate::gpu::{GpuContext, PassTimer, compute_pass};
+use crate::gpu::{GpuContext, Recorder, compute_pass};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
 use crate::stats::TechniqueStats;
 use crate::techniques::pass;
@@ -208,7 +208,7 @@ struct Grid {
 /// The GPU side of `subsampled`: its two pipelines, uniform buffers, the re-march counter and
 /// the grid texture, built once and reused (the grid is reallocated only when its size changes).
 pub struct Subsampled {
-    /// Current settings; changes apply on the next [`Subsampled::render`].
+    /// Current settings; changes apply on the next [`Subsampled::encode`].
     pub settings: SubsampledSettings,
     march_pipeline: wgpu::ComputePipeline,
     upsample_pipeline: wgpu::ComputePipeline,
@@ -217,9 +217,9 @@ pub struct Subsampled {
     frame_buffer: wgpu::Buffer,
     params_buffer: wgpu::Buffer,
     counter: wgpu::Buffer,
-    counter_readback: wgpu::Buffer,
     white: wgpu::TextureView,
     grid: Option<Grid>,
+    binds: pass::BindCache<[wgpu::BindGroup; 2]>,
 }
 
 /// The bind-group layout of the `upsample` pass: the frame-pass bindings 0–5 (output at 5),
@@ -261,8 +261,6 @@ impl Subsampled {
                 4,
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
             );
-            let counter_readback =
-                buf("re-marched pixels readback", 4, wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ);
             let white = gpu.upload_rgb_texture(None).create_view(&Default::default());
             Self {
                 settings,
@@ -273,9 +271,9 @@ impl Subsampled {
                 frame_buffer,
                 params_buffer,
                 counter,
-                counter_readback,
                 white,
                 grid: None,
+                binds: Default::default(),
             }
         })
     }
@@ -283,12 +281,7 @@ impl Subsampled {
     /// Bytes of GPU memory this technique holds (buffers, the 1×1 white texture and the grid).
     pub fn gpu_memory_bytes(&self) -> u64 {
         let grid = self.grid.as_ref().map_or(0, |g| g.texture.width() as u64 * g.texture.height() as u64 * 16);
-        self.frame_buffer.size()
-            + self.params_buffer.size()
-            + self.counter.size()
-            + self.counter_readback.size()
-            + 16
-            + grid
+        self.frame_buffer.size() + self.params_buffer.size() + self.counter.size() + 16 + grid
     }
 
     /// The low-resolution grid of the last frame (`Rgba32Float`, w×h: in-scattering in rgb,
@@ -297,11 +290,14 @@ impl Subsampled {
         self.grid.as_ref().map(|g| &g.texture)
     }
 
-    /// Renders the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
-    /// the frame's size). Pass list: `march` (the grid), `upsample` (every pixel).
-    pub fn render(
+    /// Records the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
+    /// the frame's size) through `rec`. Pass list: `march` (the grid), `upsample` (every
+    /// pixel). The re-marched pixels are counted on the GPU and join the stats once the
+    /// counter has been read back.
+    pub fn encode(
         &mut self,
         gpu: &GpuContext,
+        rec: &mut Recorder,
         frame: &GpuFrame,
         output: &wgpu::TextureView,
     ) -> Result<TechniqueStats, Error> {
@@ -324,65 +320,62 @@ impl Subsampled {
         }
         let grid_view = &self.grid.as_ref().expect("allocated above").view;
         let params = SubsampledParams::new(&self.settings, (gw, gh));
-        gpu.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&desc.uniforms()));
-        gpu.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
-        let (march_bind, upsample_bind) = gpu.scoped("binding the subsampled inputs", || {
-            let common =
-                |out| pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, out);
-            let march = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("subsampled march"),
-                layout: &self.march_layout,
-                entries: &common(grid_view),
-            });
-            let mut entries = common(output).to_vec();
-            entries.push(wgpu::BindGroupEntry { binding: 6, resource: wgpu::BindingResource::TextureView(grid_view) });
-            entries.push(wgpu::BindGroupEntry { binding: 7, resource: self.counter.as_entire_binding() });
-            let upsample = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("subsampled upsample"),
-                layout: &self.upsample_layout,
-                entries: &entries,
-            });
-            (march, upsample)
-        })?;
-        let mut timer = PassTimer::new(gpu, 2);
+        rec.write_buffer(&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()));
+        rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&params));
+        let mut key = pass::frame_key(frame, output);
+        key.push(pass::Bound::View(grid_view.clone()));
+        if !self.binds.is_current(&key) {
+            let binds = gpu.scoped("binding the subsampled inputs", || {
+                let common =
+                    |out| pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, out);
+                let march = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("subsampled march"),
+                    layout: &self.march_layout,
+                    entries: &common(grid_view),
+                });
+                let mut entries = common(output).to_vec();
+                entries
+                    .push(wgpu::BindGroupEntry { binding: 6, resource: wgpu::BindingResource::TextureView(grid_view) });
+                entries.push(wgpu::BindGroupEntry { binding: 7, resource: self.counter.as_entire_binding() });
+                let upsample = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("subsampled upsample"),
+                    layout: &self.upsample_layout,
+                    entries: &entries,
+                });
+                [march, upsample]
+            })?;
+            self.binds.store(key, binds);
+        }
+        let [march_bind, upsample_bind] = self.binds.value();
         let groups = [gw.div_ceil(8), gh.div_ceil(8), 1];
-        timer.dispatch(gpu, "march", "subsampled march", &self.march_pipeline, &march_bind, groups)?;
-        timer.pass(gpu, "upsample", |enc, ts| {
+        rec.dispatch("march", "subsampled march", &self.march_pipeline, march_bind, groups)?;
+        rec.pass("upsample", |enc, ts| {
             enc.clear_buffer(&self.counter, 0, None);
             {
                 let mut pass = compute_pass(enc, "subsampled upsample", ts);
                 pass.set_pipeline(&self.upsample_pipeline);
-                pass.set_bind_group(0, &upsample_bind, &[]);
+                pass.set_bind_group(0, upsample_bind, &[]);
                 pass.dispatch_workgroups(desc.width.div_ceil(8), desc.height.div_ceil(8), 1);
             }
-            enc.copy_buffer_to_buffer(&self.counter, 0, &self.counter_readback, 0, 4);
         })?;
-        let mode = timer.mode().to_string();
-        let measuring = timer.measuring();
-        let passes = timer.finish(gpu)?;
-        // StatsMode::Off: the re-marched pixels are counted on the GPU and not read back, so
-        // the samples are the grid's only.
-        let remarched = if measuring { Some(self.read_counter(gpu)?) } else { None };
+        // The re-marched pixels are counted on the GPU; until the counter arrives (and with
+        // StatsMode::Off) the samples are the grid's only.
         let steps = self.settings.steps as u64;
-        let mut extra = stats_extra(gw, gh, remarched.unwrap_or(0));
-        if remarched.is_none() {
-            extra.remove("remarched_pixels");
-        }
+        rec.read_counters(&self.counter, move |counter, stats| {
+            let remarched = u32::from_le_bytes([counter[0], counter[1], counter[2], counter[3]]) as u64;
+            stats.raymarched_samples += remarched * steps;
+            stats.extra.insert("remarched_pixels".into(), remarched as f64);
+        });
+        let mut extra = stats_extra(gw, gh, 0);
+        extra.remove("remarched_pixels");
         Ok(TechniqueStats {
             technique: "subsampled".into(),
             backend: "gpu".into(),
-            timing: mode,
-            passes,
-            raymarched_samples: (gw as u64 * gh as u64 + remarched.unwrap_or(0)) * steps,
+            timing: String::new(),
+            passes: Vec::new(),
+            raymarched_samples: gw as u64 * gh as u64 * steps,
             gpu_memory_bytes: self.gpu_memory_bytes(),
             extra,
-        })
-    }
-
-    /// Maps the counter's readback copy (after the frame's passes) and returns it.
-    fn read_counter(&self, gpu: &GpuContext) -> Result<u64, Error> {
-        gpu.read_mapped(&self.counter_readback, "reading the re-marched pixel count", |d| {
-            u32::from_le_bytes([d[0], d[1], d[2], d[3]]) as u64
         })
     }
 }
@@ -393,4 +386,53 @@ pub(crate) fn stats_extra(gw: u32, gh: u32, remarched: u64) -> std::collections:
         .into_iter()
         .map(|(k, v)| (k.to_string(), v))
         .collect()
+}
+
+impl crate::techniques::Technique for SubsampledSettings {
+    const INFO: crate::techniques::TechniqueInfo = crate::techniques::TechniqueInfo {
+        name: "subsampled",
+        summary: "ray marching on a reduced grid, joint-bilateral upsampling by depth, silhouette pixels re-marched at full resolution (GPU + CPU mirror)",
+        paper: "the baseline of Engelhardt & Dachsbacher 2010 §6 / Fig. 9",
+        gpu: true,
+        cpu: true,
+    };
+    fn validate(&self) -> Result<(), Error> {
+        SubsampledSettings::validate(self)
+    }
+    fn render_cpu(
+        &self,
+        frame: &crate::CpuFrame,
+        _rectified: Option<&[f32]>,
+        _progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(crate::Image, TechniqueStats), Error> {
+        cpu::render(frame, self)
+    }
+}
+
+impl crate::techniques::GpuTechnique for Subsampled {
+    type Settings = SubsampledSettings;
+    fn new(gpu: &GpuContext, settings: SubsampledSettings) -> Result<Self, Error> {
+        Subsampled::new(gpu, settings)
+    }
+    fn settings_mut(&mut self) -> &mut SubsampledSettings {
+        &mut self.settings
+    }
+    fn settings(&self) -> &SubsampledSettings {
+        &self.settings
+    }
+    fn encode(
+        &mut self,
+        gpu: &GpuContext,
+        rec: &mut Recorder,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<TechniqueStats, Error> {
+        Subsampled::encode(self, gpu, rec, frame, output)
+    }
+    fn gpu_memory_bytes(&self) -> u64 {
+        Subsampled::gpu_memory_bytes(self)
+    }
+    fn bind_group_builds(&self) -> u64 {
+        self.binds.builds()
+    }
 }

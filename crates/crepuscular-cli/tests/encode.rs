@@ -1,0 +1,256 @@
+//! The engine's way in: `Scattering::encode` records into the caller's encoder and submits
+//! nothing — proven by reading the output between `encode` and the caller's submit (still the
+//! sentinel the test wrote) and after it (the frame) — records several frames into one encoder,
+//! delivers its deferred counters after `end_frame`, and refuses inputs that do not match the
+//! frame with an error naming them.
+
+use crepuscular::gpu::{GpuContext, test_gpu};
+use crepuscular::{Error, GpuFrame, Scattering, StatsMode, TechniqueSettings};
+use crepuscular_cli::render::{frame_desc, parse_technique};
+use crepuscular_scene::{GpuHost, Scene, builtin};
+
+fn small(name: &str) -> Scene {
+    let mut s = builtin::builtin(name).expect("built-in scene");
+    s.render.width = 80;
+    s.render.height = 45;
+    s.render.shadow.size = 256;
+    s
+}
+
+/// The GPU techniques at settings sized for an 80×45 frame.
+fn techniques(scene: &Scene) -> Vec<TechniqueSettings> {
+    [
+        ("brute-force", &["steps=24"][..]),
+        ("interleaved", &["steps=32"]),
+        ("subsampled", &["steps=24"]),
+        ("epipolar", &["slices=64", "samples=48"]),
+        ("prefiltered", &["map_size=[128, 128]"]),
+    ]
+    .iter()
+    .map(|(t, set)| {
+        let set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
+        parse_technique(t, scene, &set).unwrap()
+    })
+    .collect()
+}
+
+fn read(gpu: &GpuContext, t: &wgpu::Texture) -> Vec<u32> {
+    gpu.read_texture_f32(t, 0).unwrap().into_iter().map(f32::to_bits).collect()
+}
+
+/// An output texture filled with `value` in every channel.
+fn filled_output(gpu: &GpuContext, w: u32, h: u32, value: f32) -> wgpu::Texture {
+    // An engine's own target: storage for the effect, copy destination for the sentinel.
+    let t = gpu.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("engine target"),
+        size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba32Float,
+        usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    gpu.queue.write_texture(
+        t.as_image_copy(),
+        bytemuck::cast_slice(&vec![value; (w * h * 4) as usize]),
+        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(w * 16), rows_per_image: Some(h) },
+        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+    );
+    t
+}
+
+#[test]
+fn encode_records_into_the_callers_encoder_and_never_submits() {
+    let Some(gpu) = test_gpu("encode_records_into_the_callers_encoder_and_never_submits") else { return };
+    let sentinel = 7.25f32;
+    for scene_name in ["colonnade", "cage", "stained-glass"] {
+        let scene = small(scene_name);
+        let desc = frame_desc(&scene);
+        let (w, h) = (desc.width, desc.height);
+        let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+        let spot = match &scene.light {
+            crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
+            _ => None,
+        };
+        let tex = host.render(&gpu, &desc, spot).unwrap();
+        let views = tex.views();
+        let frame = views.frame(&desc);
+        for settings in techniques(&scene) {
+            let name = settings.name();
+            // The engine's constructor: its own device and queue, nothing else.
+            let mut sc = Scattering::new(&gpu.device, &gpu.queue, settings).unwrap();
+            assert_eq!(sc.stats_mode(), StatsMode::Deferred);
+            let expected_tex = gpu.create_output_texture(w, h);
+            sc.render(&frame, &expected_tex.create_view(&Default::default())).unwrap();
+            let expected = read(&gpu, &expected_tex);
+            assert!(expected.iter().any(|&b| f32::from_bits(b) > 0.0), "{scene_name} {name}: a black frame");
+
+            let out = filled_output(&gpu, w, h, sentinel);
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            sc.encode(&mut encoder, &frame, &out.create_view(&Default::default())).unwrap();
+            // Everything encode recorded is still in the caller's encoder: the GPU has run
+            // all submitted work (this readback waits for it) and the output is untouched.
+            let before = read(&gpu, &out);
+            assert!(
+                before.iter().all(|&b| b == sentinel.to_bits()),
+                "{scene_name} {name}: encode wrote the output before the caller submitted"
+            );
+            gpu.queue.submit([encoder.finish()]);
+            sc.end_frame();
+            assert_eq!(read(&gpu, &out), expected, "{scene_name} {name}: the submitted frame differs");
+
+            // Two different frames (the second with a denser medium) into one encoder, one
+            // submit: each is its own frame (the uniforms are uploaded in order inside the
+            // encoder, not by the queue before it).
+            let mut denser = desc.clone();
+            denser.medium.scattering *= 2.0;
+            let frame2 = GpuFrame { desc: &denser, ..frame };
+            let expected2_tex = gpu.create_output_texture(w, h);
+            sc.render(&frame2, &expected2_tex.create_view(&Default::default())).unwrap();
+            let expected2 = read(&gpu, &expected2_tex);
+            assert_ne!(expected2, expected, "{scene_name} {name}: the denser medium changed nothing");
+            let (a, b) = (filled_output(&gpu, w, h, sentinel), filled_output(&gpu, w, h, sentinel));
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            sc.encode(&mut encoder, &frame, &a.create_view(&Default::default())).unwrap();
+            sc.encode(&mut encoder, &frame2, &b.create_view(&Default::default())).unwrap();
+            gpu.queue.submit([encoder.finish()]);
+            sc.end_frame();
+            assert_eq!(read(&gpu, &a), expected, "{scene_name} {name}: the first of two frames in one encoder");
+            assert_eq!(read(&gpu, &b), expected2, "{scene_name} {name}: the second of two frames in one encoder");
+            // Both frames' stats arrive (the readback above waited for the GPU).
+            let stats = sc.stats().expect("the frames' stats").clone();
+            assert_eq!(stats.technique, name);
+            assert!(!stats.passes.is_empty(), "{name}: no passes in the stats");
+            eprintln!("{scene_name} {name}: ok ({} passes, timing {})", stats.passes.len(), stats.timing);
+        }
+    }
+}
+
+#[test]
+fn deferred_counters_arrive_after_the_frame_and_match_the_wall_clock_ones() {
+    let Some(gpu) = test_gpu("deferred_counters_arrive_after_the_frame_and_match_the_wall_clock_ones") else {
+        return;
+    };
+    let scene = small("colonnade");
+    let desc = frame_desc(&scene);
+    let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+    let tex = host.render(&gpu, &desc, None).unwrap();
+    let views = tex.views();
+    let frame = views.frame(&desc);
+    let out = gpu.create_output_texture(desc.width, desc.height);
+    let out_view = out.create_view(&Default::default());
+    for settings in techniques(&scene) {
+        let name = settings.name();
+        let mut measured =
+            Scattering::from_gpu(&gpu, settings.clone()).unwrap().with_stats(StatsMode::WallClock).unwrap();
+        let want = measured.render(&frame, &out_view).unwrap();
+        let mut sc = Scattering::from_gpu(&gpu, settings).unwrap();
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        sc.encode(&mut encoder, &frame, &out_view).unwrap();
+        assert!(sc.stats().is_none(), "{name}: stats before the frame was submitted");
+        gpu.queue.submit([encoder.finish()]);
+        sc.end_frame();
+        gpu.wait().unwrap();
+        let got = sc.stats().expect("the frame's stats after the GPU finished").clone();
+        assert_eq!(got.raymarched_samples, want.raymarched_samples, "{name}");
+        assert_eq!(got.extra, want.extra, "{name}");
+        let names =
+            |s: &crepuscular::stats::TechniqueStats| s.passes.iter().map(|p| p.name.clone()).collect::<Vec<_>>();
+        assert_eq!(names(&got), names(&want), "{name}");
+        assert_eq!(want.timing, "wall-clock");
+        let expected_timing = if gpu.timestamps { "timestamp-queries" } else { "unmeasured" };
+        assert_eq!(got.timing, expected_timing, "{name}");
+    }
+}
+
+#[test]
+fn inputs_that_do_not_match_the_frame_are_errors_naming_them() {
+    let Some(gpu) = test_gpu("inputs_that_do_not_match_the_frame_are_errors_naming_them") else { return };
+    let scene = small("colonnade");
+    let desc = frame_desc(&scene);
+    let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+    let tex = host.render(&gpu, &desc, None).unwrap();
+    let views = tex.views();
+    let frame = views.frame(&desc);
+    let mut sc = Scattering::from_gpu(&gpu, TechniqueSettings::named("brute-force").unwrap()).unwrap();
+    let check = |sc: &mut Scattering, frame: &GpuFrame, out: &wgpu::Texture, key: &str, why: &str| {
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        match sc.encode(&mut encoder, frame, &out.create_view(&Default::default())) {
+            Err(e @ Error::Invalid { .. }) => {
+                let m = e.to_string();
+                assert!(m.contains(key) && m.contains(why), "{key}: {m}");
+                eprintln!("{m}");
+            }
+            other => panic!("{key}: expected an error, got {other:?}"),
+        }
+    };
+    let small_out = gpu.create_output_texture(desc.width / 2, desc.height);
+    check(&mut sc, &frame, &small_out, "output", "frame's size");
+    let rgba8 = crepuscular::gpu::storage_texture(
+        &gpu.device,
+        "wrong",
+        wgpu::TextureFormat::Rgba8Unorm,
+        desc.width,
+        desc.height,
+    );
+    check(&mut sc, &frame, &rgba8, "output", "Rgba32Float");
+    let out = gpu.create_output_texture(desc.width, desc.height);
+    // A depth buffer of another size.
+    let other = small("colonnade");
+    let mut other_desc = frame_desc(&other);
+    other_desc.width = 40;
+    other_desc.height = 30;
+    let other_tex = host.render(&gpu, &other_desc, None).unwrap();
+    let other_views = other_tex.views();
+    let other_frame = other_views.frame(&other_desc);
+    check(&mut sc, &GpuFrame { depth: other_frame.depth, ..frame }, &out, "depth", "frame's size");
+    // A point light's frame with a one-layer shadow map.
+    let mut point = desc.clone();
+    point.light = builtin::builtin("cage").unwrap().light;
+    point.shadow.layers = 6;
+    check(&mut sc, &GpuFrame { desc: &point, ..frame }, &out, "shadow_map", "6 layer");
+    // The real thing still renders.
+    let mut encoder = gpu.device.create_command_encoder(&Default::default());
+    sc.encode(&mut encoder, &frame, &out.create_view(&Default::default())).unwrap();
+}
+
+#[test]
+fn bind_groups_are_built_on_resize_and_new_inputs_not_per_frame() {
+    let Some(gpu) = test_gpu("bind_groups_are_built_on_resize_and_new_inputs_not_per_frame") else { return };
+    let scene = small("colonnade");
+    let desc = frame_desc(&scene);
+    let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+    let tex = host.render(&gpu, &desc, None).unwrap();
+    let views = tex.views();
+    let frame = views.frame(&desc);
+    let out = gpu.create_output_texture(desc.width, desc.height);
+    let out_view = out.create_view(&Default::default());
+    for settings in techniques(&scene) {
+        let name = settings.name();
+        let mut sc = Scattering::from_gpu(&gpu, settings).unwrap();
+        for _ in 0..3 {
+            sc.render(&frame, &out_view).unwrap();
+        }
+        assert_eq!(sc.technique().bind_group_builds(), 1, "{name}: three frames of the same inputs");
+        // Another output texture (an engine's second swap target): rebuilt once, then kept.
+        let other = gpu.create_output_texture(desc.width, desc.height);
+        let other_view = other.create_view(&Default::default());
+        sc.render(&frame, &other_view).unwrap();
+        sc.render(&frame, &other_view).unwrap();
+        assert_eq!(sc.technique().bind_group_builds(), 2, "{name}: a new output");
+        // A resize.
+        let mut half = small("colonnade");
+        half.render.width = 40;
+        half.render.height = 22;
+        let half_desc = frame_desc(&half);
+        let half_tex = host.render(&gpu, &half_desc, None).unwrap();
+        let half_views = half_tex.views();
+        let half_out = gpu.create_output_texture(40, 22);
+        let half_out_view = half_out.create_view(&Default::default());
+        for _ in 0..2 {
+            sc.render(&half_views.frame(&half_desc), &half_out_view).unwrap();
+        }
+        assert_eq!(sc.technique().bind_group_builds(), 3, "{name}: a resize");
+    }
+}

@@ -1,0 +1,252 @@
+//! The final composite on the GPU: L = T(s)·L_surface + L_scatt (docs/MODEL.md §1) applied to
+//! the caller's HDR colour, with the display transform of [`crate::tonemap`] optional and
+//! separate. One fullscreen render pass recorded into the caller's encoder. Its CPU mirror is
+//! [`crate::tonemap::composite`] over [`crate::frame::surface_transmittance`] (and
+//! [`ToneMap::apply`] for the display transform), tested pixel by pixel against it.
+
+use crate::error::Error;
+use crate::frame::FrameDesc;
+use crate::tonemap::ToneMap;
+use std::collections::HashMap;
+
+/// The composite pass shader (composed with common.wgsl).
+pub const COMPOSITE_WGSL: &str = include_str!("composite.wgsl");
+
+/// Where the composite writes.
+#[derive(Clone, Copy, Debug)]
+pub enum CompositeTarget<'a> {
+    /// Into another render target (any colour format the device can render to: `Rgba16Float`
+    /// or `Rgba32Float` for linear HDR, `Rgba8Unorm`/`Rgba8UnormSrgb`/`Bgra8Unorm…` with the
+    /// display transform). The surface colour is read from [`CompositeInputs::surface`].
+    Into(&'a wgpu::TextureView),
+    /// Back into the caller's HDR colour texture itself (which must have `COPY_SRC` and
+    /// `RENDER_ATTACHMENT` usage, and be the frame's size): the pass first copies it into a
+    /// scratch texture it keeps (allocated on the first frame and on resize), then draws from
+    /// that. Cost: one texture copy. [`CompositeInputs::surface`] is ignored.
+    InPlace(&'a wgpu::Texture),
+}
+
+/// What the composite reads: views of the caller's textures for one frame.
+#[derive(Clone, Copy, Debug)]
+pub struct CompositeInputs<'a> {
+    /// The frame (camera, medium, size): T(s) is rebuilt from `depth` with its camera.
+    pub desc: &'a FrameDesc,
+    /// Camera depth, as given to the technique ([`crate::GpuFrame::depth`]).
+    pub depth: &'a wgpu::TextureView,
+    /// The technique's in-scattering (its output texture).
+    pub inscatter: &'a wgpu::TextureView,
+    /// The engine's lit surface colour (linear HDR, a float format), for
+    /// [`CompositeTarget::Into`].
+    pub surface: &'a wgpu::TextureView,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    tone: [f32; 4],
+}
+
+/// The composite pass, built once per device; pipelines are made per target format as they
+/// are first used.
+pub struct Composite {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    module: wgpu::ShaderModule,
+    layout: wgpu::BindGroupLayout,
+    pipeline_layout: wgpu::PipelineLayout,
+    pipelines: HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
+    frame_buffer: wgpu::Buffer,
+    params_buffer: wgpu::Buffer,
+    scratch: Option<wgpu::Texture>,
+}
+
+impl Composite {
+    /// Builds the shader and layout on the caller's device.
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("composite.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(crate::shaders::compose(COMPOSITE_WGSL).into()),
+        });
+        let fragment = |binding, ty| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty,
+            count: None,
+        };
+        let uniform = wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        };
+        let texture = wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("composite"),
+            entries: &[
+                fragment(0, uniform),
+                fragment(1, uniform),
+                fragment(2, texture),
+                fragment(3, texture),
+                fragment(4, texture),
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("composite"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let buffer = |label, size| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        Self {
+            device: device.clone(),
+            queue: queue.clone(),
+            module,
+            layout,
+            pipeline_layout,
+            pipelines: HashMap::new(),
+            frame_buffer: buffer("composite frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64),
+            params_buffer: buffer("composite params", std::mem::size_of::<Params>() as u64),
+            scratch: None,
+        }
+    }
+
+    fn pipeline(&mut self, format: wgpu::TextureFormat) -> &wgpu::RenderPipeline {
+        let (device, module, layout) = (&self.device, &self.module, &self.pipeline_layout);
+        self.pipelines.entry(format).or_insert_with(|| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("composite"),
+                layout: Some(layout),
+                vertex: wgpu::VertexState {
+                    module,
+                    entry_point: Some("vs"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: Default::default(),
+                depth_stencil: None,
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module,
+                    entry_point: Some("fs"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(format.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        })
+    }
+
+    /// Records the composite into `encoder`. `tone`: `None` writes linear HDR radiance (for a
+    /// float target, before the engine's own tone mapping); `Some` applies exposure and the
+    /// filmic curve, and the sRGB encoding unless the target's format is itself sRGB. Errors
+    /// name a target or input whose size or format does not fit.
+    pub fn encode(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        inputs: &CompositeInputs,
+        target: CompositeTarget,
+        tone: Option<ToneMap>,
+    ) -> Result<(), Error> {
+        let d = inputs.desc;
+        let (w, h) = (d.width, d.height);
+        let size = |t: &wgpu::Texture| (t.width(), t.height());
+        for (key, t) in [("depth", inputs.depth.texture()), ("inscatter", inputs.inscatter.texture())] {
+            if size(t) != (w, h) {
+                return Err(Error::invalid(key, format!("{}×{}", t.width(), t.height()), format!("must be {w}×{h}")));
+            }
+        }
+        let target_texture = match target {
+            CompositeTarget::Into(v) => v.texture().clone(),
+            CompositeTarget::InPlace(t) => t.clone(),
+        };
+        if size(&target_texture) != (w, h) {
+            let s = format!("{}×{}", target_texture.width(), target_texture.height());
+            return Err(Error::invalid("composite target", s, format!("must be {w}×{h}")));
+        }
+        let format = target_texture.format();
+        if !target_texture.usage().contains(wgpu::TextureUsages::RENDER_ATTACHMENT) {
+            return Err(Error::invalid("composite target", format!("{format:?}"), "needs RENDER_ATTACHMENT usage"));
+        }
+        let surface_view = match target {
+            CompositeTarget::Into(_) => inputs.surface.clone(),
+            CompositeTarget::InPlace(t) => {
+                if !t.usage().contains(wgpu::TextureUsages::COPY_SRC) {
+                    return Err(Error::invalid(
+                        "composite target",
+                        format!("{format:?}"),
+                        "in place needs COPY_SRC usage",
+                    ));
+                }
+                if self.scratch.as_ref().is_none_or(|s| size(s) != (w, h) || s.format() != format) {
+                    self.scratch = Some(self.device.create_texture(&wgpu::TextureDescriptor {
+                        label: Some("composite scratch"),
+                        size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+                        mip_level_count: 1,
+                        sample_count: 1,
+                        dimension: wgpu::TextureDimension::D2,
+                        format,
+                        usage: wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::TEXTURE_BINDING,
+                        view_formats: &[],
+                    }));
+                }
+                let scratch = self.scratch.as_ref().expect("allocated above");
+                encoder.copy_texture_to_texture(
+                    t.as_image_copy(),
+                    scratch.as_image_copy(),
+                    wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+                );
+                scratch.create_view(&Default::default())
+            }
+        };
+        let tone_params = match tone {
+            Some(t) => [t.exposure, 1.0, if format.is_srgb() { 0.0 } else { 1.0 }, 0.0],
+            None => [1.0, 0.0, 0.0, 0.0],
+        };
+        self.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&d.uniforms()));
+        self.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&Params { tone: tone_params }));
+        let view = wgpu::BindingResource::TextureView;
+        let bind = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("composite"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: view(&surface_view) },
+                wgpu::BindGroupEntry { binding: 3, resource: view(inputs.inscatter) },
+                wgpu::BindGroupEntry { binding: 4, resource: view(inputs.depth) },
+            ],
+        });
+        let target_view = match target {
+            CompositeTarget::Into(v) => v.clone(),
+            CompositeTarget::InPlace(t) => t.create_view(&Default::default()),
+        };
+        let pipeline = self.pipeline(format).clone();
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("composite"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &target_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::BLACK), store: wgpu::StoreOp::Store },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.draw(0..3, 0..1);
+        Ok(())
+    }
+}

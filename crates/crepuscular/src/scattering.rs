@@ -1,0 +1,443 @@
+//! The one way in: [`Scattering`], a technique on the caller's device, recorded into the
+//! caller's encoder, and [`TechniqueSettings::render_cpu`], the same technique's CPU mirror.
+//!
+//! An engine's frame:
+//!
+//! ```no_run
+//! # fn frame(device: &wgpu::Device, queue: &wgpu::Queue, frame: &crepuscular::GpuFrame,
+//! #          output: &wgpu::TextureView) -> Result<(), crepuscular::Error> {
+//! use crepuscular::{Scattering, TechniqueSettings};
+//! let mut scattering = Scattering::new(device, queue, TechniqueSettings::named("epipolar")?)?;
+//! let mut encoder = device.create_command_encoder(&Default::default());
+//! scattering.encode(&mut encoder, frame, output)?; // records; never submits, polls or maps
+//! queue.submit([encoder.finish()]);
+//! scattering.end_frame(); // starts the non-blocking readback of this frame's timings
+//! if let Some(stats) = scattering.stats() { println!("{:.2} ms", stats.total_ms()); }
+//! # Ok(()) }
+//! ```
+
+use crate::error::Error;
+use crate::frame::{CpuFrame, FrameDesc, GpuFrame};
+use crate::gpu::{GpuContext, Recorder, StatsMode};
+use crate::image::Image;
+use crate::record::ApplyCounters;
+use crate::stats::{PassTime, TechniqueStats};
+use crate::techniques::{AnyGpuTechnique, TechniqueSettings};
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// A technique's GPU side, kept between frames (what the engine's device and queue, the
+/// technique's settings and its pipelines make). Build it once; [`Scattering::update`] changes
+/// settings in place, [`Scattering::encode`] records a frame.
+///
+/// **What it needs from the device.** Every technique uses only WebGPU's core features and
+/// default limits (compute shaders, write-only `Rgba32Float` / `R32Float` / `R32Uint` storage
+/// textures, storage buffers, indirect dispatch; at most 8 storage textures or buffers and 10
+/// sampled textures per pass; 64 invocations per workgroup), checked on creation
+/// ([`Scattering::check_device`]). Optional features change the path, never the answer:
+/// `TIMESTAMP_QUERY` times the passes ([`StatsMode::Deferred`]); `DEPTH_CLIP_CONTROL` lets a host
+/// rasterize prefiltered's rectified map with hardware depth clamping.
+pub struct Scattering {
+    gpu: GpuContext,
+    technique: AnyGpuTechnique,
+    mode: StatsMode,
+    profiler: Option<wgpu_profiler::GpuProfiler>,
+    /// Uploads the frame's uniforms inside the caller's encoder.
+    belt: wgpu::util::StagingBelt,
+    /// Frames encoded since the last [`Scattering::end_frame`].
+    recorded: Vec<Pending>,
+    /// Frames submitted whose timings and counters have not all arrived, oldest first.
+    in_flight: VecDeque<InFlight>,
+    /// Readback buffers no frame uses (the ring's free slots).
+    free_readbacks: Vec<wgpu::Buffer>,
+    latest: Option<TechniqueStats>,
+}
+
+/// One encoded frame's stats, waiting for its timings and counters.
+struct Pending {
+    stats: TechniqueStats,
+    counters: Option<(wgpu::Buffer, ApplyCounters)>,
+}
+
+/// The frames of one submission, their readbacks being mapped.
+struct InFlight {
+    frames: Vec<Pending>,
+    mapped: Arc<AtomicUsize>,
+    expected: usize,
+    timed: bool,
+}
+
+/// The smallest limits every technique needs (WebGPU's defaults cover them).
+fn required_limits() -> wgpu::Limits {
+    wgpu::Limits {
+        max_bind_groups: 1,
+        max_storage_textures_per_shader_stage: 2,
+        max_storage_buffers_per_shader_stage: 4,
+        max_sampled_textures_per_shader_stage: 5,
+        max_uniform_buffers_per_shader_stage: 2,
+        max_compute_invocations_per_workgroup: 64,
+        max_compute_workgroup_size_x: 64,
+        max_compute_workgroup_size_y: 8,
+        ..wgpu::Limits::downlevel_webgl2_defaults()
+    }
+}
+
+impl Scattering {
+    /// Builds `settings`' technique on the caller's device and queue (pipelines, uniform
+    /// buffers; size-dependent textures follow on the first frame). Statistics are
+    /// [`StatsMode::Deferred`]: see [`Scattering::with_stats`]. Errors: settings out of range,
+    /// a CPU-only technique (`reference`), a device below [`Scattering::check_device`].
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, settings: TechniqueSettings) -> Result<Self, Error> {
+        Self::from_gpu(&GpuContext::from_device(device, queue), settings)
+    }
+
+    /// [`Scattering::new`] on a [`GpuContext`] (the tools' device, or the caller's wrapped).
+    pub fn from_gpu(gpu: &GpuContext, settings: TechniqueSettings) -> Result<Self, Error> {
+        Self::check_device(&gpu.device)?;
+        settings.validate()?;
+        let technique = AnyGpuTechnique::new(gpu, settings)?;
+        let mut s = Self {
+            gpu: gpu.clone(),
+            technique,
+            mode: StatsMode::Deferred,
+            profiler: None,
+            belt: wgpu::util::StagingBelt::new(gpu.device.clone(), 16 * 1024),
+            recorded: Vec::new(),
+            in_flight: VecDeque::new(),
+            free_readbacks: Vec::new(),
+            latest: None,
+        };
+        s.set_stats_mode(StatsMode::Deferred)?;
+        Ok(s)
+    }
+
+    /// Checks that `device` has the limits every technique needs; the error names the limit.
+    pub fn check_device(device: &wgpu::Device) -> Result<(), Error> {
+        let have = device.limits();
+        let mut missing = None;
+        required_limits().check_limits_with_fail_fn(&have, true, |name, have, want| {
+            missing.get_or_insert_with(|| Error::Invalid {
+                key: format!("device limit {name}"),
+                value: have.to_string(),
+                reason: format!("the techniques need at least {want}"),
+            });
+        });
+        missing.map_or(Ok(()), Err)
+    }
+
+    /// The same, with statistics in `mode` (builder style).
+    pub fn with_stats(mut self, mode: StatsMode) -> Result<Self, Error> {
+        self.set_stats_mode(mode)?;
+        Ok(self)
+    }
+
+    /// Changes how frames are measured from the next frame on (frames in flight still report).
+    pub fn set_stats_mode(&mut self, mode: StatsMode) -> Result<(), Error> {
+        self.mode = mode;
+        if mode == StatsMode::Deferred && self.gpu.timestamps && self.profiler.is_none() {
+            let settings = wgpu_profiler::GpuProfilerSettings {
+                enable_timer_queries: true,
+                enable_debug_groups: false,
+                max_num_pending_frames: 4,
+            };
+            self.profiler = Some(
+                wgpu_profiler::GpuProfiler::new(&self.gpu.device, settings)
+                    .map_err(|e| Error::Gpu { context: "creating the pass timer".into(), message: e.to_string() })?,
+            );
+        }
+        Ok(())
+    }
+
+    /// How frames are measured.
+    pub fn stats_mode(&self) -> StatsMode {
+        self.mode
+    }
+
+    /// The technique's name.
+    pub fn name(&self) -> &'static str {
+        self.technique.name()
+    }
+
+    /// The technique's current settings.
+    pub fn settings(&self) -> TechniqueSettings {
+        self.technique.settings()
+    }
+
+    /// The technique itself, for its debug views and intermediate textures.
+    pub fn technique(&self) -> &AnyGpuTechnique {
+        &self.technique
+    }
+
+    /// The device and queue this runs on.
+    pub fn gpu(&self) -> &GpuContext {
+        &self.gpu
+    }
+
+    /// Applies `settings` in place when they are of the same technique (pipelines kept; each
+    /// technique rebuilds on its next frame only what the changed settings size or build) and
+    /// returns true; returns false, changing nothing, for another technique (build a new
+    /// [`Scattering`]). Settings out of range are an error and change nothing.
+    pub fn update(&mut self, settings: &TechniqueSettings) -> Result<bool, Error> {
+        settings.validate()?;
+        Ok(self.technique.update(settings))
+    }
+
+    /// Bytes of GPU memory the technique holds (not counting the caller's textures).
+    pub fn gpu_memory_bytes(&self) -> u64 {
+        self.technique.gpu_memory_bytes()
+    }
+
+    /// The host raster this frame would use, if any: `prefiltered`'s projective rectified
+    /// shadow map (Klehm et al. 2014, §4.2). A host that can rasterize its scene from these
+    /// matrices passes the result as [`GpuFrame::rectified_shadow_map`].
+    pub fn raster_request(&self, desc: &FrameDesc) -> Option<crate::techniques::prefiltered::RectifiedRaster> {
+        self.technique.settings().raster_request(desc)
+    }
+
+    /// Records the in-scattering of `frame` into `output` (a `STORAGE_BINDING` view of an
+    /// `Rgba32Float` texture of the frame's size) into the caller's `encoder`: no submit, no
+    /// poll, no map (except in the tools' [`StatsMode::WallClock`], which submits and waits per
+    /// pass and leaves `encoder` empty). Submit the encoder, then call
+    /// [`Scattering::end_frame`]. Inputs that do not match the frame (sizes, formats, layer
+    /// counts) are an [`Error::Invalid`] naming them; validation errors an [`Error::Gpu`].
+    pub fn encode(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<(), Error> {
+        check_frame(&self.gpu, frame, output)?;
+        let profiler = match self.mode {
+            StatsMode::Deferred => self.profiler.as_ref(),
+            _ => None,
+        };
+        let mut rec = match self.mode {
+            StatsMode::WallClock => Recorder::wall_clock(&self.gpu),
+            StatsMode::Deferred => Recorder::encoder(&self.gpu, encoder, profiler, &mut self.belt, true),
+            StatsMode::Off => Recorder::encoder(&self.gpu, encoder, None, &mut self.belt, false),
+        };
+        let result = self.technique.encode(&self.gpu, &mut rec, frame, output);
+        let timing = rec.mode();
+        let (passes, counters) = rec.finish();
+        // The uniform uploads recorded into the encoder are complete: the caller may submit.
+        self.belt.finish();
+        let mut stats = result?;
+        stats.passes = passes;
+        stats.timing = timing.into();
+        match self.mode {
+            StatsMode::WallClock => {
+                if let Some(c) = counters {
+                    let bytes = read_buffer(&self.gpu, &c.buffer)?;
+                    (c.apply)(&bytes, &mut stats);
+                }
+                self.latest = Some(stats);
+            }
+            StatsMode::Off => self.latest = Some(stats),
+            StatsMode::Deferred => {
+                let counters = counters.map(|c| {
+                    let size = c.buffer.size();
+                    let slot = self.take_readback(size);
+                    encoder.copy_buffer_to_buffer(&c.buffer, 0, &slot, 0, size);
+                    (slot, c.apply)
+                });
+                if let Some(p) = self.profiler.as_mut().filter(|_| self.gpu.timestamps) {
+                    p.resolve_queries(encoder);
+                }
+                self.recorded.push(Pending { stats, counters });
+            }
+        }
+        Ok(())
+    }
+
+    /// Marks the end of a frame: call it once after submitting the encoder(s) that hold the
+    /// frames encoded since the last call. It starts the non-blocking readback of their
+    /// timestamps and counters ([`StatsMode::Deferred`]); their stats arrive in
+    /// [`Scattering::stats`] once the GPU has run them (one or more frames later).
+    pub fn end_frame(&mut self) {
+        self.belt.recall();
+        if self.recorded.is_empty() {
+            return;
+        }
+        let frames = std::mem::take(&mut self.recorded);
+        let timed = match self.profiler.as_mut().filter(|_| self.gpu.timestamps) {
+            Some(p) => p.end_frame().is_ok(),
+            None => false,
+        };
+        let mapped = Arc::new(AtomicUsize::new(0));
+        let mut expected = 0;
+        for f in &frames {
+            if let Some((buffer, _)) = &f.counters {
+                expected += 1;
+                let mapped = mapped.clone();
+                buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                    if r.is_ok() {
+                        mapped.fetch_add(1, Ordering::AcqRel);
+                    }
+                });
+            }
+        }
+        self.in_flight.push_back(InFlight { frames, mapped, expected, timed });
+    }
+
+    /// The stats of the newest frame whose timings and counters have arrived (never waits;
+    /// polls the device without blocking so that finished readbacks are delivered). With
+    /// [`StatsMode::WallClock`] and [`StatsMode::Off`] they are the last encoded frame's.
+    pub fn stats(&mut self) -> Option<&TechniqueStats> {
+        if !self.in_flight.is_empty() {
+            let _ = self.gpu.device.poll(wgpu::PollType::Poll);
+        }
+        let period = self.gpu.queue.get_timestamp_period();
+        while let Some(front) = self.in_flight.front() {
+            if front.mapped.load(Ordering::Acquire) < front.expected {
+                break;
+            }
+            let times = match (front.timed, self.profiler.as_mut()) {
+                (true, Some(p)) => match p.process_finished_frame(period) {
+                    Some(results) => Some(results),
+                    None => break,
+                },
+                _ => None,
+            };
+            let done = self.in_flight.pop_front().expect("front exists");
+            let mut times = times.into_iter().flatten();
+            for mut f in done.frames {
+                for pass in &mut f.stats.passes {
+                    if let Some(r) = times.next() {
+                        pass.ms = r.time.map_or(0.0, |t| (t.end - t.start) * 1e3);
+                    }
+                }
+                if let Some((buffer, apply)) = f.counters {
+                    let bytes = buffer.slice(..).get_mapped_range().to_vec();
+                    buffer.unmap();
+                    apply(&bytes, &mut f.stats);
+                    self.free_readbacks.push(buffer);
+                }
+                self.latest = Some(f.stats);
+            }
+        }
+        self.latest.as_ref()
+    }
+
+    /// A tool's whole frame: records `frame` into an encoder of its own, submits it, waits for
+    /// the GPU and returns the frame's stats. Never use it in an engine's frame loop (it
+    /// waits); use [`Scattering::encode`].
+    pub fn render(&mut self, frame: &GpuFrame, output: &wgpu::TextureView) -> Result<TechniqueStats, Error> {
+        let mut encoder = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(self.technique.name()) });
+        self.encode(&mut encoder, frame, output)?;
+        self.gpu.scoped("submitting the frame", || self.gpu.queue.submit([encoder.finish()]))?;
+        self.end_frame();
+        self.gpu.wait()?;
+        self.stats().cloned().ok_or_else(|| Error::Gpu {
+            context: "reading the frame's stats".into(),
+            message: "the frame's timings or counters did not arrive".into(),
+        })
+    }
+
+    /// A readback buffer of `size` bytes from the ring (a new one when none is free).
+    fn take_readback(&mut self, size: u64) -> wgpu::Buffer {
+        match self.free_readbacks.iter().position(|b| b.size() == size) {
+            Some(i) => self.free_readbacks.swap_remove(i),
+            None => self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("counters readback"),
+                size,
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            }),
+        }
+    }
+}
+
+/// Copies a buffer into a new readback buffer, submits, waits and returns its bytes (tools and
+/// [`StatsMode::WallClock`] only).
+pub(crate) fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, Error> {
+    let read = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: buffer.size(),
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    enc.copy_buffer_to_buffer(buffer, 0, &read, 0, buffer.size());
+    gpu.queue.submit([enc.finish()]);
+    gpu.read_mapped(&read, "reading back a buffer", |d| d.to_vec())
+}
+
+/// The frame's textures against its description: sizes, formats, layer counts.
+fn check_frame(gpu: &GpuContext, frame: &GpuFrame, output: &wgpu::TextureView) -> Result<(), Error> {
+    let d = frame.desc;
+    gpu.check_texture_size("image size", d.width, d.height)?;
+    let size = |t: &wgpu::Texture| format!("{}×{}×{}", t.width(), t.height(), t.depth_or_array_layers());
+    let (w, h) = (d.width, d.height);
+    let out = output.texture();
+    if out.format() != wgpu::TextureFormat::Rgba32Float {
+        return Err(Error::invalid("output", format!("{:?}", out.format()), "must be an Rgba32Float texture"));
+    }
+    if !out.usage().contains(wgpu::TextureUsages::STORAGE_BINDING) {
+        return Err(Error::invalid("output", format!("{:?}", out.usage()), "needs STORAGE_BINDING usage"));
+    }
+    if (out.width(), out.height()) != (w, h) {
+        return Err(Error::invalid("output", size(out), format!("must be the frame's size {w}×{h}")));
+    }
+    let depth = frame.depth.texture();
+    let depth_ok = matches!(depth.format(), wgpu::TextureFormat::Depth32Float | wgpu::TextureFormat::R32Float);
+    if !depth_ok {
+        return Err(Error::invalid("depth", format!("{:?}", depth.format()), "must be Depth32Float or R32Float"));
+    }
+    if (depth.width(), depth.height()) != (w, h) {
+        return Err(Error::invalid("depth", size(depth), format!("must be the frame's size {w}×{h}")));
+    }
+    let sm = frame.shadow_map.texture();
+    let sp = &d.shadow;
+    let layers = if matches!(d.light, crate::Light::Point { .. }) { 6 } else { 1 };
+    if sp.layers != layers || sm.depth_or_array_layers() < layers {
+        return Err(Error::invalid(
+            "shadow_map",
+            size(sm),
+            format!("a {} light needs {layers} layer(s) (the frame says {})", d.light.kind_name(), sp.layers),
+        ));
+    }
+    if (sm.width(), sm.height()) != (sp.size, sp.size) {
+        return Err(Error::invalid(
+            "shadow_map",
+            size(sm),
+            format!("must be {0}×{0} (the frame's shadow size)", sp.size),
+        ));
+    }
+    if !matches!(sm.format(), wgpu::TextureFormat::Depth32Float | wgpu::TextureFormat::R32Float) {
+        return Err(Error::invalid("shadow_map", format!("{:?}", sm.format()), "must be Depth32Float or R32Float"));
+    }
+    Ok(())
+}
+
+impl TechniqueSettings {
+    /// Runs the technique's CPU implementation on `frame`. `rectified` is the host's raster of
+    /// [`TechniqueSettings::raster_request`] (`prefiltered` only; None: resampled from the
+    /// shadow map). `progress(done, total)` is called as long work (the reference) advances.
+    pub fn render_cpu(
+        &self,
+        frame: &CpuFrame,
+        rectified: Option<&[f32]>,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(Image, TechniqueStats), Error> {
+        self.validate()?;
+        let (image, stats) = self.render_cpu_unchecked(frame, rectified, progress)?;
+        if !image.all_finite() {
+            return Err(Error::invalid(
+                self.name(),
+                "NaN/Inf",
+                "the technique produced non-finite values — a bug, please report it",
+            ));
+        }
+        Ok((image, stats))
+    }
+
+    /// The times of a host raster as the first pass of `stats` (what a tool that rasterized
+    /// the rectified map adds).
+    pub fn with_host_raster(stats: &mut TechniqueStats, ms: f64) {
+        stats.passes.insert(0, PassTime { name: "rasterize (host)".into(), ms });
+    }
+}

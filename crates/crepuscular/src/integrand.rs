@@ -1,4 +1,4 @@
-//! The single-scattering integrand shared by every technique (DESIGN.md §1):
+//! The single-scattering integrand shared by every technique (docs/MODEL.md §1):
 //! L_scatt = ∫₀ˢ T(t)·σs·p(cos θ)·L_in(x_t)·V(x_t) dt. Each function here has a WGSL twin of the
 //! same name in `shaders/common.wgsl`.
 
@@ -78,7 +78,7 @@ pub fn inscatter_density(
     if l_in == Vec3::ZERO {
         return Vec3::ZERO;
     }
-    // cos θ = dot(ω_l, −ω): θ = 0 looking straight into the light (DESIGN.md §1).
+    // cos θ = dot(ω_l, −ω): θ = 0 looking straight into the light (docs/MODEL.md §1).
     let cos_theta = -wl.dot(view_dir);
     medium.scattering * medium.phase.eval(cos_theta) * l_in
 }

@@ -1,4 +1,4 @@
-//! The physical model shared by every technique (DESIGN.md §1): camera, medium, phase
+//! The physical model shared by every technique (docs/MODEL.md §1): camera, medium, phase
 //! functions and lights. Everything here is plain data plus the closed-form pieces of the
 //! single-scattering integral; the GPU mirrors these functions in `shaders/common.wgsl`
 //! under the same names.
@@ -90,7 +90,7 @@ pub fn linear_depth(d: f32, near: f32, far: f32) -> f32 {
 }
 
 /// A phase function p(cos θ), normalised to integrate to 1 over the sphere.
-/// θ is the scattering angle: 0 when looking straight into the light (DESIGN.md §1).
+/// θ is the scattering angle: 0 when looking straight into the light (docs/MODEL.md §1).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Phase {
@@ -187,7 +187,7 @@ impl Phase {
     }
 }
 
-/// A homogeneous participating medium (DESIGN.md §1). Coefficients are per world unit
+/// A homogeneous participating medium (docs/MODEL.md §1). Coefficients are per world unit
 /// (metre) and per RGB channel; σt = σs + σa.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Medium {

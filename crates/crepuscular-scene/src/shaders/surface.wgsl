@@ -1,5 +1,5 @@
 // host / surface: camera depth and Lambert-lit surface radiance with filtered shadow lookups
-// and ambient (DESIGN.md §1 "Surfaces"). Composed after common.wgsl.
+// and ambient (docs/MODEL.md §1). Composed after common.wgsl.
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var shadow_map: texture_2d_array<f32>;

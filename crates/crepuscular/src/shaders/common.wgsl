@@ -1,5 +1,5 @@
 // Shared WGSL for every pass: the frame uniforms, phase functions, lights, shadow lookups and
-// the single-scattering integrand (DESIGN.md §1). Every function has a Rust twin of the same
+// the single-scattering integrand (docs/MODEL.md §1). Every function has a Rust twin of the same
 // name (model.rs, shadow.rs, integrand.rs, frame.rs) that the CPU mirror calls.
 // Composition: this file is prepended to each pass shader (see shaders.rs).
 

@@ -86,7 +86,7 @@ macro_rules! registry {
      cpu: [$($cvariant:ident($cmodule:ident::$csettings:ident)),* $(,)?]) => {
         /// A technique and its settings: what a scene file's `[render.<name>]` table, a
         /// `--set key=value` and [`crate::Scattering::new`] take.
-        #[derive(Clone, Debug, PartialEq, serde::Serialize)]
+        #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
         #[serde(tag = "technique", rename_all = "kebab-case")]
         pub enum TechniqueSettings {
             $(#[doc = concat!("`", stringify!($module), "`: [`", stringify!($module), "::", stringify!($settings), "`].")]
@@ -243,7 +243,7 @@ macro_rules! registry {
 
 fn unknown(name: &str) -> Error {
     let known: Vec<_> = TECHNIQUES.iter().map(|t| t.name).collect();
-    Error::invalid("technique", name, format!("unknown (known: {})", known.join(", ")))
+    Error::invalid("technique", name, format!("unknown technique (known: {})", known.join(", ")))
 }
 
 // The registry: one line per technique (its folder implements `Technique` on its settings and,

@@ -2,8 +2,8 @@
 //! [`Preset::ReferenceLike`] — for every technique, so that a renderer can offer "quality:
 //! low / medium / high" without knowing what each technique's knobs mean.
 //!
-//! [`TechniqueSettings`] is one technique's settings, tagged with its name; it is
-//! serde-serialisable (`{ technique = "brute-force", steps = 32, ... }`), so a user can save a
+//! [`TechniqueSettings`] (the registry's, [`crate::techniques`]) is one technique's settings,
+//! tagged with its name; it is serde-serialisable (`{ technique = "brute-force", steps = 32, ... }`), so a user can save a
 //! preset (or a tuned variant of one) and load it back.
 //!
 //! What each preset chooses, and why:
@@ -37,6 +37,7 @@ use crate::techniques::interleaved::InterleavedSettings;
 use crate::techniques::prefiltered::PrefilteredSettings;
 use crate::techniques::reference::ReferenceSettings;
 use crate::techniques::subsampled::SubsampledSettings;
+use crate::techniques::TechniqueSettings;
 use serde::{Deserialize, Serialize};
 
 /// A quality/cost intent.
@@ -174,41 +175,13 @@ impl Preset {
     }
 }
 
-/// One technique's settings, tagged with its name (`technique = "brute-force"` beside the
-/// technique's own keys when serialised).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "technique", rename_all = "kebab-case")]
-pub enum TechniqueSettings {
-    /// `brute-force`.
-    BruteForce(BruteForceSettings),
-    /// `interleaved`.
-    Interleaved(InterleavedSettings),
-    /// `subsampled`.
-    Subsampled(SubsampledSettings),
-    /// `epipolar`.
-    Epipolar(EpipolarSettings),
-    /// `prefiltered`.
-    Prefiltered(PrefilteredSettings),
-    /// `reference`.
-    Reference(ReferenceSettings),
-}
-
-impl TechniqueSettings {
-    /// The technique's name.
-    pub fn technique(&self) -> &'static str {
-        match self {
-            TechniqueSettings::BruteForce(_) => "brute-force",
-            TechniqueSettings::Interleaved(_) => "interleaved",
-            TechniqueSettings::Subsampled(_) => "subsampled",
-            TechniqueSettings::Epipolar(_) => "epipolar",
-            TechniqueSettings::Prefiltered(_) => "prefiltered",
-            TechniqueSettings::Reference(_) => "reference",
-        }
-    }
+#[cfg(test)]
+mod tests {
+    use super::*;
 
     /// Ray-marching steps per ray (per pixel, sample or reference pixel).
-    pub fn steps(&self) -> u32 {
-        match self {
+    fn march_steps(s: &TechniqueSettings) -> u32 {
+        match s {
             TechniqueSettings::BruteForce(s) => s.steps,
             TechniqueSettings::Interleaved(s) => s.steps,
             TechniqueSettings::Subsampled(s) => s.steps,
@@ -218,34 +191,12 @@ impl TechniqueSettings {
         }
     }
 
-    /// Checks the ranges, as the technique's constructor does.
-    pub fn validate(&self) -> Result<(), Error> {
-        match self {
-            TechniqueSettings::BruteForce(s) => s.validate(),
-            TechniqueSettings::Interleaved(s) => s.validate(),
-            TechniqueSettings::Subsampled(s) => s.validate(),
-            TechniqueSettings::Epipolar(s) => s.validate(),
-            TechniqueSettings::Prefiltered(s) => s.validate(),
-            TechniqueSettings::Reference(s) => {
-                if s.steps < 2 || s.steps % 2 != 0 || s.steps > 1 << 20 {
-                    return Err(Error::invalid("reference.steps", s.steps, "must be even and in 2..=1048576"));
-                }
-                Ok(())
-            }
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
     #[test]
     fn every_preset_of_every_technique_validates() {
         for t in super::super::TECHNIQUES {
             for p in Preset::ALL {
                 let s = p.settings(t.name).unwrap_or_else(|| panic!("{}: no {} preset", t.name, p.name()));
-                assert_eq!(s.technique(), t.name);
+                assert_eq!(s.name(), t.name);
                 s.validate().unwrap_or_else(|e| panic!("{} {}: {e}", t.name, p.name()));
             }
         }
@@ -255,7 +206,7 @@ mod tests {
     #[test]
     fn steps_grow_with_quality() {
         for t in super::super::TECHNIQUES {
-            let steps = Preset::ALL.map(|p| p.settings(t.name).unwrap().steps());
+            let steps = Preset::ALL.map(|p| march_steps(&p.settings(t.name).unwrap()));
             assert!(steps[0] <= steps[1] && steps[1] <= steps[2], "{}: {steps:?}", t.name);
         }
     }

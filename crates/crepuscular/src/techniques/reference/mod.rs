@@ -2,7 +2,7 @@
 //!
 //! CPU only, f64 throughout, the same shadow map as every technique (so the visibility term is
 //! identical and differences measure the technique, not the shadow map). Each pixel's integral
-//! L_scatt = ∫₀ˢ T(t)·σs·p(cos θ)·L_in(x_t)·V(x_t) dt (DESIGN.md §1) is estimated with N
+//! L_scatt = ∫₀ˢ T(t)·σs·p(cos θ)·L_in(x_t)·V(x_t) dt (docs/MODEL.md §1) is estimated with N
 //! stratified samples: stratum k covers [kΔ, (k+1)Δ], Δ = s/N, with one uniformly jittered
 //! sample in it; the estimator Σ f(t_k)·Δ is unbiased. Convergence is estimated per pixel by
 //! comparing it with the N/2-stratum estimator built from the even strata alone (weight 2Δ).

@@ -33,7 +33,7 @@ fn setup() -> (crepuscular::frame::FrameDesc, host_cpu::CpuHost, crepuscular_sce
     (scene.render.width, scene.render.height) = SIZE;
     scene.render.shadow.size = 256;
     let desc = frame_desc(&scene);
-    let host = host_cpu::render(&scene.geometry, &desc);
+    let host = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     (desc, host, scene)
 }
 
@@ -64,7 +64,7 @@ fn techniques(c: &mut Criterion) {
 fn host(c: &mut Criterion) {
     let (desc, _, scene) = setup();
     c.bench_function("cpu 64x36/host frame (shadow map 256², depth, surface)", |b| {
-        b.iter(|| black_box(host_cpu::render(black_box(&scene.geometry), &desc)))
+        b.iter(|| black_box(host_cpu::render(black_box(&scene.geometry), &scene.shading(), &desc)))
     });
 }
 

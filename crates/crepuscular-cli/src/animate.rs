@@ -195,7 +195,7 @@ impl<'g> PathRenderer<'g> {
         let host = match gpu {
             Some(g) => {
                 g.check_texture_size("image size", scene.render.width, scene.render.height)?;
-                Some(GpuHost::new(g, &scene.geometry)?)
+                Some(GpuHost::for_scene(g, &scene)?)
             }
             None => None,
         };
@@ -225,7 +225,7 @@ impl<'g> PathRenderer<'g> {
                 (depth, surface, None, Some(tex))
             }
             _ => {
-                let h = host_cpu::render(&self.scene.geometry, &desc);
+                let h = host_cpu::render(&self.scene.geometry, &self.scene.shading(), &desc);
                 (h.depth, h.surface, Some(h.shadow_map), None)
             }
         };

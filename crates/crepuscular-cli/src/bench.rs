@@ -599,7 +599,7 @@ pub fn run(
             // The host frame (no scattering), timed like a technique; its outputs feed every row.
             let mut host_frames = Vec::new();
             let gpu_host = match gpu {
-                Some(g) => Some(GpuHost::new(g, &scene.geometry)?),
+                Some(g) => Some(GpuHost::for_scene(g, &scene)?),
                 None => None,
             };
             let (depth, surface, shadow_map, gpu_tex) = match (gpu, &gpu_host) {
@@ -621,7 +621,7 @@ pub fn run(
                 _ => {
                     let mut last = None;
                     for i in 0..plan.warmup + plan.repeat {
-                        let hc = host_cpu::render(&scene.geometry, &desc);
+                        let hc = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
                         if i >= plan.warmup {
                             host_frames.push(hc.passes.clone());
                         }

@@ -8,7 +8,7 @@ use crepuscular::stats::{PassTime, TechniqueStats};
 use crepuscular::techniques::{epipolar, interleaved, prefiltered};
 use crepuscular::tonemap::composite;
 use crepuscular::{
-    AnyGpuTechnique, Composite, CompositeInputs, CompositeTarget, CpuFrame, GpuFrame, Image, Scattering,
+    AnyGpuTechnique, Composite, CompositeInputs, CompositeTarget, CpuFrame, FrameCamera, GpuFrame, Image, Scattering,
     ShadowProjection, StatsMode, TechniqueSettings,
 };
 use crepuscular_scene::{Geometry, GpuHost, Scene, builtin, file, host, host_cpu};
@@ -188,13 +188,11 @@ pub fn frame_desc(scene: &Scene) -> FrameDesc {
     let aspect = r.width as f32 / r.height as f32;
     let shadow = ShadowProjection::fit(&scene.light, &scene.camera, aspect, scene.geometry.bounds(), r.shadow.size);
     FrameDesc {
-        camera: scene.camera.clone(),
+        camera: FrameCamera::look_at(&scene.camera, aspect),
         light: scene.light.clone(),
         medium: scene.medium.clone(),
         shadow,
         shadow_bias: r.shadow.bias,
-        normal_offset_texels: r.shadow.normal_offset_texels,
-        ambient: r.ambient,
         width: r.width,
         height: r.height,
     }
@@ -269,7 +267,7 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
     };
     let (inscatter, surface, depth, final_radiance, host_passes, technique, adapter) = match gpu {
         Some(gpu) => {
-            let host = GpuHost::new(gpu, &scene.geometry)?;
+            let host = GpuHost::for_scene(gpu, &scene)?;
             let tex = host.render(gpu, &desc, spot)?;
             let adapter = adapter_stats(Some(gpu));
             let depth = gpu.read_texture_f32(&tex.depth, 0)?;
@@ -318,7 +316,7 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
             (inscatter, surface, depth, final_radiance, tex.passes, stats, adapter)
         }
         None => {
-            let h = host_cpu::render(&scene.geometry, &desc);
+            let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
             let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
             let (inscatter, stats) = render_cpu(&opts.technique, &frame, Some(&scene.geometry), opts.progress)?;
             check_finite(&inscatter, &opts.technique)?;
@@ -437,7 +435,7 @@ pub fn debug_view(
                 crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
                 _ => None,
             };
-            let host = GpuHost::new(gpu, &scene.geometry)?;
+            let host = GpuHost::for_scene(gpu, &scene)?;
             let tex = host.render(gpu, &desc, spot)?;
             let mut runner = Scattering::from_gpu(gpu, technique.clone())?.with_stats(tool_stats_mode(gpu))?;
             let out = gpu.create_output_texture(desc.width, desc.height);
@@ -448,7 +446,7 @@ pub fn debug_view(
             t.read_debug(gpu)?
         }
         None => {
-            let h = host_cpu::render(&scene.geometry, &desc);
+            let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
             let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
             epipolar::cpu::render_with_debug(&frame, settings)?.2
         }
@@ -479,7 +477,7 @@ fn prefiltered_debug_view(
                 crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
                 _ => None,
             };
-            let host = GpuHost::new(gpu, &scene.geometry)?;
+            let host = GpuHost::for_scene(gpu, &scene)?;
             let tex = host.render(gpu, &desc, spot)?;
             let mut runner = Scattering::from_gpu(gpu, TechniqueSettings::Prefiltered(settings.clone()))?
                 .with_stats(tool_stats_mode(gpu))?;
@@ -494,7 +492,7 @@ fn prefiltered_debug_view(
             )
         }
         None => {
-            let h = host_cpu::render(&scene.geometry, &desc);
+            let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
             let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
             let rect = prefiltered::Rectification::new(&desc, &settings.rectify_options());
             let raster = rect.raster().map(|r| crepuscular_scene::raster::rasterize_rectified(&scene.geometry, &r));

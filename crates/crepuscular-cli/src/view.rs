@@ -563,7 +563,7 @@ impl Viewer {
             Some(max_side),
         );
         let renderer = egui_wgpu::Renderer::new(&gpu.device, format, egui_wgpu::RendererOptions::default());
-        let host = GpuHost::new(&gpu, &scene.geometry)?;
+        let host = GpuHost::for_scene(&gpu, &scene)?;
         let composite = crepuscular::Composite::new(&gpu.device, &gpu.queue);
         let built = Instant::now();
         let runner = render::scattering(&gpu, &technique)?;
@@ -999,7 +999,7 @@ impl Viewer {
     /// changes.
     fn open_scene(&mut self, spec: &str) -> Result<()> {
         let (scene, technique) = load_for_view(spec, self.shadow_map_size, self.technique.name(), self.preset)?;
-        let host = GpuHost::new(&self.gpu, &scene.geometry)?;
+        let host = GpuHost::for_scene(&self.gpu, &scene)?;
         self.host = host;
         self.controls = Controls::of(&scene);
         self.medium = scene.medium.clone();

@@ -34,7 +34,7 @@ fn gpu_composite_matches_its_cpu_mirror() {
         scene.render.shadow.size = 256;
         let desc = frame_desc(&scene);
         let (w, h) = (desc.width, desc.height);
-        let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+        let host = GpuHost::for_scene(&gpu, &scene).unwrap();
         let spot = match &scene.light {
             crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
             _ => None,
@@ -130,7 +130,7 @@ fn composite_refuses_targets_that_do_not_fit() {
     scene.render.height = 36;
     scene.render.shadow.size = 128;
     let desc = frame_desc(&scene);
-    let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+    let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let tex = host.render(&gpu, &desc, None).unwrap();
     let views = tex.views();
     let frame = views.frame(&desc);

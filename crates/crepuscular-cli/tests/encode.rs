@@ -68,7 +68,7 @@ fn encode_records_into_the_callers_encoder_and_never_submits() {
         let scene = small(scene_name);
         let desc = frame_desc(&scene);
         let (w, h) = (desc.width, desc.height);
-        let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+        let host = GpuHost::for_scene(&gpu, &scene).unwrap();
         let spot = match &scene.light {
             crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
             _ => None,
@@ -134,7 +134,7 @@ fn deferred_counters_arrive_after_the_frame_and_match_the_wall_clock_ones() {
     };
     let scene = small("colonnade");
     let desc = frame_desc(&scene);
-    let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+    let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let tex = host.render(&gpu, &desc, None).unwrap();
     let views = tex.views();
     let frame = views.frame(&desc);
@@ -169,7 +169,7 @@ fn inputs_that_do_not_match_the_frame_are_errors_naming_them() {
     let Some(gpu) = test_gpu("inputs_that_do_not_match_the_frame_are_errors_naming_them") else { return };
     let scene = small("colonnade");
     let desc = frame_desc(&scene);
-    let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+    let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let tex = host.render(&gpu, &desc, None).unwrap();
     let views = tex.views();
     let frame = views.frame(&desc);
@@ -220,7 +220,7 @@ fn bind_groups_are_built_on_resize_and_new_inputs_not_per_frame() {
     let Some(gpu) = test_gpu("bind_groups_are_built_on_resize_and_new_inputs_not_per_frame") else { return };
     let scene = small("colonnade");
     let desc = frame_desc(&scene);
-    let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+    let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let tex = host.render(&gpu, &desc, None).unwrap();
     let views = tex.views();
     let frame = views.frame(&desc);

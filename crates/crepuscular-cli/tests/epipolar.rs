@@ -170,13 +170,11 @@ fn view_desc(light: Light, w: u32, h: u32) -> FrameDesc {
     let bounds = Bounds { min: Vec3::splat(-40.0), max: Vec3::new(40.0, 40.0, 1.0) };
     let shadow = ShadowProjection::fit(&light, &camera, w as f32 / h as f32, bounds, 64);
     FrameDesc {
-        camera,
+        camera: crepuscular::FrameCamera::look_at(&camera, w as f32 / h as f32),
         light,
         medium: Medium::default(),
         shadow,
         shadow_bias: 0.02,
-        normal_offset_texels: 1.5,
-        ambient: Vec3::ZERO,
         width: w,
         height: h,
     }
@@ -186,7 +184,7 @@ fn view_desc(light: Light, w: u32, h: u32) -> FrameDesc {
 fn views() -> Vec<(&'static str, Light)> {
     // The sun exactly behind the top-left pixel centre: the epipole on a screen corner.
     let d = view_desc(sun(Vec3::X), VW, VH);
-    let corner = d.pixel_ray(&d.camera.view_projection(d.aspect()).inverse(), 0, 0);
+    let corner = d.pixel_ray(0, 0);
     vec![
         ("inside (point light in view)", point(Vec3::new(2.0, 1.0, -10.0))),
         ("inside (sun in view)", sun(Vec3::new(0.3, -0.2, 1.0))),
@@ -378,11 +376,7 @@ fn every_pixel_lies_between_the_lines_it_is_interpolated_from() {
 /// A depth buffer: a wall facing the camera at 30 m, and box faces (pixel rectangle
 /// [x0, y0, x1, y1), view depth in metres) in front of it.
 fn wall_depth(desc: &FrameDesc, boxes: &[([u32; 4], f32)]) -> Vec<f32> {
-    let proj = desc.camera.projection(desc.aspect());
-    let ndc = |z: f32| {
-        let c = proj * glam::Vec4::new(0.0, 0.0, -z, 1.0);
-        c.z / c.w
-    };
+    let ndc = |z: f32| desc.camera.depth_of(z);
     let mut depth = vec![ndc(30.0); (desc.width * desc.height) as usize];
     for &([x0, y0, x1, y1], z) in boxes {
         for y in y0..y1 {
@@ -717,7 +711,7 @@ fn epipolar_gpu_matches_its_cpu_mirror_pass_by_pass() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 512);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
         for s in mirror_settings(name) {
@@ -744,7 +738,7 @@ fn spot_step_policies_change_the_marched_samples_and_each_matches_the_mirror() {
     // ray, with "exact-cone" only its chord inside the cone, so the marched values differ.
     let scene = small("stained-glass", 512);
     let desc = frame_desc(&scene);
-    let h = host_cpu::render(&scene.geometry, &desc);
+    let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
     let run = |spot_steps| {
         let s = EpipolarSettings { spot_steps, steps: 32, ..Default::default() };
@@ -1014,7 +1008,7 @@ fn epipolar_vs_reference_on_every_builtin_scene_cpu() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
         let (rf, _) = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let (img, stats, d) = cpu::render_with_debug(&frame, &EpipolarSettings::default()).unwrap();
@@ -1036,7 +1030,7 @@ fn epipolar_vs_reference_on_every_builtin_scene_gpu() {
         };
         // The GPU host renderer's own depth and shadow map; the reference runs on the CPU over
         // that very shadow map.
-        let tex = GpuHost::new(&gpu, &scene.geometry).unwrap().render(&gpu, &desc, spot).unwrap();
+        let tex = GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc, spot).unwrap();
         let views = tex.views();
         let gframe = views.frame(&desc);
         let g = run_gpu(&gpu, &mut ep, &gframe);
@@ -1147,7 +1141,7 @@ fn invalid_settings_and_device_limits_are_errors_not_panics() {
     let Some(gpu) = test_gpu("invalid_settings_and_device_limits_are_errors_not_panics") else { return };
     let scene = small("cage", 64);
     let desc = frame_desc(&scene);
-    let h = host_cpu::render(&scene.geometry, &desc);
+    let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
     let up = UploadedFrame::new(&gpu, &frame).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
@@ -1237,7 +1231,7 @@ fn camera_at_the_light_and_light_behind_the_camera_give_finite_output() {
     let mut ep = gpu.as_ref().map(|g| epipolar_gpu(g, EpipolarSettings::default()));
     for (what, degenerate, scene) in cases {
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         let (img, stats, d) = cpu::render_with_debug(&frame, &EpipolarSettings::default()).unwrap();
         let e = d.params.epipole;
@@ -1266,7 +1260,7 @@ fn camera_at_the_light_and_light_behind_the_camera_give_finite_output() {
     for (w, h) in [(1u32, 1u32), (7, 1), (1, 5)] {
         let scene = scene_at("cage", w, h, 64);
         let desc = frame_desc(&scene);
-        let hr = host_cpu::render(&scene.geometry, &desc);
+        let hr = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &hr.depth, shadow_map: &hr.shadow_map, surface: None };
         let (img, _) = cpu::render(&frame, &EpipolarSettings::default()).unwrap();
         assert!(img.all_finite(), "{w}×{h}");
@@ -1364,7 +1358,7 @@ fn sweep_settings() {
         .map(|name| {
             let scene = scene_at(name, w, h, 1024);
             let desc = frame_desc(&scene);
-            let host = host_cpu::render(&scene.geometry, &desc);
+            let host = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
             let frame = CpuFrame { desc: &desc, depth: &host.depth, shadow_map: &host.shadow_map, surface: None };
             let reference = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap().0;
             Frame { scene, desc, host, reference }

@@ -110,7 +110,7 @@ fn interleaved_gpu_matches_its_cpu_mirror_pass_by_pass() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 512);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
         // One GPU object for every setting: settings changes, texture reuse and table rebuilds.
@@ -220,7 +220,7 @@ fn wall_truth(desc: &FrameDesc, s: &InterleavedSettings) -> WallTruth {
     let st = desc.medium.extinction().as_dvec3();
     let ss = desc.medium.scattering.as_dvec3();
     let e = color.as_dvec3() * *intensity as f64;
-    let inv = desc.camera.view_projection(desc.aspect()).as_dmat4().inverse();
+    let inv = desc.camera.view_proj().as_dmat4().inverse();
     let n = s.steps as usize;
     // Per pixel: amplitude σs·p·E, the step's ∫T, and the per-step ratio e^(−σt·Δ).
     let per_pixel: Vec<(DVec3, DVec3, DVec3)> = (0..h)
@@ -434,7 +434,7 @@ fn block_one_is_brute_force() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 512);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         let up = gpu.as_ref().map(|g| UploadedFrame::new(g, &frame).unwrap());
         for (steps, jitter, spot_steps) in [(64, false, SpotSteps::Fixed), (17, true, SpotSteps::ExactCone)] {
@@ -517,7 +517,7 @@ fn interleaved_vs_reference_on_every_builtin_scene_cpu() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
         let (rf, _) = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let (il, _) = cpu::render(&frame, &InterleavedSettings::default()).unwrap();
@@ -553,7 +553,7 @@ fn interleaved_vs_reference_on_every_builtin_scene_gpu() {
         };
         // The GPU host renderer's own depth and shadow map, as `crepuscular render` uses them;
         // the reference runs on the CPU over that very shadow map.
-        let tex = GpuHost::new(&gpu, &scene.geometry).unwrap().render(&gpu, &desc, spot).unwrap();
+        let tex = GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc, spot).unwrap();
         let views = tex.views();
         let gframe = views.frame(&desc);
         let g = run_gpu(&gpu, &mut il, &gframe);
@@ -615,7 +615,7 @@ fn the_phase_table_changes_each_pixel_by_at_most_its_error() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 512);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         let s = InterleavedSettings::default();
         let (a, _) = cpu::render(&frame, &s).unwrap();

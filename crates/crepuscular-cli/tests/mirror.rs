@@ -30,12 +30,12 @@ fn host_depth_and_shadow_maps_match_between_gpu_and_cpu() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name);
         let desc = frame_desc(&scene);
-        let cpu = host_cpu::render(&scene.geometry, &desc);
+        let cpu = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let spot = match &scene.light {
             crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
             _ => None,
         };
-        let tex = GpuHost::new(&gpu, &scene.geometry).unwrap().render(&gpu, &desc, spot).unwrap();
+        let tex = GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc, spot).unwrap();
         let depth = gpu.read_texture_f32(&tex.depth, 0).unwrap();
         let sm = host::read_shadow_map(&gpu, &tex, &desc).unwrap();
         // Rasterization rules agree except on a few silhouette pixels (sub-pixel snapping of
@@ -65,7 +65,7 @@ fn brute_force_gpu_matches_its_cpu_mirror() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         let spot = |spot_steps| BruteForceSettings { steps: 32, spot_steps, ..Default::default() };
         for settings in [

@@ -387,7 +387,7 @@ fn regions_recombine_to_the_single_prefix_sum() {
     // rounding differs (a region's running mean restarts at its first column).
     for scene in [scene_at("colonnade", 96, 54, 512), side_lit(scene_at("colonnade", 96, 54, 512))] {
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         for (precision, bound) in [(BasisPrecision::Float16, 5e-3), (BasisPrecision::Unorm8, 2e-2)] {
             let one = PrefilteredSettings { precision, map_size: [240, 128], ..Default::default() };
@@ -615,7 +615,7 @@ fn prefiltered_gpu_matches_its_cpu_mirror_pass_by_pass() {
     for (name, _) in builtin::builtin_names() {
         let scene = scene_at(name, 96, 54, 512);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
         let mut cases = vec![("defaults", small_settings())];
@@ -659,10 +659,10 @@ fn prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map() {
     let Some(gpu) = test_gpu("prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map") else { return };
     let scene = side_lit(scene_at("colonnade", 96, 54, 512));
     let desc = frame_desc(&scene);
-    let h = host_cpu::render(&scene.geometry, &desc);
+    let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
     let up = UploadedFrame::new(&gpu, &frame).unwrap();
-    let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+    let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let projective = PrefilteredSettings { rectification: RectificationChoice::Projective, ..small_settings() };
     for s in [
         projective.clone(),
@@ -731,7 +731,7 @@ fn prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map() {
     let front = scene_at("colonnade", 96, 54, 512);
     let fdesc = frame_desc(&front);
     assert!(pf.raster_request(&fdesc).is_none(), "the sun in view goes epipolar: nothing to rasterize");
-    let fh = host_cpu::render(&front.geometry, &fdesc);
+    let fh = host_cpu::render(&front.geometry, &front.shading(), &fdesc);
     let fframe = CpuFrame { desc: &fdesc, depth: &fh.depth, shadow_map: &fh.shadow_map, surface: None };
     let fup = UploadedFrame::new(&gpu, &fframe).unwrap();
     let g = run_gpu(&gpu, &mut pf, &fup.frame(&fdesc), Some(&view));
@@ -783,13 +783,12 @@ fn closed_form_errors(frame: &CpuFrame, s: &PrefilteredSettings, img: &Image) ->
     let desc = frame.desc;
     let rect = Rectification::new(desc, &s.rectify_options());
     let epipole = prefiltered::epipole_pixel(desc, s.epipole_radius);
-    let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let mut r =
         ClosedForm { method: 0.0, method_at: (0, 0, 0.0), truth: 0.0, truth_shallow: 0.0, truth_at: (0, 0, 0.0) };
     for y in 0..desc.height {
         for x in 0..desc.width {
             let exact = wall_closed_form(desc, x, y);
-            let dir = desc.pixel_ray(&inv, x, y);
+            let dir = desc.pixel_ray(x, y);
             let dist = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
             let (_, _, _, z) = rect.rectify_point(desc.camera.position + dir * dist, dir);
             let v = if cpu::in_epipole_disc(epipole, s.epipole_radius, x, y) {
@@ -949,7 +948,7 @@ fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut Scattering)>) -> 
                 Light::Spot { texture, .. } => texture.as_deref(),
                 _ => None,
             };
-            let host = GpuHost::new(gpu, &scene.geometry).unwrap();
+            let host = GpuHost::for_scene(gpu, &scene).unwrap();
             let tex = host.render(gpu, &desc, spot).unwrap();
             let views = tex.views();
             let out = gpu.create_output_texture(desc.width, desc.height);
@@ -961,7 +960,7 @@ fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut Scattering)>) -> 
             (img, stats, depth, surface, host::read_shadow_map(gpu, &tex, &desc).unwrap())
         }
         None => {
-            let h = host_cpu::render(&scene.geometry, &desc);
+            let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
             let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
             let (img, stats) = render_cpu(&choice, &frame, Some(&scene.geometry), &|_, _| {}).unwrap();
             (img, stats, h.depth, h.surface, h.shadow_map)

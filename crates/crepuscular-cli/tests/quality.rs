@@ -54,7 +54,7 @@ fn brute_force_vs_reference_on_every_builtin_scene_cpu() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
         let (bf, _) = crepuscular::techniques::brute_force::cpu::march(&frame, &BruteForceSettings::default()).unwrap();
         let (rf, _) = crepuscular::techniques::reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();

@@ -44,6 +44,8 @@ fn frame_uniforms_match_the_wgsl_layout() {
     let (members, span) = struct_members(&module, "Frame");
     let rust = [
         ("inv_view_proj", offset_of!(FrameUniforms, inv_view_proj)),
+        ("inv_projection", offset_of!(FrameUniforms, inv_projection)),
+        ("inv_view", offset_of!(FrameUniforms, inv_view)),
         ("view_proj", offset_of!(FrameUniforms, view_proj)),
         ("shadow_view_proj", offset_of!(FrameUniforms, shadow_view_proj)),
         ("camera_pos", offset_of!(FrameUniforms, camera_pos)),
@@ -55,7 +57,7 @@ fn frame_uniforms_match_the_wgsl_layout() {
         ("sigma_a", offset_of!(FrameUniforms, sigma_a)),
         ("rayleigh_fraction", offset_of!(FrameUniforms, rayleigh_fraction)),
         ("shadow_params", offset_of!(FrameUniforms, shadow_params)),
-        ("ambient", offset_of!(FrameUniforms, ambient)),
+        ("depth_params", offset_of!(FrameUniforms, depth_params)),
         ("ints", offset_of!(FrameUniforms, ints)),
         ("shadow_ints", offset_of!(FrameUniforms, shadow_ints)),
     ];

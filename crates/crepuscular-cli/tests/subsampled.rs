@@ -82,7 +82,7 @@ fn subsampled_gpu_matches_its_cpu_mirror_pass_by_pass() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 512);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         for settings in mirror_settings() {
             let cpu_grid = subsampled::cpu::march(&frame, &settings).unwrap();
@@ -144,7 +144,7 @@ fn the_grid_is_reallocated_only_when_its_size_changes() {
     let Some(gpu) = crepuscular::gpu::test_gpu("the_grid_is_reallocated_only_when_its_size_changes") else { return };
     let scene = small("cage", 256);
     let desc = frame_desc(&scene);
-    let h = host_cpu::render(&scene.geometry, &desc);
+    let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
     let up = crepuscular::gpu::UploadedFrame::new(&gpu, &frame).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
@@ -364,7 +364,7 @@ fn factor_one_is_brute_force_cpu() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 256);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         for (s, b) in factor_one_settings() {
             let (img, stats) = subsampled::cpu::render(&frame, &s).unwrap();
@@ -382,7 +382,7 @@ fn factor_one_is_brute_force_gpu() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 256);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
         let up = crepuscular::gpu::UploadedFrame::new(&gpu, &frame).unwrap();
         for (s, b) in factor_one_settings() {
@@ -455,7 +455,7 @@ fn subsampled_vs_reference_on_every_builtin_scene_cpu() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
         let (img, stats) = subsampled::cpu::render(&frame, &SubsampledSettings::default()).unwrap();
         let (rf, _) = crepuscular::techniques::reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
@@ -484,7 +484,7 @@ fn subsampled_vs_reference_on_every_builtin_scene_gpu() {
             crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
             _ => None,
         };
-        let tex = crepuscular_scene::GpuHost::new(&gpu, &scene.geometry).unwrap().render(&gpu, &desc, spot).unwrap();
+        let tex = crepuscular_scene::GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc, spot).unwrap();
         let views = tex.views();
         let frame = views.frame(&desc);
         let out = gpu.create_output_texture(desc.width, desc.height);
@@ -516,7 +516,7 @@ fn edge_remarching_improves_silhouettes() {
     for &(name, min_gain, max_flip_ratio, max_remarched) in EDGE_REMARCH {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
         let (rf, _) = crepuscular::techniques::reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let t = surface_transmittance(&desc, &h.depth);
@@ -553,7 +553,7 @@ fn sweep_depth_tolerance() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
-        let h = host_cpu::render(&scene.geometry, &desc);
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
         let (rf, _) = crepuscular::techniques::reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let t = surface_transmittance(&desc, &h.depth);

@@ -84,7 +84,7 @@ fn settings_changed_in_place_render_what_a_fresh_runner_renders() {
     ];
     for scene_name in ["colonnade", "stained-glass"] {
         let scene = small(scene_name);
-        let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+        let host = GpuHost::for_scene(&gpu, &scene).unwrap();
         for (technique, chain) in chains {
             let first = parse(technique, &scene, chain[0]);
             let mut runner = scattering(&gpu, &first).unwrap().expect("a GPU technique");
@@ -114,7 +114,7 @@ fn stats_off_renders_the_same_image_without_timing_or_readbacks() {
     let Some(gpu) = test_gpu("stats_off_renders_the_same_image_without_timing_or_readbacks") else { return };
     for scene_name in ["colonnade", "cage"] {
         let scene = small(scene_name);
-        let host = GpuHost::new(&gpu, &scene.geometry).unwrap();
+        let host = GpuHost::for_scene(&gpu, &scene).unwrap();
         for (technique, set) in [
             ("brute-force", &[][..]),
             ("interleaved", &[]),

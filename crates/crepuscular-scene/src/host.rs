@@ -7,7 +7,8 @@ use crepuscular::frame::FrameDesc;
 use crepuscular::gpu::{GpuContext, Recorder};
 use crepuscular::stats::PassTime;
 use crepuscular::techniques::prefiltered::raster::RectifiedRaster;
-use crepuscular::{Error, GpuFrame, RgbTexture, ShadowMap};
+use crepuscular::integrand::SurfaceShading;
+use crepuscular::{DepthConvention, Error, GpuFrame, RgbTexture, ShadowMap};
 use std::sync::OnceLock;
 use wgpu::util::DeviceExt;
 
@@ -22,8 +23,12 @@ pub const RECTIFIED_DEPTH_WGSL: &str = include_str!("shaders/rectified_depth.wgs
 pub struct GpuHost {
     shadow_pipeline: wgpu::RenderPipeline,
     shadow_layout: wgpu::BindGroupLayout,
-    surface_pipeline: wgpu::RenderPipeline,
+    /// Standard and reversed-Z depth tests.
+    surface_pipelines: [wgpu::RenderPipeline; 2],
     surface_layout: wgpu::BindGroupLayout,
+    /// How surfaces are shaded (ambient, normal offset): the scene's ([`GpuHost::for_scene`])
+    /// or the defaults ([`GpuHost::new`]).
+    pub shading: SurfaceShading,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
     index_count: u32,
@@ -102,7 +107,15 @@ const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
     wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3];
 
 impl GpuHost {
-    /// Uploads the geometry and builds the pipelines.
+    /// [`GpuHost::new`] for `scene`'s geometry, shading its surfaces as the scene says.
+    pub fn for_scene(gpu: &GpuContext, scene: &crate::Scene) -> Result<Self, Error> {
+        let mut host = Self::new(gpu, &scene.geometry)?;
+        host.shading = scene.shading();
+        Ok(host)
+    }
+
+    /// Uploads the geometry and builds the pipelines (surfaces shaded with the default
+    /// [`SurfaceShading`]).
     pub fn new(gpu: &GpuContext, geometry: &Geometry) -> Result<Self, Error> {
         gpu.scoped("creating the host renderer", || {
             let device = &gpu.device;
@@ -177,13 +190,15 @@ impl GpuHost {
                     uniform_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
                     tex_entry(1, wgpu::TextureViewDimension::D2Array),
                     tex_entry(2, wgpu::TextureViewDimension::D2),
+                    uniform_entry(3, wgpu::ShaderStages::FRAGMENT),
                 ],
             });
             let surface_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("host/surface.wgsl"),
                 source: wgpu::ShaderSource::Wgsl(crepuscular::shaders::compose(SURFACE_WGSL).into()),
             });
-            let surface_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            // One surface pipeline per camera depth convention (its depth test).
+            let surface_pipeline = |compare: wgpu::CompareFunction| device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some("surface"),
                 layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                     label: Some("surface"),
@@ -194,10 +209,10 @@ impl GpuHost {
                     module: &surface_module,
                     entry_point: Some("vs"),
                     compilation_options: Default::default(),
-                    buffers: &[vertex_layout],
+                    buffers: std::slice::from_ref(&vertex_layout),
                 },
                 primitive,
-                depth_stencil: Some(depth_state),
+                depth_stencil: Some(wgpu::DepthStencilState { depth_compare: Some(compare), ..depth_state.clone() }),
                 multisample: Default::default(),
                 fragment: Some(wgpu::FragmentState {
                     module: &surface_module,
@@ -228,11 +243,16 @@ impl GpuHost {
                 contents: bytemuck::cast_slice(&idx),
                 usage: wgpu::BufferUsages::INDEX,
             });
+            let surface_pipelines = [
+                surface_pipeline(DepthConvention::Standard.compare()),
+                surface_pipeline(DepthConvention::Reversed.compare()),
+            ];
             Self {
                 shadow_pipeline,
                 shadow_layout,
-                surface_pipeline,
+                surface_pipelines,
                 surface_layout,
+                shading: SurfaceShading::default(),
                 vertices,
                 indices,
                 index_count: idx.len() as u32,
@@ -488,6 +508,11 @@ impl GpuHost {
         });
         let shadow_view = shadow_array_view(&shadow_map);
         let spot_view = spot_texture.create_view(&Default::default());
+        let shading_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("surface shading"),
+            contents: bytemuck::cast_slice(&self.shading.uniform()),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
         let bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("surface"),
             layout: &self.surface_layout,
@@ -495,9 +520,11 @@ impl GpuHost {
                 wgpu::BindGroupEntry { binding: 0, resource: frame_buf.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&shadow_view) },
                 wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&spot_view) },
+                wgpu::BindGroupEntry { binding: 3, resource: shading_buf.as_entire_binding() },
             ],
         });
         let depth_view = depth.create_view(&Default::default());
+        let convention = desc.camera.depth;
         let surface_view = surface.create_view(&Default::default());
         timer.pass("surface", |enc, ts| {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -513,14 +540,17 @@ impl GpuHost {
                 })],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &depth_view,
-                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(convention.far_value()),
+                        store: wgpu::StoreOp::Store,
+                    }),
                     stencil_ops: None,
                 }),
                 timestamp_writes: ts.and_then(|t| t.render()),
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(&self.surface_pipeline);
+            pass.set_pipeline(&self.surface_pipelines[(convention == DepthConvention::Reversed) as usize]);
             pass.set_bind_group(0, &bg, &[]);
             pass.set_vertex_buffer(0, self.vertices.slice(..));
             pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);

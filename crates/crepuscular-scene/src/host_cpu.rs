@@ -5,7 +5,7 @@
 use crate::raster;
 use crate::scene::Geometry;
 use crepuscular::frame::FrameDesc;
-use crepuscular::integrand::surface_radiance;
+use crepuscular::integrand::{SurfaceShading, surface_radiance};
 use crepuscular::stats::PassTime;
 use crepuscular::{Image, ShadowMap};
 use glam::Vec3;
@@ -24,13 +24,14 @@ pub struct CpuHost {
     pub passes: Vec<PassTime>,
 }
 
-/// Renders the shadow map, depth and surface radiance on the CPU.
-pub fn render(geometry: &Geometry, desc: &FrameDesc) -> CpuHost {
+/// Renders the shadow map, depth (in the camera's depth convention) and surface radiance
+/// (shaded with `shading`) on the CPU.
+pub fn render(geometry: &Geometry, shading: &SurfaceShading, desc: &FrameDesc) -> CpuHost {
     let t0 = Instant::now();
     let shadow_map = raster::render_shadow_map(geometry, &desc.shadow);
     let t1 = Instant::now();
-    let vp = desc.camera.view_projection(desc.aspect());
-    let db = raster::rasterize(geometry, vp, desc.width, desc.height);
+    let vp = desc.camera.view_proj();
+    let db = raster::rasterize_with(geometry, vp, desc.width, desc.height, desc.camera.depth);
     let mut surface = Image::new(desc.width, desc.height);
     let inv = vp.inverse();
     surface.pixels.par_iter_mut().enumerate().for_each(|(i, px)| {
@@ -48,7 +49,7 @@ pub fn render(geometry: &Geometry, desc: &FrameDesc) -> CpuHost {
         let (x, y) = ((i as u32 % desc.width), (i as u32 / desc.width));
         // World position from the depth buffer, as the GPU's interpolated position would give.
         let p = inv.project_point3(desc.pixel_ndc(x, y).extend(db.depth[i]));
-        let l = surface_radiance(desc, &shadow_map, p, lerp(|v| v.normal), lerp(|v| v.albedo));
+        let l = surface_radiance(desc, shading, &shadow_map, p, lerp(|v| v.normal), lerp(|v| v.albedo));
         *px = [l.x, l.y, l.z, 1.0];
     });
     let t2 = Instant::now();

@@ -22,6 +22,7 @@
 use crate::scene::Geometry;
 use crepuscular::techniques::prefiltered::raster::RectifiedRaster;
 use crepuscular::{ShadowMap, ShadowProjection};
+use crepuscular::DepthConvention;
 use glam::{Mat4, Vec4};
 use rayon::prelude::*;
 
@@ -423,6 +424,7 @@ fn raster_band(
     rows: usize,
     depth: &mut [f32],
     mut ids: Option<&mut [u32]>,
+    convention: DepthConvention,
 ) {
     let band_y1 = band_y0 + rows - 1;
     for &ti in list {
@@ -473,7 +475,7 @@ fn raster_band(
                 if ev[0] >= e.min[0] && ev[1] >= e.min[1] && ev[2] >= e.min[2] {
                     let d = ((ev[0] * t.z[0] + ev[1] * t.z[1] + ev[2] * t.z[2]) * t.inv_area).clamp(0.0, 1.0) as f32;
                     let i = row_off + x as usize;
-                    if d < depth[i] {
+                    if convention.nearer(d, depth[i]) {
                         depth[i] = d;
                         if let Some(ids) = ids.as_deref_mut() {
                             ids[i] = ti;
@@ -494,11 +496,23 @@ fn raster_band(
 /// documentation. Degenerate triangles, triangles with non-finite vertices and out-of-range
 /// indices are skipped.
 pub fn rasterize(geometry: &Geometry, view_proj: Mat4, width: u32, height: u32) -> DepthBuffer {
+    rasterize_with(geometry, view_proj, width, height, DepthConvention::Standard)
+}
+
+/// [`rasterize`] for a depth buffer of the given convention: cleared to its far value, the
+/// nearer surface kept by its depth test (reversed-Z: the larger depth).
+pub fn rasterize_with(
+    geometry: &Geometry,
+    view_proj: Mat4,
+    width: u32,
+    height: u32,
+    convention: DepthConvention,
+) -> DepthBuffer {
     let pixels = width as usize * height as usize;
     let mut out = DepthBuffer {
         width,
         height,
-        depth: vec![1.0; pixels],
+        depth: vec![convention.far_value(); pixels],
         triangle: vec![u32::MAX; pixels],
         bary: vec![[0.0; 3]; pixels],
     };
@@ -519,7 +533,7 @@ pub fn rasterize(geometry: &Geometry, view_proj: Mat4, width: u32, height: u32) 
             let rows = depth.len() / w;
             let y0 = b * BAND_ROWS;
             let mut ids = vec![u32::MAX; depth.len()];
-            raster_band(&tris, &items[offsets[b]..offsets[b + 1]], w, y0, rows, depth, Some(&mut ids));
+            raster_band(&tris, &items[offsets[b]..offsets[b + 1]], w, y0, rows, depth, Some(&mut ids), convention);
             for (i, &id) in ids.iter().enumerate() {
                 if id == u32::MAX {
                     continue;
@@ -562,7 +576,7 @@ fn depth_only(geometry: &Geometry, view_proj: Mat4, depth_mode: DepthMode, size_
     let (offsets, items) = bin(&tris, bands);
     depth.par_chunks_mut(BAND_ROWS * w).enumerate().for_each(|(b, depth)| {
         let rows = depth.len() / w;
-        raster_band(&tris, &items[offsets[b]..offsets[b + 1]], w, b * BAND_ROWS, rows, depth, None);
+        raster_band(&tris, &items[offsets[b]..offsets[b + 1]], w, b * BAND_ROWS, rows, depth, None, DepthConvention::Standard);
     });
     depth
 }

@@ -101,3 +101,14 @@ pub struct Scene {
     /// Render settings.
     pub render: RenderSettings,
 }
+
+impl Scene {
+    /// How the host renderer shades the scene's surfaces (`render.ambient`,
+    /// `render.shadow_normal_offset_texels`).
+    pub fn shading(&self) -> crepuscular::integrand::SurfaceShading {
+        crepuscular::integrand::SurfaceShading {
+            ambient: self.render.ambient,
+            normal_offset_texels: self.render.shadow.normal_offset_texels,
+        }
+    }
+}

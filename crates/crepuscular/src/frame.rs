@@ -4,10 +4,11 @@
 //! [`CpuFrame`] with the same data as arrays.
 
 use crate::image::Image;
+use crate::camera::FrameCamera;
 use crate::integrand::light_position;
-use crate::model::{Camera, Light, Medium, RgbTexture};
+use crate::model::{Light, Medium, RgbTexture};
 use crate::shadow::{ShadowMap, ShadowProjection};
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 
 /// The per-frame uniform block shared by every shader (`struct Frame` in common.wgsl).
 /// Layout is asserted against naga's view of the WGSL struct in a test.
@@ -16,6 +17,10 @@ use glam::{Mat4, Vec3};
 pub struct FrameUniforms {
     /// Clip → world of the camera.
     pub inv_view_proj: [[f32; 4]; 4],
+    /// Clip → view of the camera (view rays are unprojected in view space: `ndc_ray`).
+    pub inv_projection: [[f32; 4]; 4],
+    /// View → world of the camera.
+    pub inv_view: [[f32; 4]; 4],
     /// World → clip of the camera.
     pub view_proj: [[f32; 4]; 4],
     /// World → clip per shadow-map layer.
@@ -38,8 +43,9 @@ pub struct FrameUniforms {
     pub rayleigh_fraction: [f32; 4],
     /// Shadow projection near, far, volume bias (world units), world size of a texel.
     pub shadow_params: [f32; 4],
-    /// Ambient radiance for surfaces (rgb); surface normal offset in texels (w).
-    pub ambient: [f32; 4],
+    /// View depth from NDC depth d, lin = y / (d + x); z: the depth buffer's far (clear)
+    /// value, 1 standard or 0 reversed-Z ([`crate::camera::FrameCamera::view_depth`]).
+    pub depth_params: [f32; 4],
     /// Image width, image height, light kind (0 directional, 1 spot, 2 point), phase kind
     /// (0 isotropic, 1 HG, 2 Rayleigh, 3 Hoffman–Preetham).
     pub ints: [u32; 4],
@@ -47,13 +53,13 @@ pub struct FrameUniforms {
     pub shadow_ints: [u32; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 704);
+const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 832);
 
 /// Describes a frame independently of where its textures live.
 #[derive(Clone, Debug)]
 pub struct FrameDesc {
-    /// Camera.
-    pub camera: Camera,
+    /// The camera: the engine's view and projection matrices and depth convention.
+    pub camera: FrameCamera,
     /// Light.
     pub light: Light,
     /// Medium.
@@ -62,10 +68,6 @@ pub struct FrameDesc {
     pub shadow: ShadowProjection,
     /// Volume shadow bias, world units (see [`crate::ShadowSettings::bias`]).
     pub shadow_bias: f32,
-    /// Surface normal offset in shadow texels (host renderer only).
-    pub normal_offset_texels: f32,
-    /// Ambient radiance for surfaces (host renderer only).
-    pub ambient: Vec3,
     /// Image width, pixels.
     pub width: u32,
     /// Image height, pixels.
@@ -80,7 +82,8 @@ impl FrameDesc {
 
     /// The uniform block for the GPU.
     pub fn uniforms(&self) -> FrameUniforms {
-        let vp = self.camera.view_projection(self.aspect());
+        let vp = self.camera.view_proj();
+        let (depth_a, depth_b) = self.camera.depth_params();
         let (light_dir, cos_outer, cos_inner) = match &self.light {
             Light::Directional { direction, .. } => (direction.normalize(), 0.0, 0.0),
             Light::Spot { direction, outer_angle_degrees, inner_angle_degrees, .. } => {
@@ -99,6 +102,8 @@ impl FrameDesc {
         let s = &self.shadow;
         FrameUniforms {
             inv_view_proj: vp.inverse().to_cols_array_2d(),
+            inv_projection: self.camera.inv_projection().to_cols_array_2d(),
+            inv_view: self.camera.inv_view().to_cols_array_2d(),
             view_proj: vp.to_cols_array_2d(),
             shadow_view_proj: s.view_proj.map(|m| m.to_cols_array_2d()),
             camera_pos: v4(self.camera.position, self.camera.near),
@@ -110,7 +115,7 @@ impl FrameDesc {
             sigma_a: v4(self.medium.absorption, 0.0),
             rayleigh_fraction: v4(rf, 0.0),
             shadow_params: [s.near, s.far, self.shadow_bias, s.texel_world],
-            ambient: v4(self.ambient, self.normal_offset_texels),
+            depth_params: [depth_a, depth_b, self.camera.depth.far_value(), 0.0],
             ints: [self.width, self.height, self.light.kind_code(), phase_kind],
             shadow_ints: [s.layers, s.size, s.orthographic as u32, has_tex as u32],
         }
@@ -125,17 +130,22 @@ impl FrameDesc {
     }
 
     /// Unit direction of the view ray through the centre of pixel (x, y), computed as the
-    /// shaders do (`pixel_ray` in common.wgsl): unproject the far-plane point.
-    pub fn pixel_ray(&self, inv_view_proj: &Mat4, x: u32, y: u32) -> Vec3 {
-        let p = inv_view_proj.project_point3(self.pixel_ndc(x, y).extend(1.0));
-        (p - self.camera.position).normalize()
+    /// shaders do (`pixel_ray` in common.wgsl; [`FrameCamera::ndc_ray`]).
+    pub fn pixel_ray(&self, x: u32, y: u32) -> Vec3 {
+        self.camera.ndc_ray(self.pixel_ndc(x, y))
     }
 
     /// Distance s along the unit view ray `dir` to the visible surface for a depth-buffer
-    /// value `d` (the far plane where d = 1). Mirrors `view_distance` in common.wgsl.
+    /// value `d` (the far distance where nothing was drawn, [`FrameCamera::view_depth`]).
+    /// Mirrors `view_distance` in common.wgsl.
     pub fn view_distance(&self, d: f32, dir: Vec3) -> f32 {
-        let lin = crate::model::linear_depth(d, self.camera.near, self.camera.far);
-        lin / dir.dot(self.camera.forward()).max(1e-4)
+        self.camera.view_depth(d) / dir.dot(self.camera.forward()).max(1e-4)
+    }
+
+    /// Distance along the unit view ray `dir` to the far distance (where the rays of empty
+    /// pixels end). Mirrors `far_distance` in common.wgsl.
+    pub fn far_distance(&self, dir: Vec3) -> f32 {
+        self.camera.far / dir.dot(self.camera.forward()).max(1e-4)
     }
 }
 
@@ -188,12 +198,11 @@ pub struct GpuFrame<'a> {
 /// Transmittance T(s) = exp(−σt·s) to the visible surface per pixel, computed from the depth
 /// buffer exactly as the composite uses it.
 pub fn surface_transmittance(desc: &FrameDesc, depth: &[f32]) -> Vec<[f32; 3]> {
-    let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let st = desc.medium.extinction();
     (0..desc.height)
         .flat_map(|y| (0..desc.width).map(move |x| (x, y)))
         .map(|(x, y)| {
-            let dir = desc.pixel_ray(&inv, x, y);
+            let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(depth[(y * desc.width + x) as usize], dir);
             (-st * s).exp().to_array()
         })

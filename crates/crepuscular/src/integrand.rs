@@ -83,11 +83,37 @@ pub fn inscatter_density(
     medium.scattering * medium.phase.eval(cos_theta) * l_in
 }
 
+/// How a host renderer shades its surfaces — not part of the effect's frame: the
+/// in-scattering never depends on it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceShading {
+    /// Ambient radiance added as ambient·albedo (rgb, linear). Default 0.03.
+    pub ambient: Vec3,
+    /// The shadow lookup's offset along the surface normal, in shadow-map texels (against
+    /// shadow acne). Default 1.5.
+    pub normal_offset_texels: f32,
+}
+
+impl Default for SurfaceShading {
+    fn default() -> Self {
+        Self { ambient: Vec3::splat(0.03), normal_offset_texels: 1.5 }
+    }
+}
+
+impl SurfaceShading {
+    /// As the host's surface shader reads it (`shading` in common.wgsl's `surface_radiance`):
+    /// ambient (rgb), normal offset (w).
+    pub fn uniform(&self) -> [f32; 4] {
+        [self.ambient.x, self.ambient.y, self.ambient.z, self.normal_offset_texels]
+    }
+}
+
 /// Lambert surface radiance with the same light and shadow map, plus ambient·albedo. The
 /// normal is flipped to face the camera (surfaces are double-sided). Mirrors
 /// `surface_radiance` in common.wgsl.
 pub fn surface_radiance(
     desc: &crate::frame::FrameDesc,
+    shading: &SurfaceShading,
     shadow: &ShadowMap,
     p: Vec3,
     normal: Vec3,
@@ -101,8 +127,9 @@ pub fn surface_radiance(
     let cosine = n.dot(-wl).max(0.0);
     let mut direct = Vec3::ZERO;
     if cosine > 0.0 && l_in.max_element() > 0.0 {
-        let v = shadow.visibility_pcf(light_position(&desc.light), p, n, desc.shadow_bias, desc.normal_offset_texels);
+        let v =
+            shadow.visibility_pcf(light_position(&desc.light), p, n, desc.shadow_bias, shading.normal_offset_texels);
         direct = albedo / std::f32::consts::PI * l_in * cosine * v;
     }
-    direct + desc.ambient * albedo
+    direct + shading.ambient * albedo
 }

@@ -7,6 +7,7 @@
 //! shadow map) through one boundary, [`frame`], and writes an in-scattering texture.
 #![deny(missing_docs)]
 
+pub mod camera;
 pub mod composite;
 pub mod error;
 pub mod frame;
@@ -25,6 +26,7 @@ pub mod techniques;
 pub mod testing;
 pub mod tonemap;
 
+pub use camera::{DepthConvention, FrameCamera};
 pub use composite::{Composite, CompositeInputs, CompositeTarget};
 pub use error::Error;
 pub use frame::{CpuFrame, FrameUniforms, GpuFrame};

@@ -5,7 +5,7 @@
 use crate::frame::FrameDesc;
 use crate::stats::TechniqueStats;
 use crate::{
-    Bounds, Camera, Error, GpuContext, GpuFrame, Light, Medium, Phase, Scattering, ShadowMap, ShadowProjection,
+    Bounds, Camera, Error, FrameCamera, GpuContext, GpuFrame, Light, Medium, Phase, Scattering, ShadowMap, ShadowProjection,
     StatsMode, TechniqueSettings,
 };
 use glam::{DVec3, Vec3};
@@ -30,16 +30,14 @@ pub fn wall_frame(light: Light, medium: Medium, w: u32, h: u32) -> (FrameDesc, V
     let shadow = ShadowProjection::fit(&light, &camera, aspect, bounds, 64);
     let sm = ShadowMap { projection: shadow.clone(), depth: vec![1.0; shadow.layers as usize * 64 * 64] };
     // The wall's depth-buffer value at its view depth.
-    let c = camera.projection(aspect) * glam::Vec4::new(0.0, 0.0, -WALL_DISTANCE, 1.0);
-    let depth = vec![c.z / c.w; (w * h) as usize];
+    let camera = FrameCamera::look_at(&camera, aspect);
+    let depth = vec![camera.depth_of(WALL_DISTANCE); (w * h) as usize];
     let desc = FrameDesc {
         camera,
         light,
         medium,
         shadow,
         shadow_bias: 0.02,
-        normal_offset_texels: 1.5,
-        ambient: Vec3::ZERO,
         width: w,
         height: h,
     };
@@ -52,7 +50,7 @@ pub fn wall_closed_form(desc: &FrameDesc, x: u32, y: u32) -> DVec3 {
     let Light::Directional { direction, color, intensity } = &desc.light else {
         panic!("wall_closed_form: the closed form is for a directional light")
     };
-    let inv = desc.camera.view_projection(desc.aspect()).as_dmat4().inverse();
+    let inv = desc.camera.view_proj().as_dmat4().inverse();
     let (w, h) = (desc.width as f64, desc.height as f64);
     let ndc = DVec3::new((x as f64 + 0.5) / w * 2.0 - 1.0, 1.0 - (y as f64 + 0.5) / h * 2.0, 1.0);
     let dir = inv.project_point3(ndc).normalize();

@@ -21,7 +21,7 @@ fn frame(light: Light, medium: Medium) -> (FrameDesc, Vec<f32>, ShadowMap) {
 }
 
 fn ray(desc: &FrameDesc, x: u32, y: u32) -> (DVec3, f64) {
-    let inv = desc.camera.view_projection(desc.aspect()).as_dmat4().inverse();
+    let inv = desc.camera.view_proj().as_dmat4().inverse();
     let ndc_x = (x as f64 + 0.5) / W as f64 * 2.0 - 1.0;
     let ndc_y = 1.0 - (y as f64 + 0.5) / H as f64 * 2.0;
     let dir = inv.project_point3(DVec3::new(ndc_x, ndc_y, 1.0)).normalize();

@@ -4,6 +4,8 @@
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var shadow_map: texture_2d_array<f32>;
 @group(0) @binding(2) var spot_tex: texture_2d<f32>;
+// The host's SurfaceShading: ambient (rgb), normal offset in shadow texels (w).
+@group(0) @binding(3) var<uniform> shading: vec4<f32>;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -24,5 +26,5 @@ fn vs(@location(0) position: vec3<f32>, @location(1) normal: vec3<f32>, @locatio
 
 @fragment
 fn fs(in: VertexOut) -> @location(0) vec4<f32> {
-    return vec4<f32>(surface_radiance(frame, shadow_map, spot_tex, in.world, in.normal, in.albedo), 1.0);
+    return vec4<f32>(surface_radiance(frame, shading, shadow_map, spot_tex, in.world, in.normal, in.albedo), 1.0);
 }

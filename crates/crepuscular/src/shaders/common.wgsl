@@ -7,6 +7,8 @@ const PI: f32 = 3.14159265358979;
 
 struct Frame {
     inv_view_proj: mat4x4<f32>,
+    inv_projection: mat4x4<f32>,
+    inv_view: mat4x4<f32>,
     view_proj: mat4x4<f32>,
     shadow_view_proj: array<mat4x4<f32>, 6>,
     camera_pos: vec4<f32>,
@@ -18,7 +20,7 @@ struct Frame {
     sigma_a: vec4<f32>,
     rayleigh_fraction: vec4<f32>,
     shadow_params: vec4<f32>,
-    ambient: vec4<f32>,
+    depth_params: vec4<f32>,
     ints: vec4<u32>,
     shadow_ints: vec4<u32>,
 }
@@ -73,19 +75,45 @@ fn segment_transmittance(st: vec3<f32>, delta: f32) -> vec3<f32> {
     );
 }
 
+// camera.rs FrameCamera::ndc_ray: the near-plane point unprojected in view space (the eye at
+// the origin keeps f32 precision), rotated to world. Any perspective projection (docs/MODEL.md §5).
+fn ndc_ray(f: Frame, ndc: vec2<f32>) -> vec3<f32> {
+    let h = f.inv_projection * vec4<f32>(ndc, 1.0 - f.depth_params.z, 1.0);
+    let p = normalize(h.xyz / h.w);
+    return normalize((f.inv_view * vec4<f32>(p, 0.0)).xyz);
+}
+
 // frame.rs FrameDesc::pixel_ray.
 fn pixel_ray(f: Frame, px: vec2<u32>) -> vec3<f32> {
     let size = vec2<f32>(f32(f.ints.x), f32(f.ints.y));
     let ndc = vec2<f32>((f32(px.x) + 0.5) / size.x * 2.0 - 1.0, 1.0 - (f32(px.y) + 0.5) / size.y * 2.0);
-    let h = f.inv_view_proj * vec4<f32>(ndc, 1.0, 1.0);
-    let p = h.xyz / h.w;
-    return normalize(p - f.camera_pos.xyz);
+    return ndc_ray(f, ndc);
+}
+
+// camera.rs FrameCamera::view_depth: distance along the view axis for depth-buffer value d,
+// lin = b / (d + a); the far distance where nothing was drawn (d = the far value), beyond it,
+// or at infinity.
+fn view_depth(f: Frame, d: f32) -> f32 {
+    let far = f.camera_fwd.w;
+    if d == f.depth_params.z {
+        return far;
+    }
+    let lin = f.depth_params.y / (d + f.depth_params.x);
+    // NaN, ∞ or ≤ 0 (a depth value beyond an infinite projection's horizon) → the far distance.
+    if !(lin > 0.0 && lin < far) {
+        return far;
+    }
+    return lin;
 }
 
 // frame.rs FrameDesc::view_distance.
 fn view_distance(f: Frame, d: f32, dir: vec3<f32>) -> f32 {
-    let lin = linear_depth(d, f.camera_pos.w, f.camera_fwd.w);
-    return lin / max(dot(dir, f.camera_fwd.xyz), 1e-4);
+    return view_depth(f, d) / max(dot(dir, f.camera_fwd.xyz), 1e-4);
+}
+
+// frame.rs FrameDesc::far_distance: to the far distance along dir.
+fn far_distance(f: Frame, dir: vec3<f32>) -> f32 {
+    return f.camera_fwd.w / max(dot(dir, f.camera_fwd.xyz), 1e-4);
 }
 
 // shadow.rs cube_face.
@@ -385,12 +413,12 @@ fn pixel_jitter(px: vec2<u32>, frame: u32) -> f32 {
 
 // shadow.rs ShadowMap::visibility_pcf: 3×3 percentage-closer filter for surfaces, with the
 // point pushed along the surface normal by `normal_offset_texels` shadow texels.
-fn shadow_pcf(f: Frame, shadow_map: texture_2d_array<f32>, p: vec3<f32>, n: vec3<f32>) -> f32 {
+fn shadow_pcf(f: Frame, shadow_map: texture_2d_array<f32>, p: vec3<f32>, n: vec3<f32>, offset_texels: f32) -> f32 {
     var texel = f.shadow_params.w;
     if f.shadow_ints.z == 0u {
         texel *= length(p - f.light_pos.xyz);
     }
-    let q = p + n * (f.ambient.w * texel);
+    let q = p + n * (offset_texels * texel);
     let sc = shadow_coord(f, q);
     if !sc.valid {
         return 1.0;
@@ -408,8 +436,10 @@ fn shadow_pcf(f: Frame, shadow_map: texture_2d_array<f32>, p: vec3<f32>, n: vec3
 }
 
 // integrand.rs surface_radiance: Lambert with the same light and shadow map, plus ambient.
+// `shading`: the host's SurfaceShading, ambient (rgb) and normal offset in texels (w).
 fn surface_radiance(
     f: Frame,
+    shading: vec4<f32>,
     shadow_map: texture_2d_array<f32>,
     spot_tex: texture_2d<f32>,
     p: vec3<f32>,
@@ -424,9 +454,9 @@ fn surface_radiance(
     let cosine = max(dot(n, -li.dir), 0.0);
     var direct = vec3<f32>(0.0);
     if cosine > 0.0 && any(li.radiance > vec3<f32>(0.0)) {
-        direct = albedo / PI * li.radiance * cosine * shadow_pcf(f, shadow_map, p, n);
+        direct = albedo / PI * li.radiance * cosine * shadow_pcf(f, shadow_map, p, n, shading.w);
     }
-    return direct + f.ambient.xyz * albedo;
+    return direct + shading.xyz * albedo;
 }
 
 // march.rs march_steps: eq. 1 of Tóth & Umenhoffer 2009 over the interval iv = [t0, t1] of the

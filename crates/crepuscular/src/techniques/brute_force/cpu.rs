@@ -28,13 +28,12 @@ pub fn march(frame: &CpuFrame, settings: &BruteForceSettings) -> Result<(Image, 
     settings.validate()?;
     let desc = frame.desc;
     let start = std::time::Instant::now();
-    let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let cone = frame_cone(desc);
     let mut img = Image::new(desc.width, desc.height);
     img.pixels.par_chunks_mut(desc.width as usize).enumerate().for_each(|(y, row)| {
         for (x, px) in row.iter_mut().enumerate() {
             let (x, y) = (x as u32, y as u32);
-            let dir = desc.pixel_ray(&inv, x, y);
+            let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
             let l = march_ray(frame, settings, cone.as_ref(), x, y, dir, s);
             *px = [l.x, l.y, l.z, 1.0];

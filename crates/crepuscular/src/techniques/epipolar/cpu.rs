@@ -11,7 +11,7 @@ use crate::image::Image;
 use crate::march::{PixelMarch, SpotCone, SpotSteps, cone_interval, frame_cone, march_pixel};
 use crate::model::{Light, RgbTexture};
 use crate::stats::{PassTime, TechniqueStats};
-use glam::{Mat4, Vec2, Vec3, Vec4};
+use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -44,7 +44,7 @@ pub fn epipole(desc: &FrameDesc) -> ([f32; 4], bool) {
     if v.length().partial_cmp(&(super::DEGENERATE_DISTANCE * scale)) != Some(std::cmp::Ordering::Greater) {
         return DEGENERATE;
     }
-    let c = desc.camera.view_projection(desc.aspect()) * Vec4::new(v.x, v.y, v.z, 0.0);
+    let c = desc.camera.view_proj() * Vec4::new(v.x, v.y, v.z, 0.0);
     let (w, h) = (desc.width as f32, desc.height as f32);
     let e = Vec3::new((c.x + c.w) * 0.5 * w, (c.w - c.y) * 0.5 * h, c.w);
     let m = e.abs().max_element();
@@ -161,10 +161,9 @@ pub fn clip_ray(desc: &FrameDesc, q: Vec2, d: Vec2, umax: f32) -> Vec2 {
 }
 
 /// Mirrors `point_ray`: the view ray through a continuous pixel-space point.
-pub fn point_ray(desc: &FrameDesc, inv_view_proj: &Mat4, q: Vec2) -> Vec3 {
+pub fn point_ray(desc: &FrameDesc, q: Vec2) -> Vec3 {
     let ndc = Vec2::new(q.x / desc.width as f32 * 2.0 - 1.0, 1.0 - q.y / desc.height as f32 * 2.0);
-    let p = inv_view_proj.project_point3(ndc.extend(1.0));
-    (p - desc.camera.position).normalize()
+    desc.camera.ndc_ray(ndc)
 }
 
 /// Mirrors `texel_point`: the point of texel t of a line.
@@ -285,7 +284,6 @@ pub fn near_epipole(p: &EpipolarParams, q: Vec2) -> bool {
 /// Mirrors `spot_clip` in lines.wgsl.
 pub fn spot_clip(
     desc: &FrameDesc,
-    inv: &Mat4,
     cone: &SpotCone,
     p: &EpipolarParams,
     line: EpipolarLine,
@@ -295,8 +293,8 @@ pub fn spot_clip(
     let mut first = n;
     let mut last = 0;
     for i in 0..n {
-        let dir = point_ray(desc, inv, texel_point(p, &line, i));
-        if cone_interval(cone, desc.camera.position, dir, desc.view_distance(1.0, dir)).is_some() {
+        let dir = point_ray(desc, texel_point(p, &line, i));
+        if cone_interval(cone, desc.camera.position, dir, desc.far_distance(dir)).is_some() {
             if first == n {
                 first = i;
             }
@@ -319,7 +317,7 @@ pub fn spot_clip(
 }
 
 /// Mirrors `setup_line` in lines.wgsl: line k (§4.1).
-pub fn setup_line(desc: &FrameDesc, inv: &Mat4, cone: Option<&SpotCone>, p: &EpipolarParams, k: u32) -> EpipolarLine {
+pub fn setup_line(desc: &FrameDesc, cone: Option<&SpotCone>, p: &EpipolarParams, k: u32) -> EpipolarLine {
     let b = line_border_point(desc, p, k);
     let te = towards_epipole(p, b);
     let d = Vec2::new(te.x, te.y);
@@ -336,7 +334,7 @@ pub fn setup_line(desc: &FrameDesc, inv: &Mat4, cone: Option<&SpotCone>, p: &Epi
     line.length = c.y - u0;
     line.valid = 1;
     if let Some(cone) = cone {
-        line = spot_clip(desc, inv, cone, p, line);
+        line = spot_clip(desc, cone, p, line);
     }
     if line.valid == 1 {
         line.initial = initial_count(desc, p, line.length);
@@ -348,16 +346,14 @@ pub fn setup_line(desc: &FrameDesc, inv: &Mat4, cone: Option<&SpotCone>, p: &Epi
 
 /// Mirrors the `lines` entry point: every line.
 pub fn lines(desc: &FrameDesc, p: &EpipolarParams) -> Vec<EpipolarLine> {
-    let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let cone = frame_cone(desc);
-    (0..p.slices).into_par_iter().map(|k| setup_line(desc, &inv, cone.as_ref(), p, k)).collect()
+    (0..p.slices).into_par_iter().map(|k| setup_line(desc, cone.as_ref(), p, k)).collect()
 }
 
 /// Mirrors the `coordinates` entry point: the coordinate texture (p.x, p.y, s of pixel ⌊p⌋,
 /// valid), row-major k·S + t.
 pub fn coordinates(frame: &CpuFrame, p: &EpipolarParams, lines: &[EpipolarLine]) -> Vec<[f32; 4]> {
     let desc = frame.desc;
-    let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let s = p.samples as usize;
     let mut out = vec![[0.0f32; 4]; s * lines.len()];
     out.par_chunks_mut(s).zip(lines.par_iter()).for_each(|(row, line)| {
@@ -367,7 +363,7 @@ pub fn coordinates(frame: &CpuFrame, p: &EpipolarParams, lines: &[EpipolarLine])
         for (t, texel) in row.iter_mut().enumerate() {
             let q = texel_point(p, line, t as u32);
             let (x, y) = texel_pixel(desc, q);
-            let dir = desc.pixel_ray(&inv, x, y);
+            let dir = desc.pixel_ray(x, y);
             let sd = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
             *texel = [q.x, q.y, sd, 1.0];
         }
@@ -483,14 +479,13 @@ pub fn pixel_march(p: &EpipolarParams) -> PixelMarch {
 /// [`prefiltered_desc`]).
 pub fn march(frame: &CpuFrame, p: &EpipolarParams, list: &[u32]) -> Image {
     let desc = frame.desc;
-    let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let cone = frame_cone(desc);
     let m = pixel_march(p);
     let values: Vec<(usize, [f32; 4])> = list
         .par_iter()
         .map(|&pixel| {
             let (x, y) = (pixel % desc.width, pixel / desc.width);
-            let dir = desc.pixel_ray(&inv, x, y);
+            let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(frame.depth[pixel as usize], dir);
             let l = march_pixel(frame, cone.as_ref(), &m, x, y, dir, s);
             (pixel as usize, [l.x, l.y, l.z, s])
@@ -671,7 +666,6 @@ struct Ctx<'a> {
     frame: &'a CpuFrame<'a>,
     p: &'a EpipolarParams,
     cone: Option<SpotCone>,
-    inv: Mat4,
     lines: &'a [EpipolarLine],
     radiance: &'a [[f32; 4]],
 }
@@ -680,7 +674,7 @@ struct Ctx<'a> {
 fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
     let desc = c.frame.desc;
     let p = c.p;
-    let dir = desc.pixel_ray(&c.inv, x, y);
+    let dir = desc.pixel_ray(x, y);
     let s = desc.view_distance(c.frame.depth[(y * desc.width + x) as usize], dir);
     if let Some(cone) = &c.cone
         && cone_interval(cone, desc.camera.position, dir, s).is_none()
@@ -727,7 +721,6 @@ pub fn upsample(frame: &CpuFrame, p: &EpipolarParams, lines: &[EpipolarLine], ra
         frame,
         p,
         cone: frame_cone(desc),
-        inv: desc.camera.view_projection(desc.aspect()).inverse(),
         lines,
         radiance,
     };

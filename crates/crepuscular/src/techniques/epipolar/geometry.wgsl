@@ -158,9 +158,7 @@ fn clip_ray(f: Frame, q: vec2<f32>, d: vec2<f32>, umax: f32) -> vec2<f32> {
 fn point_ray(f: Frame, q: vec2<f32>) -> vec3<f32> {
     let size = vec2<f32>(f32(f.ints.x), f32(f.ints.y));
     let ndc = vec2<f32>(q.x / size.x * 2.0 - 1.0, 1.0 - q.y / size.y * 2.0);
-    let h = f.inv_view_proj * vec4<f32>(ndc, 1.0, 1.0);
-    let p = h.xyz / h.w;
-    return normalize(p - f.camera_pos.xyz);
+    return ndc_ray(f, ndc);
 }
 
 // The point of texel t of a line.

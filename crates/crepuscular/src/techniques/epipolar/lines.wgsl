@@ -26,7 +26,7 @@ fn spot_clip(line_in: Line) -> Line {
     var last = 0u;
     for (var i = 0u; i < n; i++) {
         let dir = point_ray(frame, texel_point(line, i));
-        let iv = cone_interval(frame, frame.camera_pos.xyz, dir, view_distance(frame, 1.0, dir));
+        let iv = cone_interval(frame, frame.camera_pos.xyz, dir, far_distance(frame, dir));
         if iv.y > iv.x {
             if first == n {
                 first = i;

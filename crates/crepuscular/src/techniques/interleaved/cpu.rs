@@ -105,13 +105,12 @@ pub fn march_ray(
 
 fn march_with(frame: &CpuFrame, s: &InterleavedSettings, lut: Option<&PhaseLut>) -> Image {
     let desc = frame.desc;
-    let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let cone = frame_cone(desc);
     let mut img = Image::new(desc.width, desc.height);
     img.pixels.par_chunks_mut(desc.width as usize).enumerate().for_each(|(y, row)| {
         for (x, px) in row.iter_mut().enumerate() {
             let (x, y) = (x as u32, y as u32);
-            let dir = desc.pixel_ray(&inv, x, y);
+            let dir = desc.pixel_ray(x, y);
             let dist = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
             let l = march_ray(frame, s, cone.as_ref(), lut, x, y, dir, dist);
             *px = [l.x, l.y, l.z, dist];

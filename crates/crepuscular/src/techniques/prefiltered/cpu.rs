@@ -376,7 +376,6 @@ pub fn ray_visibility(p: &Passes, bases: u32, pt: Vec3, dir: Vec3) -> Vec3 {
 /// light ([`march_epipole`], §5). Mirrors evaluate.wgsl.
 pub fn evaluate(frame: &CpuFrame, settings: &PrefilteredSettings, p: &Passes, epipole: Option<[f32; 2]>) -> Image {
     let desc = frame.desc;
-    let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let w = desc.width as usize;
     let mut image = Image::new(desc.width, desc.height);
     image.pixels.par_chunks_mut(w).enumerate().for_each(|(y, line)| {
@@ -385,7 +384,7 @@ pub fn evaluate(frame: &CpuFrame, settings: &PrefilteredSettings, p: &Passes, ep
             if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
                 continue;
             }
-            let dir = desc.pixel_ray(&inv, x, y);
+            let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
             let l = unoccluded_inscatter(desc, settings, dir, s)
                 * ray_visibility(p, settings.bases, desc.camera.position + dir * s, dir);
@@ -400,13 +399,12 @@ pub fn evaluate(frame: &CpuFrame, settings: &PrefilteredSettings, p: &Passes, ep
 /// visible light, ray-marched with `epipole_steps` as `brute-force` marches them (§5).
 pub fn march_epipole(frame: &CpuFrame, settings: &PrefilteredSettings, epipole: Option<[f32; 2]>, image: &mut Image) {
     let desc = frame.desc;
-    let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let cone = frame_cone(desc);
     let march = PixelMarch::from(settings);
     for y in 0..desc.height {
         for x in 0..desc.width {
             if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
-                let dir = desc.pixel_ray(&inv, x, y);
+                let dir = desc.pixel_ray(x, y);
                 let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
                 let l = march_pixel(frame, cone.as_ref(), &march, x, y, dir, s);
                 image.pixels[(y * desc.width + x) as usize] = [l.x, l.y, l.z, 1.0];

@@ -48,7 +48,6 @@ pub fn visibility_view(
     epipole: Option<[f32; 2]>,
     radius: u32,
 ) -> Image {
-    let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let mut img = Image::new(desc.width, desc.height);
     for y in 0..desc.height {
         for x in 0..desc.width {
@@ -57,7 +56,7 @@ pub fn visibility_view(
                 img.pixels[i] = [1.0, 0.0, 0.0, 1.0];
                 continue;
             }
-            let dir = desc.pixel_ray(&inv, x, y);
+            let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(depth[i], dir);
             let v = ray_visibility(p, bases, desc.camera.position + dir * s, dir);
             img.pixels[i] = [v.x, v.y, v.z, 1.0];

@@ -68,7 +68,7 @@ pub fn epipole_pixel(desc: &FrameDesc, radius: u32) -> Option<[f32; 2]> {
     if radius == 0 {
         return None;
     }
-    let vp = desc.camera.view_projection(desc.aspect());
+    let vp = desc.camera.view_proj();
     let p = match &desc.light {
         crate::Light::Directional { direction, .. } => desc.camera.position - direction.normalize(),
         crate::Light::Spot { position, .. } | crate::Light::Point { position, .. } => *position,

@@ -181,14 +181,14 @@ fn perpendicular(a: Vec3) -> Vec3 {
 
 /// Directions of the four frustum corner rays.
 fn corner_dirs(desc: &FrameDesc) -> [Vec3; 4] {
-    let c = desc.camera.frustum_corners(desc.aspect(), 1.0, 2.0);
+    let c = desc.camera.frustum_corners(1.0, 2.0);
     [0, 1, 2, 3].map(|i| (c[i] - desc.camera.position).normalize())
 }
 
 /// True when the direction `d` from the camera is inside the view frustum's angular extent,
 /// grown by `margin` in NDC.
 fn direction_on_screen(desc: &FrameDesc, d: Vec3, margin: f32) -> bool {
-    let vp = desc.camera.view_projection(desc.aspect());
+    let vp = desc.camera.view_proj();
     let p = desc.camera.position + d;
     let c = vp * p.extend(1.0);
     c.w > 1e-6 && (c.x / c.w).abs() <= 1.0 + margin && (c.y / c.w).abs() <= 1.0 + margin
@@ -295,7 +295,7 @@ impl Rectification {
         let dr = (r1 - r0).max(1e-6) * DEPTH_PADDING;
         r.ranges = Vec4::new(q0 - dq, q1 + dq, r0 - dr, r1 + dr);
         // Near / far along x: the frustum corners (Fig. 4, bottom left).
-        let corners = desc.camera.frustum_corners(desc.aspect(), desc.camera.near, desc.camera.far);
+        let corners = desc.camera.frustum_corners(desc.camera.near, desc.camera.far);
         let xs = corners.map(|c| (c - desc.camera.position).dot(ex));
         let xn = xs[..4].iter().copied().fold(f32::MAX, f32::min).max(1e-4);
         let xf = xs[4..].iter().copied().fold(f32::MIN, f32::max).max(xn * 1.001);
@@ -397,7 +397,7 @@ impl Rectification {
         let c_max = if r.local {
             (std::f32::consts::PI - t0.max(0.0)).max(1e-3)
         } else {
-            let cs = desc.camera.frustum_corners(desc.aspect(), desc.camera.near, desc.camera.far);
+            let cs = desc.camera.frustum_corners(desc.camera.near, desc.camera.far);
             cs.iter().map(|&p| (p - c).reject_from_normalized(a).length()).fold(1e-3, f32::max) * 1.001
         };
         // Columns: for a directional light, warped so that half of them fall within the knee k
@@ -767,13 +767,11 @@ mod tests {
         let bounds = crate::shadow::Bounds { min: Vec3::splat(-10.0), max: Vec3::splat(10.0) };
         let shadow = ShadowProjection::fit(&light, &camera, 16.0 / 9.0, bounds, 256);
         FrameDesc {
-            camera,
+            camera: crate::FrameCamera::look_at(&camera, 16.0 / 9.0),
             light,
             medium: Medium::default(),
             shadow,
             shadow_bias: 0.0,
-            normal_offset_texels: 0.0,
-            ambient: Vec3::ZERO,
             width: 160,
             height: 90,
         }
@@ -814,9 +812,8 @@ mod tests {
             for regions in [1, 3] {
                 let d = desc(light.clone(), cam.clone());
                 let r = Rectification::new(&d, &opts(choice, regions, 0.5));
-                let inv = d.camera.view_projection(d.aspect()).inverse();
                 for (x, y) in [(0, 0), (159, 0), (0, 89), (159, 89), (80, 45), (13, 70)] {
-                    let dir = d.pixel_ray(&inv, x, y);
+                    let dir = d.pixel_ray(x, y);
                     let mut last_col = -1.0;
                     let mut first = None;
                     for t in [0.5f32, 1.0, 3.0, 10.0, 50.0, 190.0] {

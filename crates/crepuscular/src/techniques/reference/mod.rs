@@ -159,7 +159,7 @@ pub fn render(
     let desc = frame.desc;
     let start = std::time::Instant::now();
     let integrand = Integrand::new(frame);
-    let vp = desc.camera.view_projection(desc.aspect()).as_dmat4();
+    let vp = desc.camera.view_proj().as_dmat4();
     let inv = vp.inverse();
     let eye = desc.camera.position.as_dvec3();
     let fwd = desc.camera.forward().as_dvec3();

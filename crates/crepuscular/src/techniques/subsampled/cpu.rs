@@ -7,7 +7,7 @@ use crate::frame::CpuFrame;
 use crate::image::Image;
 use crate::march::{PixelMarch, SpotCone, frame_cone, march_pixel};
 use crate::stats::{PassTime, TechniqueStats};
-use glam::{Mat4, Vec3};
+use glam::{Vec3};
 use rayon::prelude::*;
 
 /// Mirrors `source_pixel` in march.wgsl: the full-resolution pixel (along one axis of `full`
@@ -73,14 +73,13 @@ struct Ctx<'a> {
     frame: &'a CpuFrame<'a>,
     settings: &'a SubsampledSettings,
     cone: Option<SpotCone>,
-    inv: Mat4,
     grid: &'a Image,
 }
 
 /// Mirrors `upsample_pixel` in upsample.wgsl: (radiance, re-marched).
 fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
     let desc = c.frame.desc;
-    let dir = desc.pixel_ray(&c.inv, x, y);
+    let dir = desc.pixel_ray(x, y);
     let s = desc.view_distance(c.frame.depth[(y * desc.width + x) as usize], dir);
     let (gw, gh) = (c.grid.width, c.grid.height);
     let bx = bracket(x, desc.width, gw);
@@ -120,14 +119,13 @@ pub fn march(frame: &CpuFrame, settings: &SubsampledSettings) -> Result<Image, E
     settings.validate()?;
     let desc = frame.desc;
     let (gw, gh) = settings.grid_size(desc.width, desc.height);
-    let inv = desc.camera.view_projection(desc.aspect()).inverse();
     let cone = frame_cone(desc);
     let mut img = Image::new(gw, gh);
     img.pixels.par_chunks_mut(gw as usize).enumerate().for_each(|(j, row)| {
         let y = source_pixel(j as u32, desc.height, gh);
         for (i, px) in row.iter_mut().enumerate() {
             let x = source_pixel(i as u32, desc.width, gw);
-            let dir = desc.pixel_ray(&inv, x, y);
+            let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
             let l = march_ray(frame, settings, cone.as_ref(), x, y, dir, s);
             *px = [l.x, l.y, l.z, s];
@@ -145,7 +143,6 @@ pub fn upsample(frame: &CpuFrame, settings: &SubsampledSettings, grid: &Image) -
         frame,
         settings,
         cone: frame_cone(desc),
-        inv: desc.camera.view_projection(desc.aspect()).inverse(),
         grid,
     };
     let mut img = Image::new(desc.width, desc.height);

@@ -5,9 +5,9 @@
 use crate::scene::{Geometry, Vertex};
 use crepuscular::frame::FrameDesc;
 use crepuscular::gpu::{GpuContext, Recorder};
+use crepuscular::integrand::SurfaceShading;
 use crepuscular::stats::PassTime;
 use crepuscular::techniques::prefiltered::raster::RectifiedRaster;
-use crepuscular::integrand::SurfaceShading;
 use crepuscular::{DepthConvention, Error, GpuFrame, RgbTexture, ShadowMap};
 use std::sync::OnceLock;
 use wgpu::util::DeviceExt;
@@ -198,35 +198,40 @@ impl GpuHost {
                 source: wgpu::ShaderSource::Wgsl(crepuscular::shaders::compose(SURFACE_WGSL).into()),
             });
             // One surface pipeline per camera depth convention (its depth test).
-            let surface_pipeline = |compare: wgpu::CompareFunction| device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("surface"),
-                layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            let surface_pipeline = |compare: wgpu::CompareFunction| {
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                     label: Some("surface"),
-                    bind_group_layouts: &[Some(&surface_layout)],
-                    immediate_size: 0,
-                })),
-                vertex: wgpu::VertexState {
-                    module: &surface_module,
-                    entry_point: Some("vs"),
-                    compilation_options: Default::default(),
-                    buffers: std::slice::from_ref(&vertex_layout),
-                },
-                primitive,
-                depth_stencil: Some(wgpu::DepthStencilState { depth_compare: Some(compare), ..depth_state.clone() }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &surface_module,
-                    entry_point: Some("fs"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format: wgpu::TextureFormat::Rgba32Float,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
+                    layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                        label: Some("surface"),
+                        bind_group_layouts: &[Some(&surface_layout)],
+                        immediate_size: 0,
+                    })),
+                    vertex: wgpu::VertexState {
+                        module: &surface_module,
+                        entry_point: Some("vs"),
+                        compilation_options: Default::default(),
+                        buffers: std::slice::from_ref(&vertex_layout),
+                    },
+                    primitive,
+                    depth_stencil: Some(wgpu::DepthStencilState {
+                        depth_compare: Some(compare),
+                        ..depth_state.clone()
+                    }),
+                    multisample: Default::default(),
+                    fragment: Some(wgpu::FragmentState {
+                        module: &surface_module,
+                        entry_point: Some("fs"),
+                        compilation_options: Default::default(),
+                        targets: &[Some(wgpu::ColorTargetState {
+                            format: wgpu::TextureFormat::Rgba32Float,
+                            blend: None,
+                            write_mask: wgpu::ColorWrites::ALL,
+                        })],
+                    }),
+                    multiview_mask: None,
+                    cache: None,
+                })
+            };
             // wgpu refuses zero-sized buffers: keep one degenerate triangle for empty scenes.
             let (verts, idx): (Vec<Vertex>, Vec<u32>) = if geometry.indices.is_empty() {
                 (vec![Vertex { position: [0.0; 3], normal: [0.0, 1.0, 0.0], albedo: [0.0; 3] }; 3], vec![0, 0, 0])

@@ -20,9 +20,9 @@
 //! into horizontal bands of [`BAND_ROWS`] rows, and the bands are rasterized in parallel.
 
 use crate::scene::Geometry;
+use crepuscular::DepthConvention;
 use crepuscular::techniques::prefiltered::raster::RectifiedRaster;
 use crepuscular::{ShadowMap, ShadowProjection};
-use crepuscular::DepthConvention;
 use glam::{Mat4, Vec4};
 use rayon::prelude::*;
 
@@ -576,7 +576,16 @@ fn depth_only(geometry: &Geometry, view_proj: Mat4, depth_mode: DepthMode, size_
     let (offsets, items) = bin(&tris, bands);
     depth.par_chunks_mut(BAND_ROWS * w).enumerate().for_each(|(b, depth)| {
         let rows = depth.len() / w;
-        raster_band(&tris, &items[offsets[b]..offsets[b + 1]], w, b * BAND_ROWS, rows, depth, None, DepthConvention::Standard);
+        raster_band(
+            &tris,
+            &items[offsets[b]..offsets[b + 1]],
+            w,
+            b * BAND_ROWS,
+            rows,
+            depth,
+            None,
+            DepthConvention::Standard,
+        );
     });
     depth
 }

@@ -5,7 +5,7 @@
 //! depth — is derived here, once, and mirrored by `pixel_ray` / `view_distance` in common.wgsl.
 
 use crate::error::Error;
-use glam::{Mat4, Vec2, Vec3, Vec4};
+use glam::{DVec2, DVec3, Mat4, Vec2, Vec3, Vec4};
 
 /// How the depth buffer stores depth (the projection's NDC z = clip.z / clip.w, in [0, 1]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -181,6 +181,23 @@ impl FrameCamera {
         let h = self.inv_projection * ndc.extend(self.depth.near_value()).extend(1.0);
         let p = h.truncate() / h.w;
         self.inv_view.transform_vector3(p.normalize()).normalize()
+    }
+
+    /// [`FrameCamera::ndc_ray`] in f64 (the reference's precision).
+    pub fn ndc_ray_f64(&self, ndc: DVec2) -> DVec3 {
+        let h = self.inv_projection.as_dmat4() * ndc.extend(self.depth.near_value() as f64).extend(1.0);
+        let p = h.truncate() / h.w;
+        self.inv_view.as_dmat4().transform_vector3(p.normalize()).normalize()
+    }
+
+    /// [`FrameCamera::view_depth`] in f64.
+    pub fn view_depth_f64(&self, d: f64) -> f64 {
+        let far = self.far as f64;
+        if d == self.depth.far_value() as f64 {
+            return far;
+        }
+        let lin = self.depth_b as f64 / (d + self.depth_a as f64);
+        if lin.is_finite() && lin > 0.0 { lin.min(far) } else { far }
     }
 
     /// Distance along the view axis for a depth-buffer value `d`: b / (d + a), and

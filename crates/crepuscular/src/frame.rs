@@ -3,8 +3,8 @@
 //! shadow-map projection and its own depth and shadow-map textures; the CPU backend fills a
 //! [`CpuFrame`] with the same data as arrays.
 
-use crate::image::Image;
 use crate::camera::FrameCamera;
+use crate::image::Image;
 use crate::integrand::light_position;
 use crate::model::{Light, Medium, RgbTexture};
 use crate::shadow::{ShadowMap, ShadowProjection};

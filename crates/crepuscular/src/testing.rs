@@ -5,8 +5,8 @@
 use crate::frame::FrameDesc;
 use crate::stats::TechniqueStats;
 use crate::{
-    Bounds, Camera, Error, FrameCamera, GpuContext, GpuFrame, Light, Medium, Phase, Scattering, ShadowMap, ShadowProjection,
-    StatsMode, TechniqueSettings,
+    Bounds, Camera, Error, FrameCamera, GpuContext, GpuFrame, Light, Medium, Phase, Scattering, ShadowMap,
+    ShadowProjection, StatsMode, TechniqueSettings,
 };
 use glam::{DVec3, Vec3};
 
@@ -32,15 +32,7 @@ pub fn wall_frame(light: Light, medium: Medium, w: u32, h: u32) -> (FrameDesc, V
     // The wall's depth-buffer value at its view depth.
     let camera = FrameCamera::look_at(&camera, aspect);
     let depth = vec![camera.depth_of(WALL_DISTANCE); (w * h) as usize];
-    let desc = FrameDesc {
-        camera,
-        light,
-        medium,
-        shadow,
-        shadow_bias: 0.02,
-        width: w,
-        height: h,
-    };
+    let desc = FrameDesc { camera, light, medium, shadow, shadow_bias: 0.02, width: w, height: h };
     (desc, depth, sm)
 }
 

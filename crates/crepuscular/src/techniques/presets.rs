@@ -31,13 +31,13 @@
 
 use crate::error::Error;
 use crate::march::SpotSteps;
+use crate::techniques::TechniqueSettings;
 use crate::techniques::brute_force::BruteForceSettings;
 use crate::techniques::epipolar::EpipolarSettings;
 use crate::techniques::interleaved::InterleavedSettings;
 use crate::techniques::prefiltered::PrefilteredSettings;
 use crate::techniques::reference::ReferenceSettings;
 use crate::techniques::subsampled::SubsampledSettings;
-use crate::techniques::TechniqueSettings;
 use serde::{Deserialize, Serialize};
 
 /// A quality/cost intent.

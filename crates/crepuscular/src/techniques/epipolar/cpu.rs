@@ -282,12 +282,7 @@ pub fn near_epipole(p: &EpipolarParams, q: Vec2) -> bool {
 // ---- pass 1: lines ----
 
 /// Mirrors `spot_clip` in lines.wgsl.
-pub fn spot_clip(
-    desc: &FrameDesc,
-    cone: &SpotCone,
-    p: &EpipolarParams,
-    line: EpipolarLine,
-) -> EpipolarLine {
+pub fn spot_clip(desc: &FrameDesc, cone: &SpotCone, p: &EpipolarParams, line: EpipolarLine) -> EpipolarLine {
     let mut line = line;
     let n = p.samples;
     let mut first = n;
@@ -717,13 +712,7 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
 /// original spot texture (re-marched pixels are full-resolution samples).
 pub fn upsample(frame: &CpuFrame, p: &EpipolarParams, lines: &[EpipolarLine], radiance: &[[f32; 4]]) -> (Image, u64) {
     let desc = frame.desc;
-    let c = Ctx {
-        frame,
-        p,
-        cone: frame_cone(desc),
-        lines,
-        radiance,
-    };
+    let c = Ctx { frame, p, cone: frame_cone(desc), lines, radiance };
     let mut img = Image::new(desc.width, desc.height);
     let remarched = img
         .pixels

@@ -159,11 +159,8 @@ pub fn render(
     let desc = frame.desc;
     let start = std::time::Instant::now();
     let integrand = Integrand::new(frame);
-    let vp = desc.camera.view_proj().as_dmat4();
-    let inv = vp.inverse();
     let eye = desc.camera.position.as_dvec3();
     let fwd = desc.camera.forward().as_dvec3();
-    let (near, far) = (desc.camera.near as f64, desc.camera.far as f64);
     let n = settings.steps;
     let cone = crate::march::frame_cone(desc);
     let reach = crate::march::light_reach(desc).map(|(c, r)| (c.as_dvec3(), r as f64));
@@ -182,10 +179,8 @@ pub fn render(
             for x in 0..desc.width {
                 let ndc_x = (x as f64 + 0.5) / desc.width as f64 * 2.0 - 1.0;
                 let ndc_y = 1.0 - (y as f64 + 0.5) / desc.height as f64 * 2.0;
-                let pf = inv.project_point3(DVec3::new(ndc_x, ndc_y, 1.0));
-                let dir = (pf - eye).normalize();
-                let d = frame.depth[y as usize * w + x as usize] as f64;
-                let lin = near * far / (far - d * (far - near));
+                let dir = desc.camera.ndc_ray_f64(glam::DVec2::new(ndc_x, ndc_y));
+                let lin = desc.camera.view_depth_f64(frame.depth[y as usize * w + x as usize] as f64);
                 let s = lin / dir.dot(fwd).max(1e-4);
                 // The light is zero outside a spot's cone: integrate only the ray's chord inside
                 // it (march.rs, exact-cone), widened by a margin against f32 rounding.

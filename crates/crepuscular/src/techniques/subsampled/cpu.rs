@@ -7,7 +7,7 @@ use crate::frame::CpuFrame;
 use crate::image::Image;
 use crate::march::{PixelMarch, SpotCone, frame_cone, march_pixel};
 use crate::stats::{PassTime, TechniqueStats};
-use glam::{Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 
 /// Mirrors `source_pixel` in march.wgsl: the full-resolution pixel (along one axis of `full`
@@ -139,12 +139,7 @@ pub fn march(frame: &CpuFrame, settings: &SubsampledSettings) -> Result<Image, E
 /// pixels re-marched at full resolution.
 pub fn upsample(frame: &CpuFrame, settings: &SubsampledSettings, grid: &Image) -> (Image, u64) {
     let desc = frame.desc;
-    let c = Ctx {
-        frame,
-        settings,
-        cone: frame_cone(desc),
-        grid,
-    };
+    let c = Ctx { frame, settings, cone: frame_cone(desc), grid };
     let mut img = Image::new(desc.width, desc.height);
     let remarched: u64 = img
         .pixels

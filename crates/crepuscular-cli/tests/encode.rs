@@ -254,3 +254,72 @@ fn bind_groups_are_built_on_resize_and_new_inputs_not_per_frame() {
         assert_eq!(sc.technique().bind_group_builds(), 3, "{name}: a resize");
     }
 }
+
+/// An IEEE half-float's value.
+fn half_to_f32(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exp = ((h >> 10) & 0x1f) as i32;
+    let frac = (h & 0x3ff) as f32;
+    match exp {
+        0 => sign * frac * 2f32.powi(-24),
+        31 => {
+            if frac == 0.0 {
+                sign * f32::INFINITY
+            } else {
+                f32::NAN
+            }
+        }
+        e => sign * (1.0 + frac / 1024.0) * 2f32.powi(e - 15),
+    }
+}
+
+#[test]
+fn rgba16float_output_is_the_rgba32float_frame_rounded_to_half_floats() {
+    let Some(gpu) = test_gpu("rgba16float_output_is_the_rgba32float_frame_rounded_to_half_floats") else { return };
+    for scene_name in ["colonnade", "cage"] {
+        let scene = small(scene_name);
+        let desc = frame_desc(&scene);
+        let (w, h) = (desc.width, desc.height);
+        let host = GpuHost::for_scene(&gpu, &scene).unwrap();
+        let tex = host.render(&gpu, &desc, None).unwrap();
+        let views = tex.views();
+        let frame = views.frame(&desc);
+        for settings in techniques(&scene) {
+            let name = settings.name();
+            let mut full = Scattering::from_gpu(&gpu, settings.clone()).unwrap();
+            let full_out = gpu.create_output_texture(w, h);
+            full.render(&frame, &full_out.create_view(&Default::default())).unwrap();
+            let want = gpu.read_texture_f32(&full_out, 0).unwrap();
+
+            let mut half = Scattering::from_gpu(&gpu, settings).unwrap();
+            half = half.with_output_format(wgpu::TextureFormat::Rgba16Float).unwrap();
+            assert_eq!(half.output_format(), wgpu::TextureFormat::Rgba16Float);
+            // The Rgba32Float target is now refused, naming the format.
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            let e = half.encode(&mut enc, &frame, &full_out.create_view(&Default::default())).unwrap_err();
+            assert!(e.to_string().contains("Rgba16Float"), "{e}");
+            let half_out =
+                crepuscular::gpu::storage_texture(&gpu.device, "half", wgpu::TextureFormat::Rgba16Float, w, h);
+            half.render(&frame, &half_out.create_view(&Default::default())).unwrap();
+            let bytes = gpu.read_texture_bytes(&half_out, 0).unwrap();
+            let got: Vec<f32> = bytes.chunks_exact(2).map(|b| half_to_f32(u16::from_le_bytes([b[0], b[1]]))).collect();
+            assert_eq!(got.len(), want.len());
+            // Every value is the f32 frame's value converted to a half float, within one half
+            // ulp (relative 2⁻¹⁰; the conversion may truncate rather than round — llvmpipe's
+            // does — and subnormals are 2⁻²⁴ apart): the technique computed exactly the same.
+            let (mut se, mut peak) = (0.0f64, 0.0f64);
+            for (i, (g, f)) in got.iter().zip(&want).enumerate() {
+                if i % 4 == 3 {
+                    continue; // alpha
+                }
+                assert!((g - f).abs() <= f.abs() * 2f32.powi(-10) + 2f32.powi(-24), "{scene_name} {name}: {g} vs {f}");
+                se += ((g - f) as f64).powi(2);
+                peak = peak.max(*f as f64);
+            }
+            let mse = se / (w * h * 3) as f64;
+            let psnr = 10.0 * (peak * peak / mse.max(1e-30)).log10();
+            eprintln!("{scene_name} {name}: Rgba16Float vs Rgba32Float output: PSNR {psnr:.1} dB (peak {peak:.3})");
+            assert!(peak > 1e-3, "{scene_name} {name}: a black frame");
+        }
+    }
+}

@@ -57,8 +57,9 @@ pub trait Technique: Clone + std::fmt::Debug + Default + serde::Serialize + serd
 pub trait GpuTechnique: Sized {
     /// Its settings.
     type Settings: Technique;
-    /// Builds pipelines and size-independent buffers.
-    fn new(gpu: &GpuContext, settings: Self::Settings) -> Result<Self, Error>;
+    /// Builds pipelines and size-independent buffers; the final pass writes the in-scattering
+    /// in `output`'s format (one of [`pass::OUTPUT_FORMATS`]).
+    fn new(gpu: &GpuContext, settings: Self::Settings, output: wgpu::TextureFormat) -> Result<Self, Error>;
     /// The settings used from the next frame on.
     fn settings_mut(&mut self) -> &mut Self::Settings;
     /// The current settings.
@@ -178,9 +179,15 @@ macro_rules! registry {
         }
 
         impl AnyGpuTechnique {
-            pub(crate) fn new(gpu: &GpuContext, settings: TechniqueSettings) -> Result<Self, Error> {
+            pub(crate) fn new(
+                gpu: &GpuContext,
+                settings: TechniqueSettings,
+                output: wgpu::TextureFormat,
+            ) -> Result<Self, Error> {
                 match settings {
-                    $(TechniqueSettings::$variant(s) => Ok(Self::$variant($module::$gpu::new(gpu, s)?)),)*
+                    $(TechniqueSettings::$variant(s) => {
+                        Ok(Self::$variant(<$module::$gpu as GpuTechnique>::new(gpu, s, output)?))
+                    })*
                     other => Err(Error::invalid(
                         "technique",
                         other.name(),

@@ -34,16 +34,37 @@ pub fn texture_entry(binding: u32, dim: wgpu::TextureViewDimension) -> wgpu::Bin
 
 /// A write-only `Rgba32Float` 2D storage texture at `binding`.
 pub fn storage_texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    storage_texture_entry_of(binding, wgpu::TextureFormat::Rgba32Float)
+}
+
+/// A write-only 2D storage texture of `format` at `binding`.
+pub fn storage_texture_entry_of(binding: u32, format: wgpu::TextureFormat) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
         ty: wgpu::BindingType::StorageTexture {
             access: wgpu::StorageTextureAccess::WriteOnly,
-            format: wgpu::TextureFormat::Rgba32Float,
+            format,
             view_dimension: wgpu::TextureViewDimension::D2,
         },
         count: None,
     }
+}
+
+/// The in-scattering formats a caller may choose ([`crate::Scattering::with_output_format`]).
+pub const OUTPUT_FORMATS: [wgpu::TextureFormat; 2] =
+    [wgpu::TextureFormat::Rgba32Float, wgpu::TextureFormat::Rgba16Float];
+
+/// A final pass's source with its output (`out_tex`) declared in `output`'s storage format.
+pub fn with_output(src: &str, output: wgpu::TextureFormat) -> String {
+    let name = match output {
+        wgpu::TextureFormat::Rgba16Float => "rgba16float",
+        _ => "rgba32float",
+    };
+    src.replace(
+        "var out_tex: texture_storage_2d<rgba32float, write>;",
+        &format!("var out_tex: texture_storage_2d<{name}, write>;"),
+    )
 }
 
 /// A storage buffer at `binding` of at least `min_size` bytes (None: any).
@@ -61,8 +82,8 @@ pub fn storage_buffer_entry(binding: u32, read_only: bool, min_size: Option<u64>
 }
 
 /// Bindings 0–5 of every per-pixel pass over the frame: frame uniforms, pass uniforms, depth,
-/// shadow map (array), spot texture, `Rgba32Float` output.
-pub fn frame_pass_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
+/// shadow map (array), spot texture, the output in `output`'s format.
+pub fn frame_pass_entries(output: wgpu::TextureFormat) -> [wgpu::BindGroupLayoutEntry; 6] {
     use wgpu::TextureViewDimension as D;
     [
         uniform_entry(0),
@@ -70,17 +91,28 @@ pub fn frame_pass_entries() -> [wgpu::BindGroupLayoutEntry; 6] {
         texture_entry(2, D::D2),
         texture_entry(3, D::D2Array),
         texture_entry(4, D::D2),
-        storage_texture_entry(5),
+        storage_texture_entry_of(5, output),
     ]
 }
 
-/// The frame-pass layout ([`frame_pass_entries`]) followed by a pass's own `extra` bindings.
+/// The frame-pass layout ([`frame_pass_entries`], an `Rgba32Float` output) followed by a pass's
+/// own `extra` bindings.
 pub fn frame_pass_layout(
     device: &wgpu::Device,
     label: &str,
     extra: &[wgpu::BindGroupLayoutEntry],
 ) -> wgpu::BindGroupLayout {
-    let mut entries = frame_pass_entries().to_vec();
+    frame_pass_layout_to(device, label, extra, wgpu::TextureFormat::Rgba32Float)
+}
+
+/// [`frame_pass_layout`] with the output in `output`'s format (a technique's final pass).
+pub fn frame_pass_layout_to(
+    device: &wgpu::Device,
+    label: &str,
+    extra: &[wgpu::BindGroupLayoutEntry],
+    output: wgpu::TextureFormat,
+) -> wgpu::BindGroupLayout {
+    let mut entries = frame_pass_entries(output).to_vec();
     entries.extend_from_slice(extra);
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
 }

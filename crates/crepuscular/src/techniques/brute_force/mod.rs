@@ -123,12 +123,13 @@ pub struct BruteForce {
 
 impl BruteForce {
     /// Builds the pipeline.
-    pub fn new(gpu: &GpuContext, settings: BruteForceSettings) -> Result<Self, Error> {
+    pub fn new(gpu: &GpuContext, settings: BruteForceSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.scoped("creating the brute-force pipeline", || {
             let device = &gpu.device;
-            let layout = pass::frame_pass_layout(device, "brute-force", &[]);
-            let pipeline = pass::compute_pipeline(device, "brute_force/march.wgsl", MARCH_WGSL, "march", &layout);
+            let layout = pass::frame_pass_layout_to(device, "brute-force", &[], output);
+            let src = pass::with_output(MARCH_WGSL, output);
+            let pipeline = pass::compute_pipeline(device, "brute_force/march.wgsl", &src, "march", &layout);
             let frame_buffer =
                 pass::uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64);
             let params_buffer = pass::uniform_buffer(device, "march params", std::mem::size_of::<MarchParams>() as u64);
@@ -210,8 +211,8 @@ impl crate::techniques::Technique for BruteForceSettings {
 
 impl crate::techniques::GpuTechnique for BruteForce {
     type Settings = BruteForceSettings;
-    fn new(gpu: &GpuContext, settings: BruteForceSettings) -> Result<Self, Error> {
-        BruteForce::new(gpu, settings)
+    fn new(gpu: &GpuContext, settings: BruteForceSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+        BruteForce::new(gpu, settings, output)
     }
     fn settings_mut(&mut self) -> &mut BruteForceSettings {
         &mut self.settings

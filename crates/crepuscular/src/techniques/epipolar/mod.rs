@@ -775,7 +775,7 @@ fn uint_texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
 }
 
 impl Layouts {
-    fn new(device: &wgpu::Device) -> Self {
+    fn new(device: &wgpu::Device, output: wgpu::TextureFormat) -> Self {
         use pass::{storage_buffer_entry as buf, texture_entry as tex, uniform_entry as uni};
         use wgpu::TextureFormat as F;
         use wgpu::TextureViewDimension::D2;
@@ -814,10 +814,11 @@ impl Layouts {
                 "epipolar interpolate",
                 &[uni(0), uni(1), tex(2, D2), uint_texture_entry(3), tex(4, D2), storage_entry(5, F::Rgba32Float)],
             ),
-            upsample: pass::frame_pass_layout(
+            upsample: pass::frame_pass_layout_to(
                 device,
                 "epipolar upsample",
                 &[tex(6, D2), buf(7, true, Some(32)), buf(8, false, Some(16))],
+                output,
             ),
         }
     }
@@ -825,11 +826,11 @@ impl Layouts {
 
 impl Epipolar {
     /// Builds the pipelines and the size-independent buffers.
-    pub fn new(gpu: &GpuContext, settings: EpipolarSettings) -> Result<Self, Error> {
+    pub fn new(gpu: &GpuContext, settings: EpipolarSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.scoped("creating the epipolar pipelines", || {
             let device = &gpu.device;
-            let layouts = Layouts::new(device);
+            let layouts = Layouts::new(device, output);
             let pipe = |name: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
                 pass::compute_pipeline(device, &format!("{name}.wgsl ({entry})"), &pass_source(src), entry, layout)
             };
@@ -841,7 +842,12 @@ impl Epipolar {
                 args: pipe("epipolar/refine", REFINE_WGSL, "args", &layouts.refine),
                 march: pipe("epipolar/march", MARCH_WGSL, "march", &layouts.march),
                 interpolate: pipe("epipolar/interpolate", INTERPOLATE_WGSL, "interpolate", &layouts.interpolate),
-                upsample: pipe("epipolar/upsample", UPSAMPLE_WGSL, "upsample", &layouts.upsample),
+                upsample: pipe(
+                    "epipolar/upsample",
+                    &pass::with_output(UPSAMPLE_WGSL, output),
+                    "upsample",
+                    &layouts.upsample,
+                ),
             };
             let buf = |label, size, usage| {
                 device.create_buffer(&wgpu::BufferDescriptor {
@@ -1236,8 +1242,8 @@ impl crate::techniques::Technique for EpipolarSettings {
 
 impl crate::techniques::GpuTechnique for Epipolar {
     type Settings = EpipolarSettings;
-    fn new(gpu: &GpuContext, settings: EpipolarSettings) -> Result<Self, Error> {
-        Epipolar::new(gpu, settings)
+    fn new(gpu: &GpuContext, settings: EpipolarSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+        Epipolar::new(gpu, settings, output)
     }
     fn settings_mut(&mut self) -> &mut EpipolarSettings {
         &mut self.settings

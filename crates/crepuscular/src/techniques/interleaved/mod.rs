@@ -354,7 +354,7 @@ fn march_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
 
 impl Interleaved {
     /// Builds the three pipelines.
-    pub fn new(gpu: &GpuContext, settings: InterleavedSettings) -> Result<Self, Error> {
+    pub fn new(gpu: &GpuContext, settings: InterleavedSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.scoped("creating the interleaved pipelines", || {
             use wgpu::TextureViewDimension as D;
@@ -375,13 +375,17 @@ impl Interleaved {
                     uniform_entry(1),
                     texture_entry(2, D::D2),
                     texture_entry(3, D::D2),
-                    storage_texture_entry(4),
+                    pass::storage_texture_entry_of(4, output),
                 ],
             });
             let march_pipeline = pipeline("interleaved/march.wgsl", MARCH_WGSL, "march", &march_layout);
             let rows_pipeline = pipeline("interleaved/sum_rows.wgsl", SUM_ROWS_WGSL, "sum_rows", &rows_layout);
-            let columns_pipeline =
-                pipeline("interleaved/sum_columns.wgsl", SUM_COLUMNS_WGSL, "sum_columns", &columns_layout);
+            let columns_pipeline = pipeline(
+                "interleaved/sum_columns.wgsl",
+                &pass::with_output(SUM_COLUMNS_WGSL, output),
+                "sum_columns",
+                &columns_layout,
+            );
             let frame_buffer =
                 pass::uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64);
             let params_buffer =
@@ -587,8 +591,8 @@ impl crate::techniques::Technique for InterleavedSettings {
 
 impl crate::techniques::GpuTechnique for Interleaved {
     type Settings = InterleavedSettings;
-    fn new(gpu: &GpuContext, settings: InterleavedSettings) -> Result<Self, Error> {
-        Interleaved::new(gpu, settings)
+    fn new(gpu: &GpuContext, settings: InterleavedSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+        Interleaved::new(gpu, settings, output)
     }
     fn settings_mut(&mut self) -> &mut InterleavedSettings {
         &mut self.settings

@@ -159,6 +159,8 @@ pub struct Prefiltered {
     maps: Option<Maps>,
     last: Option<Rectification>,
     binds: pass::BindCache<[wgpu::BindGroup; 3]>,
+    /// The in-scattering's storage format (kept to rebuild the pipelines on `precision`).
+    output: wgpu::TextureFormat,
 }
 
 fn storage_entry(
@@ -196,7 +198,7 @@ fn prefilter_layout(device: &wgpu::Device, precision: BasisPrecision) -> wgpu::B
 
 impl Prefiltered {
     /// Builds the pipelines and buffers.
-    pub fn new(gpu: &GpuContext, settings: PrefilteredSettings) -> Result<Self, Error> {
+    pub fn new(gpu: &GpuContext, settings: PrefilteredSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.scoped("creating the prefiltered pipelines", || {
             use wgpu::TextureViewDimension as D;
@@ -221,7 +223,7 @@ impl Prefiltered {
                 }),
             });
             let prefilter_layout = prefilter_layout(device, settings.precision);
-            let evaluate_layout = pass::frame_pass_layout(
+            let evaluate_layout = pass::frame_pass_layout_to(
                 device,
                 "prefiltered evaluate",
                 &[
@@ -244,14 +246,16 @@ impl Prefiltered {
                     },
                     pass::texture_entry(9, D::D2Array),
                 ],
+                output,
             );
             let pipe = |label: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
                 pass::compute_pipeline(device, label, &pass_source(src, settings.precision), entry, layout)
             };
             let rectify_pipeline = pipe("prefiltered/rectify.wgsl", RECTIFY_WGSL, "rectify", &rectify_layout);
             let prefilter_pipeline = pipe("prefiltered/prefilter.wgsl", PREFILTER_WGSL, "prefilter", &prefilter_layout);
-            let evaluate_pipeline = pipe("prefiltered/evaluate.wgsl", EVALUATE_WGSL, "evaluate", &evaluate_layout);
-            let epipole_pipeline = pipe("prefiltered/evaluate.wgsl", EVALUATE_WGSL, "epipole", &evaluate_layout);
+            let evaluate_src = pass::with_output(EVALUATE_WGSL, output);
+            let evaluate_pipeline = pipe("prefiltered/evaluate.wgsl", &evaluate_src, "evaluate", &evaluate_layout);
+            let epipole_pipeline = pipe("prefiltered/evaluate.wgsl", &evaluate_src, "epipole", &evaluate_layout);
             let sampler = |mode| {
                 device.create_sampler(&wgpu::SamplerDescriptor {
                     label: Some("prefiltered basis"),
@@ -289,6 +293,7 @@ impl Prefiltered {
                 maps: None,
                 last: None,
                 binds: Default::default(),
+                output,
             }
         })
     }
@@ -356,7 +361,7 @@ impl Prefiltered {
         let [w, h] = s.map_size;
         gpu.check_texture_size("prefiltered rectified map", w, h)?;
         if self.pipeline_precision != s.precision {
-            let fresh = Prefiltered::new(gpu, s.clone())?;
+            let fresh = Prefiltered::new(gpu, s.clone(), self.output)?;
             *self = Prefiltered { maps: None, ..fresh };
         }
         let rect = Rectification::new(desc, &s.rectify_options());
@@ -561,8 +566,8 @@ impl crate::techniques::Technique for PrefilteredSettings {
 
 impl crate::techniques::GpuTechnique for Prefiltered {
     type Settings = PrefilteredSettings;
-    fn new(gpu: &GpuContext, settings: PrefilteredSettings) -> Result<Self, Error> {
-        Prefiltered::new(gpu, settings)
+    fn new(gpu: &GpuContext, settings: PrefilteredSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+        Prefiltered::new(gpu, settings, output)
     }
     fn settings_mut(&mut self) -> &mut PrefilteredSettings {
         &mut self.settings

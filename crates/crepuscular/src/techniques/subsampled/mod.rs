@@ -224,26 +224,32 @@ pub struct Subsampled {
 
 /// The bind-group layout of the `upsample` pass: the frame-pass bindings 0–5 (output at 5),
 /// then the grid texture (6) and the re-march counter, a storage buffer (7).
-fn upsample_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    pass::frame_pass_layout(
+fn upsample_layout(device: &wgpu::Device, output: wgpu::TextureFormat) -> wgpu::BindGroupLayout {
+    pass::frame_pass_layout_to(
         device,
         "subsampled upsample",
         &[pass::texture_entry(6, wgpu::TextureViewDimension::D2), pass::storage_buffer_entry(7, false, Some(4))],
+        output,
     )
 }
 
 impl Subsampled {
     /// Builds the pipelines and buffers.
-    pub fn new(gpu: &GpuContext, settings: SubsampledSettings) -> Result<Self, Error> {
+    pub fn new(gpu: &GpuContext, settings: SubsampledSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.scoped("creating the subsampled pipelines", || {
             let device = &gpu.device;
             let march_layout = pass::frame_pass_layout(device, "subsampled march", &[]);
-            let upsample_layout = upsample_layout(device);
+            let upsample_layout = upsample_layout(device, output);
             let march_pipeline =
                 pass::compute_pipeline(device, "subsampled/march.wgsl", MARCH_WGSL, "march", &march_layout);
-            let upsample_pipeline =
-                pass::compute_pipeline(device, "subsampled/upsample.wgsl", UPSAMPLE_WGSL, "upsample", &upsample_layout);
+            let upsample_pipeline = pass::compute_pipeline(
+                device,
+                "subsampled/upsample.wgsl",
+                &pass::with_output(UPSAMPLE_WGSL, output),
+                "upsample",
+                &upsample_layout,
+            );
             let buf = |label, size, usage| {
                 device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some(label),
@@ -411,8 +417,8 @@ impl crate::techniques::Technique for SubsampledSettings {
 
 impl crate::techniques::GpuTechnique for Subsampled {
     type Settings = SubsampledSettings;
-    fn new(gpu: &GpuContext, settings: SubsampledSettings) -> Result<Self, Error> {
-        Subsampled::new(gpu, settings)
+    fn new(gpu: &GpuContext, settings: SubsampledSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+        Subsampled::new(gpu, settings, output)
     }
     fn settings_mut(&mut self) -> &mut SubsampledSettings {
         &mut self.settings

@@ -1,4 +1,4 @@
-//! Mirror tests (DESIGN.md §4, rung 3): the GPU and the CPU compute the same thing, pass by
+//! Mirror tests (docs/MODEL.md §4, rung 3): the GPU and the CPU compute the same thing, pass by
 //! pass, on small images — the host renderer's depth and shadow maps, and `brute-force` run on
 //! identical inputs, for every light kind.
 

@@ -1,4 +1,4 @@
-//! Quality (DESIGN.md §4, rung 4): `brute-force` at its default settings against `reference`
+//! Quality (docs/MODEL.md §4, rung 4): `brute-force` at its default settings against `reference`
 //! on every built-in scene, on both backends, with the thresholds written here (and in the
 //! README). PSNR on the linear in-scattering (peak = max of the reference); FLIP mean on the
 //! tone-mapped final images.

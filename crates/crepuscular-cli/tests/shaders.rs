@@ -56,10 +56,19 @@ fn frame_uniforms_match_the_wgsl_layout() {
         ("sigma_s", offset_of!(FrameUniforms, sigma_s)),
         ("sigma_a", offset_of!(FrameUniforms, sigma_a)),
         ("rayleigh_fraction", offset_of!(FrameUniforms, rayleigh_fraction)),
-        ("shadow_params", offset_of!(FrameUniforms, shadow_params)),
+        ("shadow_near", offset_of!(FrameUniforms, shadow_near)),
+        ("shadow_far", offset_of!(FrameUniforms, shadow_far)),
+        ("shadow_bias", offset_of!(FrameUniforms, shadow_bias)),
+        ("shadow_texel", offset_of!(FrameUniforms, shadow_texel)),
         ("depth_params", offset_of!(FrameUniforms, depth_params)),
-        ("ints", offset_of!(FrameUniforms, ints)),
-        ("shadow_ints", offset_of!(FrameUniforms, shadow_ints)),
+        ("width", offset_of!(FrameUniforms, width)),
+        ("height", offset_of!(FrameUniforms, height)),
+        ("light_kind", offset_of!(FrameUniforms, light_kind)),
+        ("phase_kind", offset_of!(FrameUniforms, phase_kind)),
+        ("shadow_layers", offset_of!(FrameUniforms, shadow_layers)),
+        ("shadow_size", offset_of!(FrameUniforms, shadow_size)),
+        ("shadow_orthographic", offset_of!(FrameUniforms, shadow_orthographic)),
+        ("spot_textured", offset_of!(FrameUniforms, spot_textured)),
     ];
     assert_eq!(members.len(), rust.len(), "field count");
     for ((wn, wo), (rn, ro)) in members.iter().zip(rust) {
@@ -205,5 +214,23 @@ fn epipolar_params_match_the_wgsl_layout_in_every_pass() {
         format!("const MIN_LINE_LENGTH: f32 = {MIN_LINE_LENGTH:e};"),
     ] {
         assert!(GEOMETRY_WGSL.contains(&c), "geometry.wgsl lacks `{c}`");
+    }
+}
+
+#[test]
+fn wgsl_light_and_phase_kinds_are_the_rust_constants() {
+    use crepuscular::frame::*;
+    let common = crepuscular::shaders::COMMON;
+    for (name, value) in [
+        ("LIGHT_DIRECTIONAL", LIGHT_DIRECTIONAL),
+        ("LIGHT_SPOT", LIGHT_SPOT),
+        ("LIGHT_POINT", LIGHT_POINT),
+        ("PHASE_ISOTROPIC", PHASE_ISOTROPIC),
+        ("PHASE_HENYEY_GREENSTEIN", PHASE_HENYEY_GREENSTEIN),
+        ("PHASE_RAYLEIGH", PHASE_RAYLEIGH),
+        ("PHASE_HOFFMAN_PREETHAM", PHASE_HOFFMAN_PREETHAM),
+    ] {
+        let decl = format!("const {name}: u32 = {value}u;");
+        assert!(common.contains(&decl), "common.wgsl lacks `{decl}`");
     }
 }

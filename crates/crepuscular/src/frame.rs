@@ -10,6 +10,21 @@ use crate::model::{Light, Medium, RgbTexture};
 use crate::shadow::{ShadowMap, ShadowProjection};
 use glam::Vec3;
 
+/// [`FrameUniforms::light_kind`] of a directional light (a sun); `LIGHT_DIRECTIONAL` in WGSL.
+pub const LIGHT_DIRECTIONAL: u32 = 0;
+/// [`FrameUniforms::light_kind`] of a spot light; `LIGHT_SPOT` in WGSL.
+pub const LIGHT_SPOT: u32 = 1;
+/// [`FrameUniforms::light_kind`] of a point light; `LIGHT_POINT` in WGSL.
+pub const LIGHT_POINT: u32 = 2;
+/// [`FrameUniforms::phase_kind`] of the isotropic phase function; `PHASE_ISOTROPIC` in WGSL.
+pub const PHASE_ISOTROPIC: u32 = 0;
+/// Henyey–Greenstein; `PHASE_HENYEY_GREENSTEIN` in WGSL.
+pub const PHASE_HENYEY_GREENSTEIN: u32 = 1;
+/// Rayleigh; `PHASE_RAYLEIGH` in WGSL.
+pub const PHASE_RAYLEIGH: u32 = 2;
+/// Hoffman–Preetham; `PHASE_HOFFMAN_PREETHAM` in WGSL.
+pub const PHASE_HOFFMAN_PREETHAM: u32 = 3;
+
 /// The per-frame uniform block shared by every shader (`struct Frame` in common.wgsl).
 /// Layout is asserted against naga's view of the WGSL struct in a test.
 #[repr(C)]
@@ -41,16 +56,34 @@ pub struct FrameUniforms {
     pub sigma_a: [f32; 4],
     /// Hoffman–Preetham Rayleigh fraction per channel (rgb); 0 (w).
     pub rayleigh_fraction: [f32; 4],
-    /// Shadow projection near, far, volume bias (world units), world size of a texel.
-    pub shadow_params: [f32; 4],
+    /// The shadow projection's near plane (world units).
+    pub shadow_near: f32,
+    /// The shadow projection's far plane (world units).
+    pub shadow_far: f32,
+    /// The volume shadow bias (world units, [`crate::ShadowSettings::bias`]).
+    pub shadow_bias: f32,
+    /// The world size of one shadow texel (at unit distance for a perspective projection).
+    pub shadow_texel: f32,
     /// View depth from NDC depth d, lin = y / (d + x); z: the depth buffer's far (clear)
     /// value, 1 standard or 0 reversed-Z ([`crate::camera::FrameCamera::view_depth`]).
     pub depth_params: [f32; 4],
-    /// Image width, image height, light kind (0 directional, 1 spot, 2 point), phase kind
-    /// (0 isotropic, 1 HG, 2 Rayleigh, 3 Hoffman–Preetham).
-    pub ints: [u32; 4],
-    /// Shadow layers, shadow size, orthographic shadow (1/0), spot texture present (1/0).
-    pub shadow_ints: [u32; 4],
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// [`LIGHT_DIRECTIONAL`], [`LIGHT_SPOT`] or [`LIGHT_POINT`].
+    pub light_kind: u32,
+    /// [`PHASE_ISOTROPIC`], [`PHASE_HENYEY_GREENSTEIN`], [`PHASE_RAYLEIGH`] or
+    /// [`PHASE_HOFFMAN_PREETHAM`].
+    pub phase_kind: u32,
+    /// Shadow-map layers (1, or 6 cube faces).
+    pub shadow_layers: u32,
+    /// Shadow-map side, texels.
+    pub shadow_size: u32,
+    /// 1 for an orthographic shadow projection (a sun), 0 for a perspective one.
+    pub shadow_orthographic: u32,
+    /// 1 when the spot light has a projected texture.
+    pub spot_textured: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 832);
@@ -114,10 +147,19 @@ impl FrameDesc {
             sigma_s: v4(self.medium.scattering, g),
             sigma_a: v4(self.medium.absorption, 0.0),
             rayleigh_fraction: v4(rf, 0.0),
-            shadow_params: [s.near, s.far, self.shadow_bias, s.texel_world],
+            shadow_near: s.near,
+            shadow_far: s.far,
+            shadow_bias: self.shadow_bias,
+            shadow_texel: s.texel_world,
             depth_params: [depth_a, depth_b, self.camera.depth.far_value(), 0.0],
-            ints: [self.width, self.height, self.light.kind_code(), phase_kind],
-            shadow_ints: [s.layers, s.size, s.orthographic as u32, has_tex as u32],
+            width: self.width,
+            height: self.height,
+            light_kind: self.light.kind_code(),
+            phase_kind,
+            shadow_layers: s.layers,
+            shadow_size: s.size,
+            shadow_orthographic: s.orthographic as u32,
+            spot_textured: has_tex as u32,
         }
     }
 

@@ -179,10 +179,12 @@ impl Phase {
     /// Code and parameters as the GPU sees them: (kind, g, rayleigh fraction).
     pub fn gpu_params(&self) -> (u32, f32, Vec3) {
         match *self {
-            Phase::Isotropic => (0, 0.0, Vec3::ZERO),
-            Phase::HenyeyGreenstein { g } => (1, g, Vec3::ZERO),
-            Phase::Rayleigh => (2, 0.0, Vec3::ONE),
-            Phase::HoffmanPreetham { g, rayleigh_fraction } => (3, g, rayleigh_fraction),
+            Phase::Isotropic => (crate::frame::PHASE_ISOTROPIC, 0.0, Vec3::ZERO),
+            Phase::HenyeyGreenstein { g } => (crate::frame::PHASE_HENYEY_GREENSTEIN, g, Vec3::ZERO),
+            Phase::Rayleigh => (crate::frame::PHASE_RAYLEIGH, 0.0, Vec3::ONE),
+            Phase::HoffmanPreetham { g, rayleigh_fraction } => {
+                (crate::frame::PHASE_HOFFMAN_PREETHAM, g, rayleigh_fraction)
+            }
         }
     }
 }
@@ -317,9 +319,9 @@ impl Light {
     /// Kind code shared with WGSL.
     pub fn kind_code(&self) -> u32 {
         match self {
-            Light::Directional { .. } => 0,
-            Light::Spot { .. } => 1,
-            Light::Point { .. } => 2,
+            Light::Directional { .. } => crate::frame::LIGHT_DIRECTIONAL,
+            Light::Spot { .. } => crate::frame::LIGHT_SPOT,
+            Light::Point { .. } => crate::frame::LIGHT_POINT,
         }
     }
     /// Number of shadow-map layers this light uses (six cube faces for a point light).

@@ -32,10 +32,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 /// settings in place, [`Scattering::encode`] records a frame.
 ///
 /// **What it needs from the device.** Every technique uses only WebGPU's core features and
-/// default limits (compute shaders, write-only `Rgba32Float` / `R32Float` / `R32Uint` storage
-/// textures, storage buffers, indirect dispatch; at most 8 storage textures or buffers and 10
-/// sampled textures per pass; 64 invocations per workgroup), checked on creation
-/// ([`Scattering::check_device`]). Optional features change the path, never the answer:
+/// default limits (compute shaders, write-only `Rgba32Float` / `Rgba16Float` / `R32Float` /
+/// `R32Uint` storage textures, storage buffers, indirect dispatch), checked on creation
+/// ([`Scattering::check_device`]). Per pass at most: 2 storage textures (prefiltered's
+/// prefilter), 5 storage buffers (epipolar's refine), 5 sampled textures (prefiltered's
+/// evaluate), 2 uniform buffers; workgroups of 64 invocations (8 × 8, or 64 × 1). Optional features change the path, never the answer:
 /// `TIMESTAMP_QUERY` times the passes ([`StatsMode::Deferred`]); `DEPTH_CLIP_CONTROL` lets a host
 /// rasterize prefiltered's rectified map with hardware depth clamping.
 pub struct Scattering {
@@ -75,7 +76,7 @@ fn required_limits() -> wgpu::Limits {
     wgpu::Limits {
         max_bind_groups: 1,
         max_storage_textures_per_shader_stage: 2,
-        max_storage_buffers_per_shader_stage: 4,
+        max_storage_buffers_per_shader_stage: 5,
         max_sampled_textures_per_shader_stage: 5,
         max_uniform_buffers_per_shader_stage: 2,
         max_compute_invocations_per_workgroup: 64,

@@ -1,5 +1,5 @@
 //! Fixtures shared by the test suites of this workspace (not part of the supported API): the
-//! occluder-free "wall frame" and its closed form, DESIGN.md §4 rung 2, and a technique's GPU
+//! occluder-free "wall frame" and its closed form, docs/MODEL.md §4 rung 2, and a technique's GPU
 //! frame as the tests run it.
 
 use crate::frame::FrameDesc;

@@ -1,4 +1,4 @@
-//! Closed forms (DESIGN.md §4, rung 2): on occluder-free frames every technique must match the
+//! Closed forms (docs/MODEL.md §4, rung 2): on occluder-free frames every technique must match the
 //! known answer — the directional closed form σs·p·E·(1 − e^(−σt·s))/σt per pixel, and an
 //! independent high-order quadrature for a point light.
 

@@ -19,11 +19,29 @@ struct Frame {
     sigma_s: vec4<f32>,
     sigma_a: vec4<f32>,
     rayleigh_fraction: vec4<f32>,
-    shadow_params: vec4<f32>,
+    shadow_near: f32,
+    shadow_far: f32,
+    shadow_bias: f32,
+    shadow_texel: f32,
     depth_params: vec4<f32>,
-    ints: vec4<u32>,
-    shadow_ints: vec4<u32>,
+    width: u32,
+    height: u32,
+    light_kind: u32,
+    phase_kind: u32,
+    shadow_layers: u32,
+    shadow_size: u32,
+    shadow_orthographic: u32,
+    spot_textured: u32,
 }
+
+// Frame::light_kind and Frame::phase_kind (frame.rs LIGHT_* and PHASE_*).
+const LIGHT_DIRECTIONAL: u32 = 0u;
+const LIGHT_SPOT: u32 = 1u;
+const LIGHT_POINT: u32 = 2u;
+const PHASE_ISOTROPIC: u32 = 0u;
+const PHASE_HENYEY_GREENSTEIN: u32 = 1u;
+const PHASE_RAYLEIGH: u32 = 2u;
+const PHASE_HOFFMAN_PREETHAM: u32 = 3u;
 
 fn extinction(f: Frame) -> vec3<f32> {
     return f.sigma_s.xyz + f.sigma_a.xyz;
@@ -45,13 +63,13 @@ fn phase_rayleigh(c: f32) -> f32 {
 
 // model.rs Phase::eval.
 fn phase(f: Frame, c: f32) -> vec3<f32> {
-    let kind = f.ints.w;
+    let kind = f.phase_kind;
     let g = f.sigma_s.w;
-    if kind == 0u {
+    if kind == PHASE_ISOTROPIC {
         return vec3<f32>(1.0 / (4.0 * PI));
-    } else if kind == 1u {
+    } else if kind == PHASE_HENYEY_GREENSTEIN {
         return vec3<f32>(phase_hg(c, g));
-    } else if kind == 2u {
+    } else if kind == PHASE_RAYLEIGH {
         return vec3<f32>(phase_rayleigh(c));
     }
     let fr = f.rayleigh_fraction.xyz;
@@ -85,7 +103,7 @@ fn ndc_ray(f: Frame, ndc: vec2<f32>) -> vec3<f32> {
 
 // frame.rs FrameDesc::pixel_ray.
 fn pixel_ray(f: Frame, px: vec2<u32>) -> vec3<f32> {
-    let size = vec2<f32>(f32(f.ints.x), f32(f.ints.y));
+    let size = vec2<f32>(f32(f.width), f32(f.height));
     let ndc = vec2<f32>((f32(px.x) + 0.5) / size.x * 2.0 - 1.0, 1.0 - (f32(px.y) + 0.5) / size.y * 2.0);
     return ndc_ray(f, ndc);
 }
@@ -129,10 +147,10 @@ fn cube_face(v: vec3<f32>) -> u32 {
 
 // shadow.rs ShadowProjection::linear.
 fn shadow_linear_depth(f: Frame, d: f32) -> f32 {
-    if f.shadow_ints.z == 1u {
-        return f.shadow_params.x + d * (f.shadow_params.y - f.shadow_params.x);
+    if f.shadow_orthographic == 1u {
+        return f.shadow_near + d * (f.shadow_far - f.shadow_near);
     }
-    return linear_depth(d, f.shadow_params.x, f.shadow_params.y);
+    return linear_depth(d, f.shadow_near, f.shadow_far);
 }
 
 struct ShadowCoord {
@@ -148,7 +166,7 @@ fn shadow_coord(f: Frame, p: vec3<f32>) -> ShadowCoord {
     var sc: ShadowCoord;
     sc.valid = false;
     var layer = 0u;
-    if f.shadow_ints.x == 6u {
+    if f.shadow_layers == 6u {
         layer = cube_face(p - f.light_pos.xyz);
     }
     sc.layer = layer;
@@ -160,7 +178,7 @@ fn shadow_coord(f: Frame, p: vec3<f32>) -> ShadowCoord {
     if ndc.z < 0.0 || ndc.z > 1.0 || abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 {
         return sc;
     }
-    let n = f32(f.shadow_ints.y);
+    let n = f32(f.shadow_size);
     sc.uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
     sc.texel = vec2<u32>(min(floor(sc.uv * n), vec2<f32>(n - 1.0)));
     sc.depth = shadow_linear_depth(f, ndc.z);
@@ -208,8 +226,8 @@ fn smooth_cone(cos_outer: f32, cos_inner: f32, c: f32) -> f32 {
 // integrand.rs light_incident.
 fn light_incident(f: Frame, spot_tex: texture_2d<f32>, p: vec3<f32>) -> Incident {
     var r: Incident;
-    let kind = f.ints.z;
-    if kind == 0u {
+    let kind = f.light_kind;
+    if kind == LIGHT_DIRECTIONAL {
         r.radiance = f.light_color.xyz;
         r.dir = f.light_dir.xyz;
         return r;
@@ -219,7 +237,7 @@ fn light_incident(f: Frame, spot_tex: texture_2d<f32>, p: vec3<f32>) -> Incident
     let d = sqrt(d2);
     r.dir = v / d;
     let att = exp(-extinction(f) * d) / d2;
-    if kind == 2u {
+    if kind == LIGHT_POINT {
         r.radiance = f.light_color.xyz * att;
         return r;
     }
@@ -229,7 +247,7 @@ fn light_incident(f: Frame, spot_tex: texture_2d<f32>, p: vec3<f32>) -> Incident
         return r;
     }
     var tex = vec3<f32>(1.0);
-    if f.shadow_ints.w == 1u {
+    if f.spot_textured == 1u {
         let c = f.shadow_view_proj[0] * vec4<f32>(p, 1.0);
         if c.w > 0.0 {
             let ndc = c.xy / c.w;
@@ -247,7 +265,7 @@ fn lit_incident(f: Frame, shadow_map: texture_2d_array<f32>, spot_tex: texture_2
     if all(li.radiance == vec3<f32>(0.0)) {
         return li;
     }
-    li.radiance *= shadow_visibility(f, shadow_map, p, f.shadow_params.z);
+    li.radiance *= shadow_visibility(f, shadow_map, p, f.shadow_bias);
     return li;
 }
 
@@ -338,7 +356,7 @@ fn smooth_denominator(den: f32, k: f32) -> f32 {
 // march.rs march_interval: the interval of the view ray a technique marches with its N steps.
 // policy: 0 fixed, 1 exact-cone, 2 appendix-b-constant, 3 appendix-b-smoothstep.
 fn policy_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
-    if f.ints.z != 1u || policy == 0u {
+    if f.light_kind != LIGHT_SPOT || policy == 0u {
         return vec2<f32>(0.0, s);
     }
     let c = cone_interval(f, o, d, s);
@@ -361,7 +379,7 @@ const REACH_OPTICAL_DEPTH: f32 = 13.815511;
 fn light_reach(f: Frame) -> f32 {
     let st = extinction(f);
     let sigma = min(st.x, min(st.y, st.z));
-    if f.ints.z == 0u || sigma <= 0.0 {
+    if f.light_kind == LIGHT_DIRECTIONAL || sigma <= 0.0 {
         return 0.0;
     }
     return REACH_OPTICAL_DEPTH / sigma;
@@ -414,8 +432,8 @@ fn pixel_jitter(px: vec2<u32>, frame: u32) -> f32 {
 // shadow.rs ShadowMap::visibility_pcf: 3×3 percentage-closer filter for surfaces, with the
 // point pushed along the surface normal by `normal_offset_texels` shadow texels.
 fn shadow_pcf(f: Frame, shadow_map: texture_2d_array<f32>, p: vec3<f32>, n: vec3<f32>, offset_texels: f32) -> f32 {
-    var texel = f.shadow_params.w;
-    if f.shadow_ints.z == 0u {
+    var texel = f.shadow_texel;
+    if f.shadow_orthographic == 0u {
         texel *= length(p - f.light_pos.xyz);
     }
     let q = p + n * (offset_texels * texel);
@@ -423,13 +441,13 @@ fn shadow_pcf(f: Frame, shadow_map: texture_2d_array<f32>, p: vec3<f32>, n: vec3
     if !sc.valid {
         return 1.0;
     }
-    let size = i32(f.shadow_ints.y);
+    let size = i32(f.shadow_size);
     var sum = 0.0;
     for (var dy = -1; dy <= 1; dy++) {
         for (var dx = -1; dx <= 1; dx++) {
             let t = clamp(vec2<i32>(sc.texel) + vec2<i32>(dx, dy), vec2<i32>(0), vec2<i32>(size - 1));
             let stored = shadow_linear_depth(f, textureLoad(shadow_map, t, i32(sc.layer), 0).r);
-            sum += select(0.0, 1.0, sc.depth <= stored + f.shadow_params.z);
+            sum += select(0.0, 1.0, sc.depth <= stored + f.shadow_bias);
         }
     }
     return sum / 9.0;

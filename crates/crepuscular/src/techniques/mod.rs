@@ -7,6 +7,40 @@ use crate::gpu::{GpuContext, Recorder};
 use crate::image::Image;
 use crate::stats::TechniqueStats;
 
+/// Implements [`GpuTechnique`] for a technique's GPU side `$gpu` (fields `settings` and
+/// `binds`, inherent `new`, `encode` and `gpu_memory_bytes`) with settings `$settings`.
+macro_rules! gpu_technique {
+    ($gpu:ident, $settings:ident) => {
+        impl crate::techniques::GpuTechnique for $gpu {
+            type Settings = $settings;
+            fn new(gpu: &GpuContext, settings: $settings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+                $gpu::new(gpu, settings, output)
+            }
+            fn settings_mut(&mut self) -> &mut $settings {
+                &mut self.settings
+            }
+            fn settings(&self) -> &$settings {
+                &self.settings
+            }
+            fn encode(
+                &mut self,
+                gpu: &GpuContext,
+                rec: &mut Recorder,
+                frame: &GpuFrame,
+                output: &wgpu::TextureView,
+            ) -> Result<TechniqueStats, Error> {
+                $gpu::encode(self, gpu, rec, frame, output)
+            }
+            fn gpu_memory_bytes(&self) -> u64 {
+                $gpu::gpu_memory_bytes(self)
+            }
+            fn bind_group_builds(&self) -> u64 {
+                self.binds.builds()
+            }
+        }
+    };
+}
+
 pub mod brute_force;
 pub mod epipolar;
 pub mod interleaved;
@@ -31,7 +65,7 @@ pub struct TechniqueInfo {
     pub cpu: bool,
 }
 
-/// What a technique's folder provides to the registry ([`registry!`]): its description, its
+/// What a technique's folder provides to the registry (the `registry!` macro below): its description, its
 /// settings' checks, its CPU mirror and (for GPU techniques) its GPU side. Implemented on the
 /// technique's settings type.
 pub trait Technique: Clone + std::fmt::Debug + Default + serde::Serialize + serde::de::DeserializeOwned {

@@ -30,7 +30,7 @@ fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec3<f32> {
 
 @compute @workgroup_size(8, 8)
 fn march(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= frame.ints.x || gid.y >= frame.ints.y {
+    if gid.x >= frame.width || gid.y >= frame.height {
         return;
     }
     let px = gid.xy;

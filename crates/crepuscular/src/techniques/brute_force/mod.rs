@@ -209,30 +209,4 @@ impl crate::techniques::Technique for BruteForceSettings {
     }
 }
 
-impl crate::techniques::GpuTechnique for BruteForce {
-    type Settings = BruteForceSettings;
-    fn new(gpu: &GpuContext, settings: BruteForceSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
-        BruteForce::new(gpu, settings, output)
-    }
-    fn settings_mut(&mut self) -> &mut BruteForceSettings {
-        &mut self.settings
-    }
-    fn settings(&self) -> &BruteForceSettings {
-        &self.settings
-    }
-    fn encode(
-        &mut self,
-        gpu: &GpuContext,
-        rec: &mut Recorder,
-        frame: &GpuFrame,
-        output: &wgpu::TextureView,
-    ) -> Result<TechniqueStats, Error> {
-        BruteForce::encode(self, gpu, rec, frame, output)
-    }
-    fn gpu_memory_bytes(&self) -> u64 {
-        BruteForce::gpu_memory_bytes(self)
-    }
-    fn bind_group_builds(&self) -> u64 {
-        self.binds.builds()
-    }
-}
+gpu_technique!(BruteForce, BruteForceSettings);

@@ -53,7 +53,7 @@ fn rect_min() -> vec2<f32> {
 }
 
 fn rect_max(f: Frame) -> vec2<f32> {
-    return vec2<f32>(f32(f.ints.x) - 0.5, f32(f.ints.y) - 0.5);
+    return vec2<f32>(f32(f.width) - 0.5, f32(f.height) - 0.5);
 }
 
 fn perimeter(f: Frame) -> f32 {
@@ -156,7 +156,7 @@ fn clip_ray(f: Frame, q: vec2<f32>, d: vec2<f32>, umax: f32) -> vec2<f32> {
 
 // The view ray through a continuous pixel-space point q (pixel_ray for q = px + ½).
 fn point_ray(f: Frame, q: vec2<f32>) -> vec3<f32> {
-    let size = vec2<f32>(f32(f.ints.x), f32(f.ints.y));
+    let size = vec2<f32>(f32(f.width), f32(f.height));
     let ndc = vec2<f32>(q.x / size.x * 2.0 - 1.0, 1.0 - q.y / size.y * 2.0);
     return ndc_ray(f, ndc);
 }
@@ -170,7 +170,7 @@ fn texel_point(line: Line, t: u32) -> vec2<f32> {
 
 // The pixel a sample at q takes: ⌊q⌋, clamped to the image.
 fn texel_pixel(f: Frame, q: vec2<f32>) -> vec2<u32> {
-    let hi = vec2<f32>(f32(f.ints.x) - 1.0, f32(f.ints.y) - 1.0);
+    let hi = vec2<f32>(f32(f.width) - 1.0, f32(f.height) - 1.0);
     return vec2<u32>(clamp(floor(q), vec2<f32>(0.0), hi));
 }
 

@@ -70,7 +70,7 @@ fn setup_line(k: u32) -> Line {
     line.end = b + te.xy * u0;
     line.length = c.y - u0;
     line.valid = 1u;
-    if frame.ints.z == 1u {
+    if frame.light_kind == LIGHT_SPOT {
         line = spot_clip(line);
     }
     if line.valid == 1u {

@@ -27,7 +27,7 @@ fn march(
         return;
     }
     let pixel = list[i];
-    let px = vec2<u32>(pixel % frame.ints.x, pixel / frame.ints.x);
+    let px = vec2<u32>(pixel % frame.width, pixel / frame.width);
     let dir = pixel_ray(frame, px);
     let s = view_distance(frame, textureLoad(depth_tex, vec2<i32>(px), 0).r, dir);
     let p = params;

@@ -932,7 +932,7 @@ impl Epipolar {
             Ok(gpu.read_texture_f32(t, 0)?.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect())
         };
         let interp: Vec<u32> = gpu.read_texture_f32(&s.interp, 0)?.into_iter().map(f32::to_bits).collect();
-        let lines: Vec<EpipolarLine> = bytemuck::cast_slice(&read_buffer(gpu, &s.lines)?).to_vec();
+        let lines: Vec<EpipolarLine> = bytemuck::cast_slice(&crate::scattering::read_buffer(gpu, &s.lines)?).to_vec();
         Ok(EpipolarDebug { params: *p, lines, coords: rgba(&s.coords)?, interp, radiance: rgba(&s.radiance)? })
     }
 
@@ -1205,19 +1205,6 @@ impl Epipolar {
     }
 }
 
-/// Copies a storage buffer into a mapped readback buffer and returns its bytes.
-fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, Error> {
-    let read = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("epipolar readback"),
-        size: buffer.size(),
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
-    let mut enc = gpu.device.create_command_encoder(&Default::default());
-    enc.copy_buffer_to_buffer(buffer, 0, &read, 0, buffer.size());
-    gpu.queue.submit([enc.finish()]);
-    gpu.read_mapped(&read, "reading back a buffer", |d| d.to_vec())
-}
 
 impl crate::techniques::Technique for EpipolarSettings {
     const INFO: crate::techniques::TechniqueInfo = crate::techniques::TechniqueInfo {
@@ -1240,30 +1227,4 @@ impl crate::techniques::Technique for EpipolarSettings {
     }
 }
 
-impl crate::techniques::GpuTechnique for Epipolar {
-    type Settings = EpipolarSettings;
-    fn new(gpu: &GpuContext, settings: EpipolarSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
-        Epipolar::new(gpu, settings, output)
-    }
-    fn settings_mut(&mut self) -> &mut EpipolarSettings {
-        &mut self.settings
-    }
-    fn settings(&self) -> &EpipolarSettings {
-        &self.settings
-    }
-    fn encode(
-        &mut self,
-        gpu: &GpuContext,
-        rec: &mut Recorder,
-        frame: &GpuFrame,
-        output: &wgpu::TextureView,
-    ) -> Result<TechniqueStats, Error> {
-        Epipolar::encode(self, gpu, rec, frame, output)
-    }
-    fn gpu_memory_bytes(&self) -> u64 {
-        Epipolar::gpu_memory_bytes(self)
-    }
-    fn bind_group_builds(&self) -> u64 {
-        self.binds.builds()
-    }
-}
+gpu_technique!(Epipolar, EpipolarSettings);

@@ -74,7 +74,7 @@ fn refine(@builtin(global_invocation_id) gid: vec3<u32>) {
     if lr.x == t && lr.y == t {
         atomicAdd(&counters[3], 1u);
         let px = texel_pixel(frame, textureLoad(coord_tex, vec2<i32>(i32(t), i32(k)), 0).xy);
-        let pixel = px.y * frame.ints.x + px.x;
+        let pixel = px.y * frame.width + px.x;
         if atomicAdd(&claims[pixel], 1u) == 0u {
             let i = atomicAdd(&counters[0], 1u);
             list[i] = pixel;

@@ -113,7 +113,7 @@ fn upsample_pixel(px: vec2<u32>) -> Upsampled {
     out.remarched = false;
     let dir = pixel_ray(frame, px);
     let s = view_distance(frame, textureLoad(depth_tex, vec2<i32>(px), 0).r, dir);
-    if frame.ints.z == 1u {
+    if frame.light_kind == LIGHT_SPOT {
         let iv = cone_interval(frame, frame.camera_pos.xyz, dir, s);
         if iv.y <= iv.x {
             return out;
@@ -196,7 +196,7 @@ fn upsample(
     @builtin(global_invocation_id) gid: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    if gid.x < frame.ints.x && gid.y < frame.ints.y {
+    if gid.x < frame.width && gid.y < frame.height {
         let u = upsample_pixel(gid.xy);
         textureStore(out_tex, vec2<i32>(gid.xy), vec4<f32>(u.radiance, 1.0));
         if u.remarched {

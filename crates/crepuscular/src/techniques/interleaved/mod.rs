@@ -589,30 +589,4 @@ impl crate::techniques::Technique for InterleavedSettings {
     }
 }
 
-impl crate::techniques::GpuTechnique for Interleaved {
-    type Settings = InterleavedSettings;
-    fn new(gpu: &GpuContext, settings: InterleavedSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
-        Interleaved::new(gpu, settings, output)
-    }
-    fn settings_mut(&mut self) -> &mut InterleavedSettings {
-        &mut self.settings
-    }
-    fn settings(&self) -> &InterleavedSettings {
-        &self.settings
-    }
-    fn encode(
-        &mut self,
-        gpu: &GpuContext,
-        rec: &mut Recorder,
-        frame: &GpuFrame,
-        output: &wgpu::TextureView,
-    ) -> Result<TechniqueStats, Error> {
-        Interleaved::encode(self, gpu, rec, frame, output)
-    }
-    fn gpu_memory_bytes(&self) -> u64 {
-        Interleaved::gpu_memory_bytes(self)
-    }
-    fn bind_group_builds(&self) -> u64 {
-        self.binds.builds()
-    }
-}
+gpu_technique!(Interleaved, InterleavedSettings);

@@ -42,8 +42,8 @@ fn accept(sn: f32, sc: f32) -> bool {
 
 @compute @workgroup_size(8, 8)
 fn sum_columns(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let h = frame.ints.y;
-    if gid.x >= frame.ints.x || gid.y >= h {
+    let h = frame.height;
+    if gid.x >= frame.width || gid.y >= h {
         return;
     }
     let px = gid.xy;

@@ -53,8 +53,8 @@ fn accept(sn: f32, sc: f32) -> bool {
 
 @compute @workgroup_size(8, 8)
 fn sum_rows(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let w = frame.ints.x;
-    if gid.x >= w || gid.y >= frame.ints.y {
+    let w = frame.width;
+    if gid.x >= w || gid.y >= frame.height {
         return;
     }
     let px = gid.xy;

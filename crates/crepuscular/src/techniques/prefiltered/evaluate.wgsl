@@ -106,7 +106,7 @@ fn ray_visibility(p: Params, pt: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
 
 fn unoccluded_inscatter(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> vec3<f32> {
     let st = extinction(f);
-    if f.ints.z == 0u {
+    if f.light_kind == LIGHT_DIRECTIONAL {
         let inc = light_incident(f, spot_tex, f.camera_pos.xyz);
         return f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance * segment_transmittance(st, s);
     }
@@ -135,7 +135,7 @@ fn in_epipole_disc(p: Params, px: vec2<u32>) -> bool {
 
 @compute @workgroup_size(8, 8)
 fn evaluate(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= frame.ints.x || id.y >= frame.ints.y {
+    if id.x >= frame.width || id.y >= frame.height {
         return;
     }
     let px = id.xy;
@@ -156,7 +156,7 @@ fn epipole(@builtin(global_invocation_id) id: vec3<u32>) {
     let r = f32(params.ints3.x);
     let origin = vec2<u32>(max(floor(params.epipole.xy - r), vec2<f32>(0.0)));
     let px = origin + id.xy;
-    if px.x >= frame.ints.x || px.y >= frame.ints.y || !in_epipole_disc(params, px) {
+    if px.x >= frame.width || px.y >= frame.height || !in_epipole_disc(params, px) {
         return;
     }
     let dir = pixel_ray(frame, px);

@@ -564,30 +564,4 @@ impl crate::techniques::Technique for PrefilteredSettings {
     }
 }
 
-impl crate::techniques::GpuTechnique for Prefiltered {
-    type Settings = PrefilteredSettings;
-    fn new(gpu: &GpuContext, settings: PrefilteredSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
-        Prefiltered::new(gpu, settings, output)
-    }
-    fn settings_mut(&mut self) -> &mut PrefilteredSettings {
-        &mut self.settings
-    }
-    fn settings(&self) -> &PrefilteredSettings {
-        &self.settings
-    }
-    fn encode(
-        &mut self,
-        gpu: &GpuContext,
-        rec: &mut Recorder,
-        frame: &GpuFrame,
-        output: &wgpu::TextureView,
-    ) -> Result<TechniqueStats, Error> {
-        Prefiltered::encode(self, gpu, rec, frame, output)
-    }
-    fn gpu_memory_bytes(&self) -> u64 {
-        Prefiltered::gpu_memory_bytes(self)
-    }
-    fn bind_group_builds(&self) -> u64 {
-        self.binds.builds()
-    }
-}
+gpu_technique!(Prefiltered, PrefilteredSettings);

@@ -48,13 +48,13 @@ struct Occluder {
 fn line_occluder(f: Frame, pt: vec3<f32>, dir: vec3<f32>, bias: f32) -> Occluder {
     var r: Occluder;
     r.found = false;
-    let ortho = f.shadow_ints.z == 1u;
+    let ortho = f.shadow_orthographic == 1u;
     var q = pt;
     if !ortho {
         q = f.light_pos.xyz + dir;
     }
     var layer = 0u;
-    if f.shadow_ints.x == 6u {
+    if f.shadow_layers == 6u {
         layer = cube_face(dir);
     }
     let c = f.shadow_view_proj[layer] * vec4<f32>(q, 1.0);
@@ -65,7 +65,7 @@ fn line_occluder(f: Frame, pt: vec3<f32>, dir: vec3<f32>, bias: f32) -> Occluder
     if abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 {
         return r;
     }
-    let n = f32(f.shadow_ints.y);
+    let n = f32(f.shadow_size);
     let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
     let texel = vec2<u32>(min(floor(uv * n), vec2<f32>(n - 1.0)));
     let d = textureLoad(shadow_map, vec2<i32>(texel), i32(layer), 0).r;
@@ -105,7 +105,7 @@ fn rectify(@builtin(global_invocation_id) id: vec3<u32>) {
     let c = f32(id.x) + 0.5;
     let r = f32(id.y) + 0.5;
     let line = texel_line(params, c, r);
-    let occ = line_occluder(frame, line.p, line.dir, frame.shadow_params.z);
+    let occ = line_occluder(frame, line.p, line.dir, frame.shadow_bias);
     var z = 1.0;
     if occ.found {
         z = occluder_depth(params, c, occ.o);

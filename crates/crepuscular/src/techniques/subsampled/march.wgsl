@@ -48,8 +48,8 @@ fn march(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let px = vec2<u32>(
-        source_pixel(gid.x, frame.ints.x, params.grid_width),
-        source_pixel(gid.y, frame.ints.y, params.grid_height),
+        source_pixel(gid.x, frame.width, params.grid_width),
+        source_pixel(gid.y, frame.height, params.grid_height),
     );
     let dir = pixel_ray(frame, px);
     let d = textureLoad(depth_tex, vec2<i32>(px), 0).r;

@@ -415,30 +415,4 @@ impl crate::techniques::Technique for SubsampledSettings {
     }
 }
 
-impl crate::techniques::GpuTechnique for Subsampled {
-    type Settings = SubsampledSettings;
-    fn new(gpu: &GpuContext, settings: SubsampledSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
-        Subsampled::new(gpu, settings, output)
-    }
-    fn settings_mut(&mut self) -> &mut SubsampledSettings {
-        &mut self.settings
-    }
-    fn settings(&self) -> &SubsampledSettings {
-        &self.settings
-    }
-    fn encode(
-        &mut self,
-        gpu: &GpuContext,
-        rec: &mut Recorder,
-        frame: &GpuFrame,
-        output: &wgpu::TextureView,
-    ) -> Result<TechniqueStats, Error> {
-        Subsampled::encode(self, gpu, rec, frame, output)
-    }
-    fn gpu_memory_bytes(&self) -> u64 {
-        Subsampled::gpu_memory_bytes(self)
-    }
-    fn bind_group_builds(&self) -> u64 {
-        self.binds.builds()
-    }
-}
+gpu_technique!(Subsampled, SubsampledSettings);

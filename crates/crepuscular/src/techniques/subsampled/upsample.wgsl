@@ -100,8 +100,8 @@ fn upsample_pixel(px: vec2<u32>) -> Upsampled {
     out.remarched = false;
     let dir = pixel_ray(frame, px);
     let s = view_distance(frame, textureLoad(depth_tex, vec2<i32>(px), 0).r, dir);
-    let bx = bracket(px.x, frame.ints.x, params.grid_width);
-    let by = bracket(px.y, frame.ints.y, params.grid_height);
+    let bx = bracket(px.x, frame.width, params.grid_width);
+    let by = bracket(px.y, frame.height, params.grid_height);
     var taps = array<vec4<f32>, 4>(
         textureLoad(grid_tex, vec2<i32>(i32(bx.i0), i32(by.i0)), 0),
         textureLoad(grid_tex, vec2<i32>(i32(bx.i1), i32(by.i0)), 0),
@@ -145,7 +145,7 @@ fn upsample(
     @builtin(global_invocation_id) gid: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    if gid.x < frame.ints.x && gid.y < frame.ints.y {
+    if gid.x < frame.width && gid.y < frame.height {
         let u = upsample_pixel(gid.xy);
         textureStore(out_tex, vec2<i32>(gid.xy), vec4<f32>(u.radiance, 1.0));
         if u.remarched {

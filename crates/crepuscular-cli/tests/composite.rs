@@ -26,7 +26,7 @@ fn texture(gpu: &GpuContext, w: u32, h: u32, format: wgpu::TextureFormat, usage:
 #[test]
 fn gpu_composite_matches_its_cpu_mirror() {
     let Some(gpu) = test_gpu("gpu_composite_matches_its_cpu_mirror") else { return };
-    let mut comp = Composite::new(&gpu.device, &gpu.queue);
+    let mut comp = Composite::new(&gpu.device);
     for scene_name in ["colonnade", "cage", "stained-glass"] {
         let mut scene = builtin::builtin(scene_name).unwrap();
         scene.render.width = 96;
@@ -74,6 +74,19 @@ fn gpu_composite_matches_its_cpu_mirror() {
         assert!(worst < 2e-5, "{scene_name}: GPU composite differs from the CPU mirror by {worst}");
         let lit = want.pixels.iter().filter(|p| p[0] + p[1] + p[2] > 0.01).count();
         assert!(lit > (w * h / 4) as usize, "{scene_name}: a dark composite ({lit} lit pixels)");
+
+        // Two frames' composites in one encoder each use their own frame (a denser medium
+        // first, then this frame).
+        let mut denser = desc.clone();
+        denser.medium.absorption += glam::Vec3::splat(0.05);
+        let other = CompositeInputs { desc: &denser, ..inputs };
+        let (x, y) = (composite_target(&gpu, w, h), composite_target(&gpu, w, h));
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        comp.encode(&mut enc, &other, CompositeTarget::Into(&x.create_view(&Default::default())), None).unwrap();
+        comp.encode(&mut enc, &inputs, CompositeTarget::Into(&y.create_view(&Default::default())), None).unwrap();
+        gpu.queue.submit([enc.finish()]);
+        assert_eq!(gpu.read_image(&y).unwrap().pixels, got.pixels, "{scene_name}: the second composite in one encoder");
+        assert_ne!(gpu.read_image(&x).unwrap().pixels, got.pixels, "{scene_name}: the denser medium changed nothing");
 
         // In place: the engine's HDR colour itself (a copy of the surface here).
         let colour = texture(
@@ -138,7 +151,7 @@ fn composite_refuses_targets_that_do_not_fit() {
     let out_view = out.create_view(&Default::default());
     let surface_view = tex.surface.create_view(&Default::default());
     let inputs = CompositeInputs { desc: &desc, depth: frame.depth, inscatter: &out_view, surface: &surface_view };
-    let mut comp = Composite::new(&gpu.device, &gpu.queue);
+    let mut comp = Composite::new(&gpu.device);
     let mut enc = gpu.device.create_command_encoder(&Default::default());
     let wrong = composite_target(&gpu, 32, 36);
     let e = comp.encode(&mut enc, &inputs, CompositeTarget::Into(&wrong.create_view(&Default::default())), None);

@@ -8,6 +8,7 @@ use crate::error::Error;
 use crate::frame::FrameDesc;
 use crate::tonemap::ToneMap;
 use std::collections::HashMap;
+use wgpu::util::DeviceExt;
 
 /// The composite pass shader (composed with common.wgsl).
 pub const COMPOSITE_WGSL: &str = include_str!("composite.wgsl");
@@ -50,19 +51,16 @@ struct Params {
 /// are first used.
 pub struct Composite {
     device: wgpu::Device,
-    queue: wgpu::Queue,
     module: wgpu::ShaderModule,
     layout: wgpu::BindGroupLayout,
     pipeline_layout: wgpu::PipelineLayout,
     pipelines: HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
-    frame_buffer: wgpu::Buffer,
-    params_buffer: wgpu::Buffer,
     scratch: Option<wgpu::Texture>,
 }
 
 impl Composite {
     /// Builds the shader and layout on the caller's device.
-    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue) -> Self {
+    pub fn new(device: &wgpu::Device) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("composite.wgsl"),
             source: wgpu::ShaderSource::Wgsl(crate::shaders::compose(COMPOSITE_WGSL).into()),
@@ -98,25 +96,7 @@ impl Composite {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let buffer = |label, size| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        };
-        Self {
-            device: device.clone(),
-            queue: queue.clone(),
-            module,
-            layout,
-            pipeline_layout,
-            pipelines: HashMap::new(),
-            frame_buffer: buffer("composite frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64),
-            params_buffer: buffer("composite params", std::mem::size_of::<Params>() as u64),
-            scratch: None,
-        }
+        Self { device: device.clone(), module, layout, pipeline_layout, pipelines: HashMap::new(), scratch: None }
     }
 
     fn pipeline(&mut self, format: wgpu::TextureFormat) -> &wgpu::RenderPipeline {
@@ -212,15 +192,24 @@ impl Composite {
             Some(t) => [t.exposure, 1.0, if format.is_srgb() { 0.0 } else { 1.0 }, 0.0],
             None => [1.0, 0.0, 0.0, 0.0],
         };
-        self.queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&d.uniforms()));
-        self.queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&Params { tone: tone_params }));
+        // This frame's uniforms in buffers of its own (so composites of different frames in one
+        // encoder each read their own values).
+        let uniform = |label, contents: &[u8]| {
+            self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        };
+        let frame_buffer = uniform("composite frame uniforms", bytemuck::bytes_of(&d.uniforms()));
+        let params_buffer = uniform("composite params", bytemuck::bytes_of(&Params { tone: tone_params }));
         let view = wgpu::BindingResource::TextureView;
         let bind = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("composite"),
             layout: &self.layout,
             entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 0, resource: frame_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: params_buffer.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 2, resource: view(&surface_view) },
                 wgpu::BindGroupEntry { binding: 3, resource: view(inputs.inscatter) },
                 wgpu::BindGroupEntry { binding: 4, resource: view(inputs.depth) },

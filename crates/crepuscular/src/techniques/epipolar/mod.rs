@@ -1205,7 +1205,6 @@ impl Epipolar {
     }
 }
 
-
 impl crate::techniques::Technique for EpipolarSettings {
     const INFO: crate::techniques::TechniqueInfo = crate::techniques::TechniqueInfo {
         name: "epipolar",

@@ -323,3 +323,31 @@ fn rgba16float_output_is_the_rgba32float_frame_rounded_to_half_floats() {
         }
     }
 }
+
+#[test]
+fn a_frame_loop_that_never_asks_for_stats_keeps_at_most_three_frames_in_flight() {
+    let Some(gpu) = test_gpu("a_frame_loop_that_never_asks_for_stats_keeps_at_most_three_frames_in_flight") else {
+        return;
+    };
+    let scene = small("colonnade");
+    let desc = frame_desc(&scene);
+    let host = GpuHost::for_scene(&gpu, &scene).unwrap();
+    let tex = host.render(&gpu, &desc, None).unwrap();
+    let views = tex.views();
+    let frame = views.frame(&desc);
+    let out = gpu.create_output_texture(desc.width, desc.height);
+    let out_view = out.create_view(&Default::default());
+    // Subsampled reads back a GPU counter every measured frame.
+    let mut sc = Scattering::from_gpu(&gpu, parse_technique("subsampled", &scene, &[]).unwrap()).unwrap();
+    for _ in 0..10 {
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        sc.encode(&mut encoder, &frame, &out_view).unwrap();
+        gpu.queue.submit([encoder.finish()]);
+        sc.end_frame();
+        assert!(sc.frames_in_flight() <= 3, "{} frames in flight", sc.frames_in_flight());
+    }
+    gpu.wait().unwrap();
+    let stats = sc.stats().expect("the measured frames' stats").clone();
+    assert!(stats.extra.contains_key("remarched_pixels"), "{:?}", stats.extra);
+    assert_eq!(sc.frames_in_flight(), 0);
+}

@@ -12,7 +12,9 @@ pub enum StatsMode {
     /// the caller's encoder, and read back one or more frames later (a ring of query sets and
     /// readback buffers, through wgpu-profiler): [`crate::Scattering::encode`] never submits,
     /// polls or maps, and [`crate::Scattering::stats`] returns the newest frame whose results
-    /// have arrived. Cost: two timestamps per pass and one small buffer copy per frame.
+    /// have arrived. At most 3 measured frames wait at a time; a frame encoded while they do is
+    /// recorded unmeasured, so nothing grows in a loop that never asks for stats. Cost: two
+    /// timestamps per pass and one small buffer copy per frame.
     #[default]
     Deferred,
     /// The tools' mode on software adapters, whose timestamps mean nothing: every pass is

@@ -71,6 +71,12 @@ struct InFlight {
     timed: bool,
 }
 
+/// At most this many measured frames wait for their readbacks ([`StatsMode::Deferred`]): fewer
+/// than wgpu-profiler's pending-frame limit (4), so it never drops a frame and every timing stays
+/// paired with its frame; a frame encoded while this many wait is recorded unmeasured (it
+/// yields no stats), so memory stays bounded in a loop that never asks for stats.
+const MAX_MEASURED_IN_FLIGHT: usize = 3;
+
 /// The smallest limits every technique needs (WebGPU's defaults cover them).
 fn required_limits() -> wgpu::Limits {
     wgpu::Limits {
@@ -234,13 +240,16 @@ impl Scattering {
         output: &wgpu::TextureView,
     ) -> Result<(), Error> {
         check_frame(&self.gpu, frame, output, self.output)?;
+        // Readbacks the caller's own polls and submits delivered (this does not poll).
+        self.collect();
+        let measured = self.mode != StatsMode::Deferred || self.frames_in_flight() < MAX_MEASURED_IN_FLIGHT;
         let profiler = match self.mode {
-            StatsMode::Deferred => self.profiler.as_ref(),
+            StatsMode::Deferred if measured => self.profiler.as_ref(),
             _ => None,
         };
         let mut rec = match self.mode {
             StatsMode::WallClock => Recorder::wall_clock(&self.gpu),
-            StatsMode::Deferred => Recorder::encoder(&self.gpu, encoder, profiler, &mut self.belt, true),
+            StatsMode::Deferred => Recorder::encoder(&self.gpu, encoder, profiler, &mut self.belt, measured),
             StatsMode::Off => Recorder::encoder(&self.gpu, encoder, None, &mut self.belt, false),
         };
         let result = self.technique.encode(&self.gpu, &mut rec, frame, output);
@@ -260,6 +269,8 @@ impl Scattering {
                 self.latest = Some(stats);
             }
             StatsMode::Off => self.latest = Some(stats),
+            // Too many frames wait for their readbacks: this one is not measured.
+            StatsMode::Deferred if !measured => {}
             StatsMode::Deferred => {
                 let counters = counters.map(|c| {
                     let size = c.buffer.size();
@@ -306,6 +317,12 @@ impl Scattering {
         self.in_flight.push_back(InFlight { frames, mapped, expected, timed });
     }
 
+    /// How many measured frames wait for their timings and counters (at most 3; see
+    /// [`StatsMode::Deferred`]).
+    pub fn frames_in_flight(&self) -> usize {
+        self.in_flight.iter().map(|f| f.frames.len()).sum::<usize>() + self.recorded.len()
+    }
+
     /// The stats of the newest frame whose timings and counters have arrived (never waits;
     /// polls the device without blocking so that finished readbacks are delivered). With
     /// [`StatsMode::WallClock`] and [`StatsMode::Off`] they are the last encoded frame's.
@@ -313,6 +330,13 @@ impl Scattering {
         if !self.in_flight.is_empty() {
             let _ = self.gpu.device.poll(wgpu::PollType::Poll);
         }
+        self.collect();
+        self.latest.as_ref()
+    }
+
+    /// Moves the frames whose timings and counters have arrived out of flight, oldest first,
+    /// into `latest` (never polls or waits).
+    fn collect(&mut self) {
         let period = self.gpu.queue.get_timestamp_period();
         while let Some(front) = self.in_flight.front() {
             if front.mapped.load(Ordering::Acquire) < front.expected {
@@ -342,7 +366,6 @@ impl Scattering {
                 self.latest = Some(f.stats);
             }
         }
-        self.latest.as_ref()
     }
 
     /// A tool's whole frame: records `frame` into an encoder of its own, submits it, waits for

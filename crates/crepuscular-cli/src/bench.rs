@@ -3,8 +3,9 @@
 //! `reference`; written as `bench.json`, `bench.md` and SVG plots. Named presets reproduce the
 //! papers' own experiments.
 //!
-//! Timing: every pass of every frame is measured by the technique's `PassTimer` (GPU timestamp
-//! queries on hardware adapters; a synchronised wall clock on software adapters and the CPU).
+//! Timing: every pass of every frame is measured by the library's `Scattering` (GPU timestamp
+//! queries read back after the frame on hardware adapters, `StatsMode::Deferred`; a
+//! synchronised wall clock on software adapters, `StatsMode::WallClock`, and on the CPU).
 //! Warm-up frames (pipeline compilation, first-use allocation) are excluded; the report gives
 //! the median and the min–max spread over the timed frames. Timings are only comparable within
 //! one run on one device: the device is recorded in every output.

@@ -422,7 +422,7 @@ impl From<&EpipolarSettings> for crate::march::PixelMarch {
 }
 
 impl EpipolarSettings {
-    /// Checks every range (device limits are checked by [`Epipolar::render`]).
+    /// Checks every range (device limits are checked by [`Epipolar::encode`]).
     pub fn validate(&self) -> Result<(), Error> {
         let m = MAX_TEXELS_PER_SIDE;
         if let Some(v) = self.slices
@@ -701,7 +701,7 @@ struct Prefiltered {
 /// built once and reused (the line textures are reallocated only when `samples` or `slices`
 /// change, the prefiltered spot texture when its size does).
 pub struct Epipolar {
-    /// Current settings; changes apply on the next [`Epipolar::render`].
+    /// Current settings; changes apply on the next [`Epipolar::encode`].
     pub settings: EpipolarSettings,
     layouts: Layouts,
     pipelines: Pipelines,

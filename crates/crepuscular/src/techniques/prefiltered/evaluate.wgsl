@@ -150,7 +150,7 @@ fn evaluate(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 // The pixels of the epipole disc, ray-marched (§5): dispatched over the disc's bounding box only
-// (its first pixel is the disc's, see `Prefiltered::render_with`).
+// (its first pixel is the disc's, see `Prefiltered::encode`).
 @compute @workgroup_size(8, 8)
 fn epipole(@builtin(global_invocation_id) id: vec3<u32>) {
     let r = f32(params.ints3.x);

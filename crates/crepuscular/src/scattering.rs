@@ -372,6 +372,13 @@ impl Scattering {
     /// the GPU and returns the frame's stats. Never use it in an engine's frame loop (it
     /// waits); use [`Scattering::encode`].
     pub fn render(&mut self, frame: &GpuFrame, output: &wgpu::TextureView) -> Result<TechniqueStats, Error> {
+        // Frames the caller encoded before still in flight: let them land first, so that this
+        // frame is measured and its own stats are returned.
+        if self.frames_in_flight() > 0 {
+            self.end_frame();
+            self.gpu.wait()?;
+            self.stats();
+        }
         let mut encoder = self
             .gpu
             .device

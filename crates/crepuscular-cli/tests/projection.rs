@@ -183,3 +183,58 @@ fn a_projection_jittered_by_one_pixel_shifts_the_image_by_one_pixel() {
         }
     }
 }
+
+/// The frame with its shadow map in the reversed-Z convention: each layer's world → clip matrix
+/// followed by z ↦ w − z (the light's projection with near and far swapped: d ↦ 1 − d).
+fn reversed_shadows(desc: &FrameDesc) -> FrameDesc {
+    let flip = Mat4::from_cols(
+        glam::Vec4::X,
+        glam::Vec4::Y,
+        glam::Vec4::new(0.0, 0.0, -1.0, 0.0),
+        glam::Vec4::new(0.0, 0.0, 1.0, 1.0),
+    );
+    let mut d = desc.clone();
+    d.shadow.view_proj = d.shadow.view_proj.map(|m| flip * m);
+    d.shadow.depth = DepthConvention::Reversed;
+    d
+}
+
+#[test]
+fn reversed_z_shadow_maps_give_the_standard_in_scattering() {
+    let gpu = test_gpu("reversed_z_shadow_maps_give_the_standard_in_scattering");
+    for scene_name in ["colonnade", "cage", "stained-glass"] {
+        let scene = small(scene_name);
+        let standard = frame_desc(&scene);
+        let rev = reversed_shadows(&standard);
+        for settings in techniques(&scene) {
+            let name = settings.name();
+            let (a, _) = cpu_frame(&scene, &standard, &settings);
+            let (b, _) = cpu_frame(&scene, &rev, &settings);
+            let mut runs = vec![("cpu", a, b)];
+            if let Some(gpu) = &gpu {
+                runs.push((
+                    "gpu",
+                    gpu_frame(gpu, &scene, &standard, &settings).0,
+                    gpu_frame(gpu, &scene, &rev, &settings).0,
+                ));
+            }
+            for (backend, a, b) in runs {
+                let (over, p99, max) = differences(&b, &a);
+                eprintln!(
+                    "{scene_name} {name} {backend}: reversed-Z shadow map vs standard: {:.2} % of pixels off by > 1 %, p99 {p99:.1e}, max {max:.1e}",
+                    100.0 * over
+                );
+                // The binary shadow tests give identical pixels (measured: 0 difference for
+                // every technique but prefiltered). Prefiltered filters the stored depths
+                // themselves, so it sees the standard map's rounding (most likely: a perspective
+                // map's depths near its far plane round to the clear value 1 and read as "no
+                // occluder", where the reversed map keeps them — not verified texel by texel). Measured on stained-glass
+                // (the spot): p99 1.4e-2 and 1.37 % of pixels off by > 1 % on llvmpipe, 2.8e-3
+                // and 0.10 % on the CPU; elsewhere ≤ 7.3e-4 and 0 %. Bounds: 2–3× that.
+                let (p99_bound, over_bound) = if name == "prefiltered" { (3e-2, 3e-2) } else { (1e-6, 1e-6) };
+                assert!(p99 <= p99_bound, "{scene_name} {name} {backend}: 99th percentile {p99}");
+                assert!(over <= over_bound, "{scene_name} {name} {backend}: {over} of the pixels off by > 1 %");
+            }
+        }
+    }
+}

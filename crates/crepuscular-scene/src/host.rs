@@ -21,7 +21,8 @@ pub const RECTIFIED_DEPTH_WGSL: &str = include_str!("shaders/rectified_depth.wgs
 
 /// The host renderer's pipelines and the scene's vertex data on the GPU.
 pub struct GpuHost {
-    shadow_pipeline: wgpu::RenderPipeline,
+    /// Shadow-map depth for the standard and the reversed-Z convention (their depth tests).
+    shadow_pipelines: [wgpu::RenderPipeline; 2],
     shadow_layout: wgpu::BindGroupLayout,
     /// Standard and reversed-Z depth tests.
     surface_pipelines: [wgpu::RenderPipeline; 2],
@@ -150,30 +151,35 @@ impl GpuHost {
                 bias: Default::default(),
             };
             let primitive = wgpu::PrimitiveState { cull_mode: None, ..Default::default() };
-            let shadow_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("shadow depth"),
-                layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            let shadow_pipeline = |compare: wgpu::CompareFunction| {
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                     label: Some("shadow depth"),
-                    bind_group_layouts: &[Some(&shadow_layout)],
-                    immediate_size: 0,
-                })),
-                vertex: wgpu::VertexState {
-                    module: &shadow_module,
-                    entry_point: Some("vs"),
-                    compilation_options: Default::default(),
-                    buffers: &[wgpu::VertexBufferLayout {
-                        array_stride: std::mem::size_of::<Vertex>() as u64,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &VERTEX_ATTRIBUTES[..1],
-                    }],
-                },
-                primitive,
-                depth_stencil: Some(depth_state.clone()),
-                multisample: Default::default(),
-                fragment: None,
-                multiview_mask: None,
-                cache: None,
-            });
+                    layout: Some(&device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                        label: Some("shadow depth"),
+                        bind_group_layouts: &[Some(&shadow_layout)],
+                        immediate_size: 0,
+                    })),
+                    vertex: wgpu::VertexState {
+                        module: &shadow_module,
+                        entry_point: Some("vs"),
+                        compilation_options: Default::default(),
+                        buffers: &[wgpu::VertexBufferLayout {
+                            array_stride: std::mem::size_of::<Vertex>() as u64,
+                            step_mode: wgpu::VertexStepMode::Vertex,
+                            attributes: &VERTEX_ATTRIBUTES[..1],
+                        }],
+                    },
+                    primitive,
+                    depth_stencil: Some(wgpu::DepthStencilState {
+                        depth_compare: Some(compare),
+                        ..depth_state.clone()
+                    }),
+                    multisample: Default::default(),
+                    fragment: None,
+                    multiview_mask: None,
+                    cache: None,
+                })
+            };
             let tex_entry = |binding, dim| wgpu::BindGroupLayoutEntry {
                 binding,
                 visibility: wgpu::ShaderStages::FRAGMENT,
@@ -253,7 +259,10 @@ impl GpuHost {
                 surface_pipeline(DepthConvention::Reversed.compare()),
             ];
             Self {
-                shadow_pipeline,
+                shadow_pipelines: [
+                    shadow_pipeline(DepthConvention::Standard.compare()),
+                    shadow_pipeline(DepthConvention::Reversed.compare()),
+                ],
                 shadow_layout,
                 surface_pipelines,
                 surface_layout,
@@ -490,7 +499,7 @@ impl GpuHost {
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                         view,
                         depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(1.0),
+                            load: wgpu::LoadOp::Clear(sp.depth.far_value()),
                             store: wgpu::StoreOp::Store,
                         }),
                         stencil_ops: None,
@@ -499,7 +508,7 @@ impl GpuHost {
                     occlusion_query_set: None,
                     multiview_mask: None,
                 });
-                pass.set_pipeline(&self.shadow_pipeline);
+                pass.set_pipeline(&self.shadow_pipelines[(sp.depth == DepthConvention::Reversed) as usize]);
                 pass.set_bind_group(0, bg, &[]);
                 pass.set_vertex_buffer(0, self.vertices.slice(..));
                 pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);

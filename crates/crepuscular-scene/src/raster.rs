@@ -560,13 +560,20 @@ pub fn rasterize_with(
 /// `size_w × size_h` [0, 1] depths, row-major from the top-left pixel, 1.0 where nothing was
 /// drawn.
 pub fn rasterize_depth_only(geometry: &Geometry, view_proj: Mat4, size_w: u32, size_h: u32) -> Vec<f32> {
-    depth_only(geometry, view_proj, DepthMode::Clip, size_w, size_h)
+    depth_only(geometry, view_proj, DepthMode::Clip, size_w, size_h, DepthConvention::Standard)
 }
 
 /// [`rasterize_depth_only`] with near/far clipping or depth clamping.
-fn depth_only(geometry: &Geometry, view_proj: Mat4, depth_mode: DepthMode, size_w: u32, size_h: u32) -> Vec<f32> {
+fn depth_only(
+    geometry: &Geometry,
+    view_proj: Mat4,
+    depth_mode: DepthMode,
+    size_w: u32,
+    size_h: u32,
+    convention: DepthConvention,
+) -> Vec<f32> {
     let pixels = size_w as usize * size_h as usize;
-    let mut depth = vec![1.0f32; pixels];
+    let mut depth = vec![convention.far_value(); pixels];
     if pixels == 0 {
         return depth;
     }
@@ -576,16 +583,7 @@ fn depth_only(geometry: &Geometry, view_proj: Mat4, depth_mode: DepthMode, size_
     let (offsets, items) = bin(&tris, bands);
     depth.par_chunks_mut(BAND_ROWS * w).enumerate().for_each(|(b, depth)| {
         let rows = depth.len() / w;
-        raster_band(
-            &tris,
-            &items[offsets[b]..offsets[b + 1]],
-            w,
-            b * BAND_ROWS,
-            rows,
-            depth,
-            None,
-            DepthConvention::Standard,
-        );
+        raster_band(&tris, &items[offsets[b]..offsets[b + 1]], w, b * BAND_ROWS, rows, depth, None, convention);
     });
     depth
 }
@@ -597,7 +595,7 @@ pub fn render_shadow_map(geometry: &Geometry, projection: &ShadowProjection) -> 
     let n = projection.size;
     let mut depth = Vec::with_capacity(layers * n as usize * n as usize);
     for vp in &projection.view_proj[..layers] {
-        depth.extend(rasterize_depth_only(geometry, *vp, n, n));
+        depth.extend(depth_only(geometry, *vp, DepthMode::Clip, n, n, projection.depth));
     }
     ShadowMap { projection: projection.clone(), depth }
 }
@@ -619,7 +617,14 @@ pub fn rasterize_rectified(geometry: &Geometry, request: &RectifiedRaster) -> Ve
             continue;
         }
         let rw = (c1 - c0) as usize;
-        let part = depth_only(geometry, region.view_proj, DepthMode::Clamp, rw as u32, request.height);
+        let part = depth_only(
+            geometry,
+            region.view_proj,
+            DepthMode::Clamp,
+            rw as u32,
+            request.height,
+            DepthConvention::Standard,
+        );
         // Overlapping regions keep the nearer depth, as the depth test of one GPU pass does.
         for (row, src) in depth.chunks_exact_mut(w).zip(part.chunks_exact(rw)) {
             for (d, &s) in row[c0 as usize..c1 as usize].iter_mut().zip(src) {

@@ -254,6 +254,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         orthographic: true,
         size: SHADOW_SIZE,
         texel_world: 2.0 * r / SHADOW_SIZE as f32,
+        depth: DepthConvention::Standard,
     };
 
     // One frame of the engine: its passes, crepuscular's technique and composite, one submit.

@@ -65,7 +65,8 @@ pub struct FrameUniforms {
     /// The world size of one shadow texel (at unit distance for a perspective projection).
     pub shadow_texel: f32,
     /// View depth from NDC depth d, lin = y / (d + x); z: the depth buffer's far (clear)
-    /// value, 1 standard or 0 reversed-Z ([`crate::camera::FrameCamera::view_depth`]).
+    /// value, 1 standard or 0 reversed-Z ([`crate::camera::FrameCamera::view_depth`]); w: the
+    /// shadow map's clear value, 1 standard or 0 reversed-Z ([`ShadowProjection::depth`]).
     pub depth_params: [f32; 4],
     /// Image width, pixels.
     pub width: u32,
@@ -151,7 +152,7 @@ impl FrameDesc {
             shadow_far: s.far,
             shadow_bias: self.shadow_bias,
             shadow_texel: s.texel_world,
-            depth_params: [depth_a, depth_b, self.camera.depth.far_value(), 0.0],
+            depth_params: [depth_a, depth_b, self.camera.depth.far_value(), s.depth.far_value()],
             width: self.width,
             height: self.height,
             light_kind: self.light.kind_code(),

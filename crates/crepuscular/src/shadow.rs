@@ -4,6 +4,7 @@
 //! depths so a bias means the same distance everywhere. Mirrored by `shadow_visibility` in
 //! common.wgsl.
 
+use crate::camera::DepthConvention;
 use crate::model::{Camera, Light};
 use glam::{Mat4, Vec3, Vec4, Vec4Swizzles};
 use serde::{Deserialize, Serialize};
@@ -82,6 +83,11 @@ pub struct ShadowProjection {
     pub size: u32,
     /// World-space size of one texel at unit distance (perspective) or everywhere (orthographic).
     pub texel_world: f32,
+    /// How the shadow map stores depth: [`DepthConvention::Standard`] (0 at `near`, 1 at `far`,
+    /// cleared to 1; what [`ShadowProjection::fit`] makes) or [`DepthConvention::Reversed`]
+    /// (1 at `near`, 0 at `far`, cleared to 0 — an engine's reversed-Z shadow maps, made with
+    /// near and far swapped in the projection). `near` and `far` are the distances either way.
+    pub depth: DepthConvention,
 }
 
 /// Look-at targets and up vectors of the six cube faces, in layer order.
@@ -146,7 +152,16 @@ impl ShadowProjection {
                 let proj = Mat4::orthographic_rh(lo.x - pad, hi.x + pad, lo.y - pad, hi.y + pad, near, far);
                 let texel = ((hi.x - lo.x).max(hi.y - lo.y) + 2.0 * pad) / size as f32;
                 let m = proj * view;
-                Self { view_proj: [m; 6], layers: 1, near, far, orthographic: true, size, texel_world: texel }
+                Self {
+                    view_proj: [m; 6],
+                    layers: 1,
+                    near,
+                    far,
+                    orthographic: true,
+                    size,
+                    texel_world: texel,
+                    depth: DepthConvention::Standard,
+                }
             }
             Light::Spot { position, direction, outer_angle_degrees, .. } => {
                 let dir = direction.normalize();
@@ -156,24 +171,60 @@ impl ShadowProjection {
                 let near = (far * 1e-3).max(0.02);
                 let m = Mat4::perspective_rh(fov, 1.0, near, far) * Mat4::look_at_rh(*position, *position + dir, up);
                 let texel = 2.0 * (fov * 0.5).tan() / size as f32;
-                Self { view_proj: [m; 6], layers: 1, near, far, orthographic: false, size, texel_world: texel }
+                Self {
+                    view_proj: [m; 6],
+                    layers: 1,
+                    near,
+                    far,
+                    orthographic: false,
+                    size,
+                    texel_world: texel,
+                    depth: DepthConvention::Standard,
+                }
             }
             Light::Point { position, .. } => {
                 let far = ((bounds.center() - *position).length() + bounds.radius()).max(1.0);
                 let near = (far * 1e-3).max(0.02);
                 let proj = Mat4::perspective_rh(std::f32::consts::FRAC_PI_2, 1.0, near, far);
                 let view_proj = CUBE_FACES.map(|(f, u)| proj * Mat4::look_at_rh(*position, *position + f, u));
-                Self { view_proj, layers: 6, near, far, orthographic: false, size, texel_world: 2.0 / size as f32 }
+                Self {
+                    view_proj,
+                    layers: 6,
+                    near,
+                    far,
+                    orthographic: false,
+                    size,
+                    texel_world: 2.0 / size as f32,
+                    depth: DepthConvention::Standard,
+                }
             }
         }
     }
 
-    /// Linear light-space depth from a [0, 1] depth value. Mirrors `shadow_linear_depth`.
+    /// Linear light-space depth from a [0, 1] depth value (either convention: a reversed map
+    /// swaps near and far). Mirrors `shadow_linear_depth`.
     pub fn linear(&self, d: f32) -> f32 {
-        if self.orthographic {
-            self.near + d * (self.far - self.near)
-        } else {
-            crate::model::linear_depth(d, self.near, self.far)
+        let (near, far) = match self.depth {
+            DepthConvention::Standard => (self.near, self.far),
+            DepthConvention::Reversed => (self.far, self.near),
+        };
+        if self.orthographic { near + d * (far - near) } else { crate::model::linear_depth(d, near, far) }
+    }
+
+    /// [`ShadowProjection::linear`] in f64 (the reference's precision).
+    pub fn linear_f64(&self, d: f64) -> f64 {
+        let (near, far) = match self.depth {
+            DepthConvention::Standard => (self.near as f64, self.far as f64),
+            DepthConvention::Reversed => (self.far as f64, self.near as f64),
+        };
+        if self.orthographic { near + d * (far - near) } else { near * far / (far - d * (far - near)) }
+    }
+
+    /// True where a stored depth is the clear value (no occluder at that texel).
+    pub fn is_empty(&self, d: f32) -> bool {
+        match self.depth {
+            DepthConvention::Standard => d >= 1.0,
+            DepthConvention::Reversed => d <= 0.0,
         }
     }
 }

@@ -147,10 +147,17 @@ fn cube_face(v: vec3<f32>) -> u32 {
 
 // shadow.rs ShadowProjection::linear.
 fn shadow_linear_depth(f: Frame, d: f32) -> f32 {
-    if f.shadow_orthographic == 1u {
-        return f.shadow_near + d * (f.shadow_far - f.shadow_near);
+    // A reversed-Z shadow map (clear value 0, depth_params.w) swaps near and far.
+    var near = f.shadow_near;
+    var far = f.shadow_far;
+    if f.depth_params.w == 0.0 {
+        near = f.shadow_far;
+        far = f.shadow_near;
     }
-    return linear_depth(d, f.shadow_near, f.shadow_far);
+    if f.shadow_orthographic == 1u {
+        return near + d * (far - near);
+    }
+    return linear_depth(d, near, far);
 }
 
 struct ShadowCoord {

@@ -749,7 +749,7 @@ pub fn line_occluder(shadow: &ShadowMap, light_pos: Vec3, p: Vec3, dir: Vec3, bi
     let tx = ((ndc.x * 0.5 + 0.5) * n).floor().min(n - 1.0) as u32;
     let ty = ((0.5 - ndc.y * 0.5) * n).floor().min(n - 1.0) as u32;
     let d = shadow.texel(layer, tx, ty);
-    if d >= 1.0 {
+    if pr.is_empty(d) {
         return None;
     }
     let stored = pr.linear(d);

@@ -69,7 +69,8 @@ fn line_occluder(f: Frame, pt: vec3<f32>, dir: vec3<f32>, bias: f32) -> Occluder
     let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
     let texel = vec2<u32>(min(floor(uv * n), vec2<f32>(n - 1.0)));
     let d = textureLoad(shadow_map, vec2<i32>(texel), i32(layer), 0).r;
-    if d >= 1.0 {
+    // The shadow map's clear value (1, or 0 for a reversed-Z map): no occluder.
+    if (f.depth_params.w == 1.0 && d >= 1.0) || (f.depth_params.w == 0.0 && d <= 0.0) {
         return r;
     }
     let stored = shadow_linear_depth(f, d);

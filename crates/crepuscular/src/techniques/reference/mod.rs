@@ -94,11 +94,8 @@ impl<'a> Integrand<'a> {
         let n = pr.size as f64;
         let tx = ((ndc.x * 0.5 + 0.5) * n).floor().min(n - 1.0) as u32;
         let ty = ((0.5 - ndc.y * 0.5) * n).floor().min(n - 1.0) as u32;
-        let (near, far) = (pr.near as f64, pr.far as f64);
-        let lin =
-            |d: f64| if pr.orthographic { near + d * (far - near) } else { near * far / (far - d * (far - near)) };
-        let stored = lin(sm.texel(layer, tx, ty) as f64);
-        if lin(ndc.z) <= stored + self.frame.desc.shadow_bias as f64 { 1.0 } else { 0.0 }
+        let stored = pr.linear_f64(sm.texel(layer, tx, ty) as f64);
+        if pr.linear_f64(ndc.z) <= stored + self.frame.desc.shadow_bias as f64 { 1.0 } else { 0.0 }
     }
 
     fn density(&self, view_dir: DVec3, p: DVec3) -> DVec3 {

@@ -213,13 +213,9 @@ impl<'g> PathRenderer<'g> {
         self.scene.camera = camera;
         self.scene.light = light;
         let desc = frame_desc(&self.scene);
-        let spot = match &self.scene.light {
-            Light::Spot { texture, .. } => texture.as_deref(),
-            _ => None,
-        };
         let (depth, surface, shadow_map, textures) = match (self.gpu, &self.host) {
             (Some(g), Some(h)) => {
-                let tex = h.render(g, &desc, spot)?;
+                let tex = h.render(g, &desc)?;
                 let depth = g.read_texture_f32(&tex.depth, 0)?;
                 let surface = g.read_image(&tex.surface)?;
                 (depth, surface, None, Some(tex))

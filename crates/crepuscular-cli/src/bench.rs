@@ -592,10 +592,6 @@ pub fn run(
             if let Some(g) = gpu {
                 g.check_texture_size("image size", w, h)?;
             }
-            let spot = match &scene.light {
-                crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
-                _ => None,
-            };
             progress(&format!("{} {w}×{h}: host frame ×{}", scene.name, plan.warmup + plan.repeat));
             // The host frame (no scattering), timed like a technique; its outputs feed every row.
             let mut host_frames = Vec::new();
@@ -607,7 +603,7 @@ pub fn run(
                 (Some(g), Some(gh)) => {
                     let mut last = None;
                     for i in 0..plan.warmup + plan.repeat {
-                        let t = gh.render(g, &desc, spot)?;
+                        let t = gh.render(g, &desc)?;
                         if i >= plan.warmup {
                             host_frames.push(t.passes.clone());
                         }

@@ -261,14 +261,10 @@ pub fn composite_target(gpu: &GpuContext, width: u32, height: u32) -> wgpu::Text
 /// Renders a scene with a technique.
 pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> Result<RenderOutput> {
     let desc = frame_desc(scene);
-    let spot = match &scene.light {
-        crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
-        _ => None,
-    };
     let (inscatter, surface, depth, final_radiance, host_passes, technique, adapter) = match gpu {
         Some(gpu) => {
             let host = GpuHost::for_scene(gpu, &scene)?;
-            let tex = host.render(gpu, &desc, spot)?;
+            let tex = host.render(gpu, &desc)?;
             let adapter = adapter_stats(Some(gpu));
             let depth = gpu.read_texture_f32(&tex.depth, 0)?;
             let surface = gpu.read_image(&tex.surface)?;
@@ -426,12 +422,8 @@ pub fn debug_view(
     let desc = frame_desc(scene);
     let debug = match gpu {
         Some(gpu) => {
-            let spot = match &scene.light {
-                crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
-                _ => None,
-            };
             let host = GpuHost::for_scene(gpu, &scene)?;
-            let tex = host.render(gpu, &desc, spot)?;
+            let tex = host.render(gpu, &desc)?;
             let mut runner = Scattering::from_gpu(gpu, technique.clone())?.with_stats(tool_stats_mode(gpu))?;
             let out = gpu.create_output_texture(desc.width, desc.height);
             let views = tex.views();
@@ -468,12 +460,8 @@ fn prefiltered_debug_view(
     let desc = frame_desc(scene);
     let (passes, depth) = match gpu {
         Some(gpu) => {
-            let spot = match &scene.light {
-                crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
-                _ => None,
-            };
             let host = GpuHost::for_scene(gpu, &scene)?;
-            let tex = host.render(gpu, &desc, spot)?;
+            let tex = host.render(gpu, &desc)?;
             let mut runner = Scattering::from_gpu(gpu, TechniqueSettings::Prefiltered(settings.clone()))?
                 .with_stats(tool_stats_mode(gpu))?;
             let out = gpu.create_output_texture(desc.width, desc.height);

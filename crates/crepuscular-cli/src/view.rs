@@ -599,10 +599,6 @@ impl Viewer {
         }
         let scene = self.current_scene();
         let desc = render::frame_desc(&scene);
-        let spot = match &scene.light {
-            Light::Spot { texture, .. } => texture.as_deref(),
-            _ => None,
-        };
         let (w, h) = (desc.width, desc.height);
         if self.targets.as_ref().is_none_or(|t| t.width != w || t.height != h) {
             self.gpu.check_texture_size("render size", w, h)?;
@@ -635,7 +631,7 @@ impl Viewer {
             self.targets = Some(Targets { width: w, height: h, inscatter, display });
         }
         let targets = self.targets.as_ref().expect("targets were just created");
-        let tex = self.host.render(&self.gpu, &desc, spot)?;
+        let tex = self.host.render(&self.gpu, &desc)?;
         let runner = self.runner.as_mut().expect("runner was just built");
         let out_view = targets.inscatter.create_view(&Default::default());
         let views = tex.views();

@@ -35,11 +35,7 @@ fn gpu_composite_matches_its_cpu_mirror() {
         let desc = frame_desc(&scene);
         let (w, h) = (desc.width, desc.height);
         let host = GpuHost::for_scene(&gpu, &scene).unwrap();
-        let spot = match &scene.light {
-            crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
-            _ => None,
-        };
-        let tex = host.render(&gpu, &desc, spot).unwrap();
+        let tex = host.render(&gpu, &desc).unwrap();
         let views = tex.views();
         let frame = views.frame(&desc);
         let settings = TechniqueSettings::named("brute-force").unwrap();
@@ -144,7 +140,7 @@ fn composite_refuses_targets_that_do_not_fit() {
     scene.render.shadow.size = 128;
     let desc = frame_desc(&scene);
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
-    let tex = host.render(&gpu, &desc, None).unwrap();
+    let tex = host.render(&gpu, &desc).unwrap();
     let views = tex.views();
     let frame = views.frame(&desc);
     let out = gpu.create_output_texture(64, 36);

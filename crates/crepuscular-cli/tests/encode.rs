@@ -69,11 +69,7 @@ fn encode_records_into_the_callers_encoder_and_never_submits() {
         let desc = frame_desc(&scene);
         let (w, h) = (desc.width, desc.height);
         let host = GpuHost::for_scene(&gpu, &scene).unwrap();
-        let spot = match &scene.light {
-            crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
-            _ => None,
-        };
-        let tex = host.render(&gpu, &desc, spot).unwrap();
+        let tex = host.render(&gpu, &desc).unwrap();
         let views = tex.views();
         let frame = views.frame(&desc);
         for settings in techniques(&scene) {
@@ -135,7 +131,7 @@ fn deferred_counters_arrive_after_the_frame_and_match_the_wall_clock_ones() {
     let scene = small("colonnade");
     let desc = frame_desc(&scene);
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
-    let tex = host.render(&gpu, &desc, None).unwrap();
+    let tex = host.render(&gpu, &desc).unwrap();
     let views = tex.views();
     let frame = views.frame(&desc);
     let out = gpu.create_output_texture(desc.width, desc.height);
@@ -170,7 +166,7 @@ fn inputs_that_do_not_match_the_frame_are_errors_naming_them() {
     let scene = small("colonnade");
     let desc = frame_desc(&scene);
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
-    let tex = host.render(&gpu, &desc, None).unwrap();
+    let tex = host.render(&gpu, &desc).unwrap();
     let views = tex.views();
     let frame = views.frame(&desc);
     let mut sc = Scattering::from_gpu(&gpu, TechniqueSettings::named("brute-force").unwrap()).unwrap();
@@ -201,7 +197,7 @@ fn inputs_that_do_not_match_the_frame_are_errors_naming_them() {
     let mut other_desc = frame_desc(&other);
     other_desc.width = 40;
     other_desc.height = 30;
-    let other_tex = host.render(&gpu, &other_desc, None).unwrap();
+    let other_tex = host.render(&gpu, &other_desc).unwrap();
     let other_views = other_tex.views();
     let other_frame = other_views.frame(&other_desc);
     check(&mut sc, &GpuFrame { depth: other_frame.depth, ..frame }, &out, "depth", "frame's size");
@@ -221,7 +217,7 @@ fn bind_groups_are_built_on_resize_and_new_inputs_not_per_frame() {
     let scene = small("colonnade");
     let desc = frame_desc(&scene);
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
-    let tex = host.render(&gpu, &desc, None).unwrap();
+    let tex = host.render(&gpu, &desc).unwrap();
     let views = tex.views();
     let frame = views.frame(&desc);
     let out = gpu.create_output_texture(desc.width, desc.height);
@@ -244,7 +240,7 @@ fn bind_groups_are_built_on_resize_and_new_inputs_not_per_frame() {
         half.render.width = 40;
         half.render.height = 22;
         let half_desc = frame_desc(&half);
-        let half_tex = host.render(&gpu, &half_desc, None).unwrap();
+        let half_tex = host.render(&gpu, &half_desc).unwrap();
         let half_views = half_tex.views();
         let half_out = gpu.create_output_texture(40, 22);
         let half_out_view = half_out.create_view(&Default::default());
@@ -281,7 +277,7 @@ fn rgba16float_output_is_the_rgba32float_frame_rounded_to_half_floats() {
         let desc = frame_desc(&scene);
         let (w, h) = (desc.width, desc.height);
         let host = GpuHost::for_scene(&gpu, &scene).unwrap();
-        let tex = host.render(&gpu, &desc, None).unwrap();
+        let tex = host.render(&gpu, &desc).unwrap();
         let views = tex.views();
         let frame = views.frame(&desc);
         for settings in techniques(&scene) {
@@ -332,7 +328,7 @@ fn a_frame_loop_that_never_asks_for_stats_keeps_at_most_three_frames_in_flight()
     let scene = small("colonnade");
     let desc = frame_desc(&scene);
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
-    let tex = host.render(&gpu, &desc, None).unwrap();
+    let tex = host.render(&gpu, &desc).unwrap();
     let views = tex.views();
     let frame = views.frame(&desc);
     let out = gpu.create_output_texture(desc.width, desc.height);

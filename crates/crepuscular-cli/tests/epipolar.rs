@@ -1024,13 +1024,9 @@ fn epipolar_vs_reference_on_every_builtin_scene_gpu() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
-        let spot = match &scene.light {
-            Light::Spot { texture, .. } => texture.as_deref(),
-            _ => None,
-        };
         // The GPU host renderer's own depth and shadow map; the reference runs on the CPU over
         // that very shadow map.
-        let tex = GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc, spot).unwrap();
+        let tex = GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc).unwrap();
         let views = tex.views();
         let gframe = views.frame(&desc);
         let g = run_gpu(&gpu, &mut ep, &gframe);

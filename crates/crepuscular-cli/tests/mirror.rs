@@ -31,11 +31,7 @@ fn host_depth_and_shadow_maps_match_between_gpu_and_cpu() {
         let scene = small(name);
         let desc = frame_desc(&scene);
         let cpu = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let spot = match &scene.light {
-            crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
-            _ => None,
-        };
-        let tex = GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc, spot).unwrap();
+        let tex = GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc).unwrap();
         let depth = gpu.read_texture_f32(&tex.depth, 0).unwrap();
         let sm = host::read_shadow_map(&gpu, &tex, &desc).unwrap();
         // Rasterization rules agree except on a few silhouette pixels (sub-pixel snapping of

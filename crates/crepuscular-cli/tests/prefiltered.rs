@@ -944,12 +944,8 @@ fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut Scattering)>) -> 
     let (img, stats, depth, surface, shadow_map) = match gpu {
         Some((gpu, runner)) => {
             assert!(runner.update(&choice).unwrap(), "the runner is prefiltered's");
-            let spot = match &scene.light {
-                Light::Spot { texture, .. } => texture.as_deref(),
-                _ => None,
-            };
             let host = GpuHost::for_scene(gpu, &scene).unwrap();
-            let tex = host.render(gpu, &desc, spot).unwrap();
+            let tex = host.render(gpu, &desc).unwrap();
             let views = tex.views();
             let out = gpu.create_output_texture(desc.width, desc.height);
             let stats =

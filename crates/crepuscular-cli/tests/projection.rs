@@ -53,11 +53,7 @@ fn techniques(scene: &Scene) -> Vec<TechniqueSettings> {
 /// The GPU host's frame for `desc`, the technique's in-scattering and the depth buffer.
 fn gpu_frame(gpu: &GpuContext, scene: &Scene, desc: &FrameDesc, settings: &TechniqueSettings) -> (Image, Vec<f32>) {
     let host = GpuHost::for_scene(gpu, scene).unwrap();
-    let spot = match &scene.light {
-        crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
-        _ => None,
-    };
-    let tex = host.render(gpu, desc, spot).unwrap();
+    let tex = host.render(gpu, desc).unwrap();
     let depth = gpu.read_texture_f32(&tex.depth, 0).unwrap();
     let img = match scattering(gpu, settings).unwrap() {
         Some(mut sc) => {

@@ -480,11 +480,7 @@ fn subsampled_vs_reference_on_every_builtin_scene_gpu() {
             &RenderOptions { technique: TechniqueSettings::Reference(REFERENCE), progress: &|_, _| {} },
         )
         .unwrap();
-        let spot = match &scene.light {
-            crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
-            _ => None,
-        };
-        let tex = crepuscular_scene::GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc, spot).unwrap();
+        let tex = crepuscular_scene::GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc).unwrap();
         let views = tex.views();
         let frame = views.frame(&desc);
         let out = gpu.create_output_texture(desc.width, desc.height);

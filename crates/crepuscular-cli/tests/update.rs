@@ -30,11 +30,7 @@ fn render_stats(
     runner: &mut Scattering,
 ) -> (Vec<u32>, crepuscular::stats::TechniqueStats) {
     let desc = frame_desc(scene);
-    let spot = match &scene.light {
-        crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
-        _ => None,
-    };
-    let tex = host.render(gpu, &desc, spot).unwrap();
+    let tex = host.render(gpu, &desc).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
     let views = tex.views();
     let stats = render_gpu(runner, Some(host), &views.frame(&desc), &out.create_view(&Default::default())).unwrap();

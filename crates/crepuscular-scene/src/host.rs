@@ -8,7 +8,7 @@ use crepuscular::gpu::{GpuContext, Recorder};
 use crepuscular::integrand::SurfaceShading;
 use crepuscular::stats::PassTime;
 use crepuscular::techniques::prefiltered::raster::RectifiedRaster;
-use crepuscular::{DepthConvention, Error, GpuFrame, RgbTexture, ShadowMap};
+use crepuscular::{DepthConvention, Error, GpuFrame, ShadowMap};
 use std::sync::OnceLock;
 use wgpu::util::DeviceExt;
 
@@ -440,7 +440,11 @@ impl GpuHost {
 
     /// Renders the shadow map, then depth and surface radiance for `desc`. Passes:
     /// `shadow map` (one render pass per layer, timed together) and `surface`.
-    pub fn render(&self, gpu: &GpuContext, desc: &FrameDesc, spot: Option<&RgbTexture>) -> Result<HostTextures, Error> {
+    pub fn render(&self, gpu: &GpuContext, desc: &FrameDesc) -> Result<HostTextures, Error> {
+        let spot = match &desc.light {
+            crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
+            _ => None,
+        };
         let sp = &desc.shadow;
         gpu.check_texture_size("shadow_map_size", sp.size, sp.size)?;
         gpu.check_texture_size("image size", desc.width, desc.height)?;

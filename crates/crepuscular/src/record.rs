@@ -117,11 +117,6 @@ impl<'a> Recorder<'a> {
         }
     }
 
-    /// False with [`crate::StatsMode::Off`]: the frame's counters are not read back.
-    pub fn measuring(&self) -> bool {
-        self.measuring
-    }
-
     /// Records one pass named `name`: `record` gets the encoder (inside a debug group named
     /// `name`) and the timestamp slot to put in its pass descriptor. Validation errors become
     /// [`Error::Gpu`] naming the pass.

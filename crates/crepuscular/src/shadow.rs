@@ -204,20 +204,23 @@ impl ShadowProjection {
     /// Linear light-space depth from a [0, 1] depth value (either convention: a reversed map
     /// swaps near and far). Mirrors `shadow_linear_depth`.
     pub fn linear(&self, d: f32) -> f32 {
-        let (near, far) = match self.depth {
-            DepthConvention::Standard => (self.near, self.far),
-            DepthConvention::Reversed => (self.far, self.near),
-        };
+        let (near, far) = self.depth_range();
         if self.orthographic { near + d * (far - near) } else { crate::model::linear_depth(d, near, far) }
     }
 
     /// [`ShadowProjection::linear`] in f64 (the reference's precision).
     pub fn linear_f64(&self, d: f64) -> f64 {
-        let (near, far) = match self.depth {
-            DepthConvention::Standard => (self.near as f64, self.far as f64),
-            DepthConvention::Reversed => (self.far as f64, self.near as f64),
-        };
+        let (near, far) = self.depth_range();
+        let (near, far) = (near as f64, far as f64);
         if self.orthographic { near + d * (far - near) } else { near * far / (far - d * (far - near)) }
+    }
+
+    /// The distances at depth 0 and depth 1: (near, far), swapped for a reversed-Z map.
+    fn depth_range(&self) -> (f32, f32) {
+        match self.depth {
+            DepthConvention::Standard => (self.near, self.far),
+            DepthConvention::Reversed => (self.far, self.near),
+        }
     }
 
     /// True where a stored depth is the clear value (no occluder at that texel).

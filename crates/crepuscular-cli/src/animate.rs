@@ -88,10 +88,15 @@ impl MotionPath {
     /// The path of any scene: an 8° orbit and 5 % dolly, the light swept by 6° (tilted by 2°), a
     /// point light moved by 5 % of its distance to the camera's `look_at` (0.05–1 m) per axis.
     pub fn generic(scene: &Scene) -> Self {
-        let offset = match &scene.light {
-            Light::Point { position, .. } => (0.05 * position.distance(scene.camera.look_at)).clamp(0.05, 1.0),
-            _ => 0.0,
-        };
+        // From the first point light (every point light moves by the same offsets).
+        let offset = scene
+            .lights
+            .iter()
+            .find_map(|l| match &l.light {
+                Light::Point { position, .. } => Some((0.05 * position.distance(scene.camera.look_at)).clamp(0.05, 1.0)),
+                _ => None,
+            })
+            .unwrap_or(0.0);
         MotionPath {
             orbit_degrees: 8.0,
             dolly: 0.05,
@@ -101,7 +106,8 @@ impl MotionPath {
         }
     }
 
-    /// The camera and the light at `t` (period 1), from the scene's own.
+    /// The camera and one light at `t` (period 1), from the scene's own (every light of a
+    /// scene moves by the same rule).
     /// Whole t (the start of a loop) gives the scene's own camera and light, bit for bit.
     pub fn pose(&self, camera: &Camera, light: &Light, t: f64) -> (Camera, Light) {
         if t.fract() == 0.0 {
@@ -158,18 +164,18 @@ pub struct HostFrame {
     pub surface: Image,
     /// Transmittance to the visible surface, per pixel (for compositing).
     pub transmittance: Vec<[f32; 3]>,
-    shadow_map: Option<ShadowMap>,
+    shadow_maps: Option<Vec<ShadowMap>>,
     textures: Option<HostTextures>,
 }
 
 impl HostFrame {
-    /// The CPU shadow map (read back from the GPU on first use).
-    fn shadow_map(&mut self, gpu: Option<&GpuContext>) -> Result<&ShadowMap> {
-        if self.shadow_map.is_none() {
+    /// The CPU shadow maps, one per light (read back from the GPU on first use).
+    fn shadow_maps(&mut self, gpu: Option<&GpuContext>) -> Result<&[ShadowMap]> {
+        if self.shadow_maps.is_none() {
             let (Some(g), Some(t)) = (gpu, &self.textures) else { bail!("no shadow map (internal error)") };
-            self.shadow_map = Some(host::read_shadow_map(g, t, &self.desc)?);
+            self.shadow_maps = Some(host::read_shadow_maps(g, t, &self.desc)?);
         }
-        self.shadow_map.as_ref().context("no shadow map")
+        self.shadow_maps.as_deref().context("no shadow map")
     }
 
     /// The final image from this frame's surface and an in-scattering image.
@@ -184,7 +190,7 @@ pub struct PathRenderer<'g> {
     host: Option<GpuHost>,
     scene: Scene,
     camera: Camera,
-    light: Light,
+    lights: Vec<crepuscular_scene::SceneLight>,
     /// The path.
     pub path: MotionPath,
 }
@@ -199,7 +205,7 @@ impl<'g> PathRenderer<'g> {
             }
             None => None,
         };
-        Ok(PathRenderer { gpu, host, camera: scene.camera.clone(), light: scene.light.clone(), scene, path })
+        Ok(PathRenderer { gpu, host, camera: scene.camera.clone(), lights: scene.lights.clone(), scene, path })
     }
 
     /// The scene (at t = 0).
@@ -209,9 +215,10 @@ impl<'g> PathRenderer<'g> {
 
     /// The host frame at `t`.
     pub fn frame(&mut self, t: f64) -> Result<HostFrame> {
-        let (camera, light) = self.path.pose(&self.camera, &self.light, t);
-        self.scene.camera = camera;
-        self.scene.light = light;
+        for (posed, own) in self.scene.lights.iter_mut().zip(&self.lights) {
+            posed.light = self.path.pose(&self.camera, &own.light, t).1;
+        }
+        self.scene.camera = self.path.pose(&self.camera, &self.lights[0].light, t).0;
         let desc = frame_desc(&self.scene);
         let (depth, surface, shadow_map, textures) = match (self.gpu, &self.host) {
             (Some(g), Some(h)) => {
@@ -222,11 +229,11 @@ impl<'g> PathRenderer<'g> {
             }
             _ => {
                 let h = host_cpu::render(&self.scene.geometry, &self.scene.shading(), &desc);
-                (h.depth, h.surface, Some(h.shadow_map), None)
+                (h.depth, h.surface, Some(h.shadow_maps), None)
             }
         };
         let transmittance = surface_transmittance(&desc, &depth);
-        Ok(HostFrame { t, desc, depth, surface, transmittance, shadow_map, textures })
+        Ok(HostFrame { t, desc, depth, surface, transmittance, shadow_maps: shadow_map, textures })
     }
 }
 
@@ -259,7 +266,7 @@ impl AnimatedTechnique {
             description: String::new(),
             camera: scene.camera.clone(),
             medium: scene.medium.clone(),
-            light: scene.light.clone(),
+            lights: scene.lights.clone(),
             geometry: Geometry::default(),
             render: scene.render.clone(),
         };
@@ -337,10 +344,10 @@ impl AnimatedTechnique {
                 (g.read_image(out)?, stats)
             }
             _ => {
-                frame.shadow_map(gpu)?;
-                let sm = frame.shadow_map.as_ref().context("no shadow map")?;
+                frame.shadow_maps(gpu)?;
+                let sm = frame.shadow_maps.as_deref().context("no shadow map")?;
                 let cf =
-                    CpuFrame { desc: &frame.desc, depth: &frame.depth, shadow_map: sm, surface: Some(&frame.surface) };
+                    CpuFrame { desc: &frame.desc, depth: &frame.depth, shadow_maps: sm, surface: Some(&frame.surface) };
                 render::render_cpu(&choice, &cf, None, progress)?
             }
         };
@@ -683,15 +690,15 @@ mod tests {
             let s = builtin::builtin(name).unwrap();
             let p = MotionPath::for_scene(name, &s);
             assert_ne!(p, MotionPath::generic(&s), "{name} has its own path");
-            let (c, l) = p.pose(&s.camera, &s.light, 0.0);
-            assert_eq!((c, l), (s.camera.clone(), s.light.clone()), "{name}: t = 0 is the scene");
-            let (c, l) = p.pose(&s.camera, &s.light, 0.999999);
+            let (c, l) = p.pose(&s.camera, &s.lights[0].light, 0.0);
+            assert_eq!((c, l), (s.camera.clone(), s.lights[0].light.clone()), "{name}: t = 0 is the scene");
+            let (c, l) = p.pose(&s.camera, &s.lights[0].light, 0.999999);
             assert!(c.position.distance(s.camera.position) < 1e-3, "{name}: t → 1 loops back");
-            assert!(light_vector(&l).distance(light_vector(&s.light)) < 1e-3, "{name}");
-            let (c, l) = p.pose(&s.camera, &s.light, 0.25);
+            assert!(light_vector(&l).distance(light_vector(&s.lights[0].light)) < 1e-3, "{name}");
+            let (c, l) = p.pose(&s.camera, &s.lights[0].light, 0.25);
             assert!(c.position.distance(s.camera.position) > 0.1, "{name}: the camera does not move");
             assert_eq!(c.look_at, s.camera.look_at);
-            assert!(light_vector(&l).distance(light_vector(&s.light)) > 0.02, "{name}: the light does not move");
+            assert!(light_vector(&l).distance(light_vector(&s.lights[0].light)) > 0.02, "{name}: the light does not move");
         }
         // A scene from a file (any name that is not built in) gets the generic path.
         let s = builtin::builtin("cage").unwrap();

@@ -612,7 +612,7 @@ pub fn run(
                     let t = last.context("no host frame")?;
                     let depth = g.read_texture_f32(&t.depth, 0)?;
                     let surface = g.read_image(&t.surface)?;
-                    let sm = host::read_shadow_map(g, &t, &desc)?;
+                    let sm = host::read_shadow_maps(g, &t, &desc)?;
                     (depth, surface, sm, Some(t))
                 }
                 _ => {
@@ -625,12 +625,12 @@ pub fn run(
                         last = Some(hc);
                     }
                     let hc = last.context("no host frame")?;
-                    (hc.depth, hc.surface, hc.shadow_map, None)
+                    (hc.depth, hc.surface, hc.shadow_maps, None)
                 }
             };
             let (passes, total_ms) = summarise(&host_frames);
             host_records.push(HostRecord { scene: scene.name.clone(), size: [w, h], passes, total_ms });
-            let cpu_frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
+            let cpu_frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &shadow_map, surface: Some(&surface) };
             let transmittance = surface_transmittance(&desc, &depth);
             let tone = ToneMap::new(scene.render.exposure);
             let quality = if plan.reference_steps > 0 {

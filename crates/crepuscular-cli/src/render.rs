@@ -8,8 +8,8 @@ use crepuscular::stats::{PassTime, TechniqueStats};
 use crepuscular::techniques::{epipolar, interleaved, prefiltered};
 use crepuscular::tonemap::composite;
 use crepuscular::{
-    AnyGpuTechnique, Composite, CompositeInputs, CompositeTarget, CpuFrame, FrameCamera, GpuFrame, Image, Scattering,
-    ShadowProjection, StatsMode, TechniqueSettings,
+    AnyGpuTechnique, Composite, CompositeInputs, CompositeTarget, CpuFrame, GpuFrame, Image, Scattering,
+    StatsMode, TechniqueSettings,
 };
 use crepuscular_scene::{Geometry, GpuHost, Scene, builtin, file, host, host_cpu};
 use serde::Serialize;
@@ -89,17 +89,31 @@ pub fn render_gpu(
     frame: &GpuFrame,
     output: &wgpu::TextureView,
 ) -> Result<TechniqueStats> {
-    let (Some(host), Some(request)) = (host, scattering.raster_request(frame.desc)) else {
+    let requests = scattering.raster_requests(frame.desc);
+    let Some(host) = host.filter(|_| requests.iter().any(Option::is_some)) else {
         return Ok(scattering.render(frame, output)?);
     };
     let gpu = scattering.gpu().clone();
     let start = std::time::Instant::now();
-    let map = host.render_rectified(&gpu, &request)?;
+    let maps = requests
+        .iter()
+        .map(|r| r.as_ref().map(|request| host.render_rectified(&gpu, request)).transpose())
+        .collect::<Result<Vec<_>, _>>()?;
     gpu.wait()?;
     let ms = start.elapsed().as_secs_f64() * 1e3;
-    let view =
-        map.create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() });
-    let mut stats = scattering.render(&GpuFrame { rectified_shadow_map: Some(&view), ..*frame }, output)?;
+    let views: Vec<Option<wgpu::TextureView>> = maps
+        .iter()
+        .map(|m| {
+            m.as_ref().map(|m| {
+                m.create_view(&wgpu::TextureViewDescriptor {
+                    aspect: wgpu::TextureAspect::DepthOnly,
+                    ..Default::default()
+                })
+            })
+        })
+        .collect();
+    let refs: Vec<Option<&wgpu::TextureView>> = views.iter().map(Option::as_ref).collect();
+    let mut stats = scattering.render(&GpuFrame { rectified_shadow_maps: &refs, ..*frame }, output)?;
     TechniqueSettings::with_host_raster(&mut stats, ms);
     Ok(stats)
 }
@@ -112,13 +126,19 @@ pub fn render_cpu(
     geometry: Option<&Geometry>,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<(Image, TechniqueStats)> {
-    let raster = geometry.zip(settings.raster_request(frame.desc)).map(|(g, request)| {
-        let start = std::time::Instant::now();
-        let map = crepuscular_scene::raster::rasterize_rectified(g, &request);
-        (map, start.elapsed().as_secs_f64() * 1e3)
-    });
-    let (img, mut stats) = settings.render_cpu(frame, raster.as_ref().map(|(m, _)| m.as_slice()), progress)?;
-    if let Some((_, ms)) = raster {
+    let start = std::time::Instant::now();
+    let maps: Vec<Option<Vec<f32>>> = match geometry {
+        Some(g) => settings
+            .raster_requests(frame.desc)
+            .iter()
+            .map(|r| r.as_ref().map(|request| crepuscular_scene::raster::rasterize_rectified(g, request)))
+            .collect(),
+        None => Vec::new(),
+    };
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+    let refs: Vec<Option<&[f32]>> = maps.iter().map(|m| m.as_deref()).collect();
+    let (img, mut stats) = settings.render_cpu(frame, &refs, progress)?;
+    if refs.iter().any(Option::is_some) {
         TechniqueSettings::with_host_raster(&mut stats, ms);
     }
     Ok((img, stats))
@@ -166,6 +186,10 @@ pub struct RenderStats {
     pub resolution: [u32; 2],
     /// Shadow-map size and layers.
     pub shadow_map: [u32; 2],
+    /// The frame's lights.
+    pub lights: usize,
+    /// The lights that reach the view (the others cost the effect nothing).
+    pub scattering_lights: usize,
     /// Technique and its settings.
     pub settings: TechniqueSettings,
     /// Host renderer passes (shadow map, surface).
@@ -182,20 +206,9 @@ pub struct RenderOptions<'a> {
     pub progress: &'a (dyn Fn(u64, u64) + Sync),
 }
 
-/// The frame description of a scene at its render size.
+/// The frame description of a scene at its render size ([`Scene::frame_desc`]).
 pub fn frame_desc(scene: &Scene) -> FrameDesc {
-    let r = &scene.render;
-    let aspect = r.width as f32 / r.height as f32;
-    let shadow = ShadowProjection::fit(&scene.light, &scene.camera, aspect, scene.geometry.bounds(), r.shadow.size);
-    FrameDesc {
-        camera: FrameCamera::look_at(&scene.camera, aspect),
-        light: scene.light.clone(),
-        medium: scene.medium.clone(),
-        shadow,
-        shadow_bias: r.shadow.bias,
-        width: r.width,
-        height: r.height,
-    }
+    scene.frame_desc()
 }
 
 /// The adapter a frame runs on: the GPU's name, backend and driver, or the CPU backend.
@@ -295,9 +308,9 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
                 None => {
                     // CPU-only techniques (the reference) run over the very shadow map the GPU
                     // drew, and are composited by the CPU mirror of the composite.
-                    let shadow_map = host::read_shadow_map(gpu, &tex, &desc)?;
+                    let shadow_maps = host::read_shadow_maps(gpu, &tex, &desc)?;
                     let frame =
-                        CpuFrame { desc: &desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
+                        CpuFrame { desc: &desc, depth: &depth, shadow_maps: &shadow_maps, surface: Some(&surface) };
                     let (inscatter, stats) = render_cpu(&opts.technique, &frame, Some(&scene.geometry), opts.progress)?;
                     check_finite(&inscatter, &opts.technique)?;
                     let final_radiance = composite(&surface, &inscatter, &surface_transmittance(&desc, &depth));
@@ -308,7 +321,7 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
         }
         None => {
             let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
             let (inscatter, stats) = render_cpu(&opts.technique, &frame, Some(&scene.geometry), opts.progress)?;
             check_finite(&inscatter, &opts.technique)?;
             let final_radiance = composite(&h.surface, &inscatter, &surface_transmittance(&desc, &h.depth));
@@ -320,7 +333,12 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
         adapter,
         scene: scene.name.clone(),
         resolution: [desc.width, desc.height],
-        shadow_map: [desc.shadow.size, desc.shadow.layers],
+        shadow_map: {
+            let (size, layers) = desc.shadow_array_extent();
+            [size, layers]
+        },
+        lights: desc.lights.len(),
+        scattering_lights: desc.scattering_lights().len(),
         settings: opts.technique.clone(),
         host_passes,
         technique,
@@ -419,7 +437,7 @@ pub fn debug_view(
     let TechniqueSettings::Epipolar(settings) = technique else {
         bail!("--debug {}: not a debug view of `{}`", view.name(), technique.name());
     };
-    let desc = frame_desc(scene);
+    let desc = debug_desc(scene);
     let debug = match gpu {
         Some(gpu) => {
             let host = GpuHost::for_scene(gpu, &scene)?;
@@ -434,7 +452,7 @@ pub fn debug_view(
         }
         None => {
             let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
             epipolar::cpu::render_with_debug(&frame, settings)?.2
         }
     };
@@ -448,6 +466,14 @@ pub fn debug_view(
     })
 }
 
+/// The frame a per-light technique's debug view shows: the scene's first light that reaches
+/// the view alone (epipolar lines and rectified maps are one light's).
+fn debug_desc(scene: &Scene) -> FrameDesc {
+    let desc = frame_desc(scene);
+    let k = desc.scattering_lights().first().copied().unwrap_or(0);
+    desc.with_light(k)
+}
+
 /// `prefiltered`'s debug views: the frame rendered on the backend (with the host's rectified
 /// raster where the rectification is projective), its maps read back, and the view drawn.
 fn prefiltered_debug_view(
@@ -457,7 +483,7 @@ fn prefiltered_debug_view(
     view: DebugView,
 ) -> Result<Image> {
     use prefiltered::debug;
-    let desc = frame_desc(scene);
+    let desc = debug_desc(scene);
     let (passes, depth) = match gpu {
         Some(gpu) => {
             let host = GpuHost::for_scene(gpu, &scene)?;
@@ -470,13 +496,13 @@ fn prefiltered_debug_view(
             let AnyGpuTechnique::Prefiltered(t) = runner.technique() else { unreachable!("built above") };
             let rect = t.last_rectification().context("no frame rendered")?.clone();
             (
-                debug::passes_from_gpu(rect, settings.channels(&desc.light), t.read_maps(gpu)?),
+                debug::passes_from_gpu(rect, settings.channels(&desc.lights[0].light), t.read_maps(gpu)?),
                 gpu.read_texture_f32(&tex.depth, 0)?,
             )
         }
         None => {
             let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
             let rect = prefiltered::Rectification::new(&desc, &settings.rectify_options());
             let raster = rect.raster().map(|r| crepuscular_scene::raster::rasterize_rectified(&scene.geometry, &r));
             (prefiltered::cpu::passes(&frame, settings, raster.as_deref())?.0, h.depth)

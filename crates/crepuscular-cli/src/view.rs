@@ -474,7 +474,7 @@ impl Viewer {
         let mut scene = self.scene.clone();
         scene.camera.position = self.controls.orbit.position();
         scene.camera.look_at = self.controls.orbit.target;
-        scene.light = self.controls.light.clone();
+        scene.lights = self.controls.lights.clone();
         scene.medium = self.medium.clone();
         scene.render.exposure = self.exposure;
         let (w, h) = self.render_size();
@@ -703,9 +703,10 @@ impl Viewer {
     fn view_state_json(&self) -> Result<String> {
         let scene = self.current_scene();
         let v3 = |v: Vec3| [v.x, v.y, v.z];
-        let light = match &scene.light {
+        let light_json = |l: &Light, scattering: f32| match l {
             Light::Directional { direction, color, intensity } => serde_json::json!({
                 "kind": "directional", "direction": v3(*direction), "color": v3(*color), "intensity": intensity,
+                "scattering": scattering,
             }),
             Light::Spot {
                 position,
@@ -720,12 +721,16 @@ impl Viewer {
                     "kind": "spot", "position": v3(*position), "direction": v3(*direction),
                     "outer_angle_degrees": outer_angle_degrees, "inner_angle_degrees": inner_angle_degrees,
                     "color": v3(*color), "intensity": intensity, "textured": texture.is_some(),
+                    "scattering": scattering,
                 })
             }
             Light::Point { position, color, intensity } => serde_json::json!({
                 "kind": "point", "position": v3(*position), "color": v3(*color), "intensity": intensity,
+                "scattering": scattering,
             }),
         };
+        let lights: Vec<serde_json::Value> = scene.lights.iter().map(|l| light_json(&l.light, l.scattering)).collect();
+        let light = lights[self.controls.selected.min(lights.len() - 1)].clone();
         let state = serde_json::json!({
             "scene": scene.name,
             "technique": self.technique.name(),
@@ -734,6 +739,8 @@ impl Viewer {
             "size": [scene.render.width, scene.render.height],
             "camera": scene.camera,
             "light": light,
+            "lights": lights,
+            "selected_light": self.controls.selected,
             "medium": scene.medium,
             "exposure": scene.render.exposure,
             "stats": self.last_stats,
@@ -795,9 +802,9 @@ impl Viewer {
                 let started = Instant::now();
                 let (inscatter, fin, depth) = self.read_frame()?;
                 let (tex, desc) = self.last_host.as_ref().context("nothing rendered yet")?;
-                let shadow_map = host::read_shadow_map(&self.gpu, tex, desc)?;
+                let shadow_maps = host::read_shadow_maps(&self.gpu, tex, desc)?;
                 let surface = self.gpu.read_image(&tex.surface)?;
-                let frame = CpuFrame { desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
+                let frame = CpuFrame { desc, depth: &depth, shadow_maps: &shadow_maps, surface: Some(&surface) };
                 let settings = ReferenceSettings { steps: self.reference_steps, ..Default::default() };
                 let (ref_in, _) = reference::render(&frame, &settings, &|_, _| {})?;
                 let tr = surface_transmittance(desc, &depth);
@@ -1120,8 +1127,9 @@ impl Viewer {
         changed |= rgb(ui, "σs", &mut self.medium.scattering, "scattering coefficient, 1/m, RGB");
         changed |= rgb(ui, "σa", &mut self.medium.absorption, "absorption coefficient, 1/m, RGB");
         changed |= phase_editor(ui, &mut self.medium.phase);
-        ui.label(egui::RichText::new("light & view").strong());
-        match &mut self.controls.light {
+        ui.label(egui::RichText::new("lights & view").strong());
+        changed |= lights_editor(ui, &mut self.controls);
+        match self.controls.light_mut() {
             Light::Directional { intensity, direction, color } => {
                 ui.label(format!("sun, travelling along ({:.2}, {:.2}, {:.2})", direction.x, direction.y, direction.z));
                 ui.horizontal(|ui| {
@@ -1162,14 +1170,14 @@ impl Viewer {
             changed |= ui.add(egui::Slider::new(&mut self.scale, 0.1..=1.0)).changed();
         });
         ui.horizontal(|ui| {
-            if ui.button("reset camera & light").clicked() {
+            if ui.button("reset camera & lights").clicked() {
                 self.controls = Controls::of(&self.scene);
                 self.medium = self.scene.medium.clone();
                 changed = true;
             }
             ui.checkbox(&mut self.continuous, "continuous").on_hover_text("re-render every frame (for timing)");
         });
-        ui.small("left drag orbit · shift/middle drag pan · wheel dolly · WASD QE fly · right (ctrl) drag light, + shift moves spot/point · F12/P screenshot · N scene · T technique");
+        ui.small("left drag orbit · shift/middle drag pan · wheel dolly · WASD QE fly · right (ctrl) drag the selected light, + shift moves spot/point · F12/P screenshot · N scene · T technique");
         if changed {
             self.dirty = true;
         }
@@ -1316,6 +1324,65 @@ fn phase_of_kind(kind: &str, old: &Phase) -> Option<Phase> {
 }
 
 /// A linear-RGB colour picker; returns whether it changed.
+/// The scene's lights: one button per light selects the one the mouse steers and the panel
+/// edits; "+ sun", "+ spot", "+ point" add a light (a local one 3 m above the camera's target,
+/// a spot aimed at it), "remove" drops the selected one (not the last), and "scattering" scales
+/// the selected light's in-scattering (0 opts it out; it still lights surfaces).
+fn lights_editor(ui: &mut egui::Ui, controls: &mut Controls) -> bool {
+    let mut changed = false;
+    ui.horizontal_wrapped(|ui| {
+        for i in 0..controls.lights.len() {
+            let name = format!("{} {}", i + 1, controls.lights[i].light.kind_name());
+            if ui.selectable_label(controls.selected == i, name).clicked() {
+                controls.selected = i;
+            }
+        }
+    });
+    let target = controls.orbit.target;
+    let above = target + Vec3::new(0.0, 3.0, 0.0);
+    ui.horizontal(|ui| {
+        let full = controls.lights.len() >= crepuscular::MAX_LIGHTS;
+        let add = |ui: &mut egui::Ui, label: &str| {
+            ui.add_enabled(!full, egui::Button::new(label))
+                .on_hover_text(format!("add a light (at most {})", crepuscular::MAX_LIGHTS))
+                .clicked()
+        };
+        if add(ui, "+ sun") {
+            changed |= controls.add_light(Light::Directional {
+                direction: Vec3::new(0.3, -0.6, -0.75).normalize(),
+                color: Vec3::ONE,
+                intensity: 2.0,
+            });
+        }
+        if add(ui, "+ spot") {
+            changed |= controls.add_light(Light::Spot {
+                position: above,
+                direction: Vec3::NEG_Y,
+                outer_angle_degrees: 25.0,
+                inner_angle_degrees: 20.0,
+                color: Vec3::ONE,
+                intensity: 200.0,
+                texture: None,
+            });
+        }
+        if add(ui, "+ point") {
+            changed |= controls.add_light(Light::Point { position: above, color: Vec3::ONE, intensity: 100.0 });
+        }
+        let one = controls.lights.len() <= 1;
+        if ui.add_enabled(!one, egui::Button::new("remove")).on_hover_text("remove the selected light").clicked() {
+            changed |= controls.remove_light();
+        }
+    });
+    let i = controls.selected.min(controls.lights.len() - 1);
+    ui.horizontal(|ui| {
+        ui.label("scattering").on_hover_text(
+            "scale of this light's in-scattering: 1 as it shines, 0 opts it out of the effect (it still lights surfaces)",
+        );
+        changed |= ui.add(egui::DragValue::new(&mut controls.lights[i].scattering).speed(0.01).range(0.0..=100.0)).changed();
+    });
+    changed
+}
+
 fn color_editor(ui: &mut egui::Ui, color: &mut Vec3) -> bool {
     let mut c = color.to_array();
     let changed = egui::color_picker::color_edit_button_rgb(ui, &mut c).on_hover_text("colour, linear RGB").changed();

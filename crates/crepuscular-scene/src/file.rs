@@ -86,6 +86,7 @@
 use crate::mesh::{self, Transform};
 use crate::scene::{Geometry, RenderSettings, Scene};
 use crepuscular::{Camera, Light, Medium, Phase, RgbTexture};
+use crate::scene::SceneLight;
 use glam::Vec3;
 use serde::Deserialize;
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
@@ -262,6 +263,7 @@ struct RawScene {
     camera: Option<RawCamera>,
     medium: Option<RawMedium>,
     light: Option<RawLight>,
+    lights: Option<Vec<RawLight>>,
     #[serde(default)]
     objects: Vec<RawObject>,
     render: Option<RawRender>,
@@ -324,6 +326,7 @@ struct RawLight {
     color: Option<Rgb>,
     intensity: Option<f32>,
     texture: Option<String>,
+    scattering: Option<f32>,
 }
 
 #[derive(Deserialize, Clone, Copy, PartialEq, Debug)]
@@ -635,13 +638,34 @@ fn build(ctx: &Ctx, raw: RawScene) -> Result<Scene, SceneError> {
     let description = raw.description.map(|d| one_line(&d)).unwrap_or_default();
     let camera = build_camera(ctx, raw.camera.unwrap_or_default())?;
     let medium = build_medium(ctx, raw.medium.unwrap_or_default())?;
-    let light = build_light(ctx, raw.light.unwrap_or_default())?;
+    let lights = match (raw.light, raw.lights) {
+        (Some(_), Some(_)) => {
+            return Err(ctx.err("lights", "[light] and [[lights]]", "give either one [light] table or [[lights]] tables"));
+        }
+        (Some(l), None) => vec![build_light(ctx, "light", l)?],
+        (None, None) => vec![build_light(ctx, "light", RawLight::default())?],
+        (None, Some(list)) if list.is_empty() => {
+            return Err(ctx.err("lights", "[]", "a scene needs at least one light"));
+        }
+        (None, Some(list)) => list
+            .into_iter()
+            .enumerate()
+            .map(|(i, l)| build_light(ctx, &format!("lights[{i}]"), l))
+            .collect::<Result<Vec<_>, _>>()?,
+    };
+    if lights.len() > crepuscular::MAX_LIGHTS {
+        return Err(ctx.err(
+            format!("lights[{}]", crepuscular::MAX_LIGHTS),
+            format!("{} lights", lights.len()),
+            format!("at most {} lights per scene", crepuscular::MAX_LIGHTS),
+        ));
+    }
     let render = build_render(ctx, raw.render.unwrap_or_default())?;
     let mut geometry = Geometry::default();
     for (i, o) in raw.objects.iter().enumerate() {
         geometry.append(&build_object(ctx, &format!("objects[{i}]"), o)?);
     }
-    Ok(Scene { name, description, camera, medium, light, geometry, render })
+    Ok(Scene { name, description, camera, medium, lights, geometry, render })
 }
 
 fn build_camera(ctx: &Ctx, c: RawCamera) -> Result<Camera, SceneError> {
@@ -745,26 +769,37 @@ fn build_medium(ctx: &Ctx, m: RawMedium) -> Result<Medium, SceneError> {
     Ok(Medium { scattering, absorption, phase })
 }
 
-fn build_light(ctx: &Ctx, l: RawLight) -> Result<Light, SceneError> {
+/// One light table (`key` is `light` or `lights[i]`, the prefix of every error's key).
+fn build_light(ctx: &Ctx, key: &str, l: RawLight) -> Result<SceneLight, SceneError> {
+    let k = |name: &str| format!("{key}.{name}");
+    let scattering = l.scattering.unwrap_or(1.0);
+    if !(scattering.is_finite() && scattering >= 0.0) {
+        return Err(ctx.err(k("scattering"), fmt_num(scattering), "must be finite and ≥ 0"));
+    }
+    Ok(SceneLight { light: build_light_kind(ctx, key, l)?, scattering })
+}
+
+fn build_light_kind(ctx: &Ctx, key: &str, l: RawLight) -> Result<Light, SceneError> {
+    let k = |name: &str| format!("{key}.{name}");
     let kind = match l.kind {
         LightKind::Directional => "directional",
         LightKind::Spot => "spot",
         LightKind::Point => "point",
     };
     let not_used =
-        |key: &str, value: String| Err(ctx.err(format!("light.{key}"), value, format!("not used by a {kind} light")));
+        |name: &str, value: String| Err(ctx.err(k(name), value, format!("not used by a {kind} light")));
     let color = match l.color {
-        Some(c) => ctx.ranged3("light.color", c.0, 0.0, f32::MAX, "colour components must be ≥ 0 and finite")?,
+        Some(c) => ctx.ranged3(&k("color"), c.0, 0.0, f32::MAX, "colour components must be ≥ 0 and finite")?,
         None => Vec3::ONE,
     };
     let default_intensity = if l.kind == LightKind::Directional { 1.0 } else { 50.0 };
     let intensity = l.intensity.unwrap_or(default_intensity);
     if !(intensity.is_finite() && intensity >= 0.0) {
-        return Err(ctx.err("light.intensity", fmt_num(intensity), "must be finite and ≥ 0"));
+        return Err(ctx.err(k("intensity"), fmt_num(intensity), "must be finite and ≥ 0"));
     }
-    let required = |key: &str| ctx.err(format!("light.{key}"), "(missing)", format!("required for a {kind} light"));
-    let position = l.position.map(|p| ctx.finite3("light.position", p)).transpose()?;
-    let direction = l.direction.map(|d| ctx.direction("light.direction", d)).transpose()?;
+    let required = |name: &str| ctx.err(k(name), "(missing)", format!("required for a {kind} light"));
+    let position = l.position.map(|p| ctx.finite3(&k("position"), p)).transpose()?;
+    let direction = l.direction.map(|d| ctx.direction(&k("direction"), d)).transpose()?;
     if l.kind != LightKind::Spot {
         if let Some(v) = l.outer_angle_degrees {
             return not_used("outer_angle_degrees", fmt_num(v));
@@ -796,24 +831,24 @@ fn build_light(ctx: &Ctx, l: RawLight) -> Result<Light, SceneError> {
             let direction = direction.ok_or_else(|| required("direction"))?;
             let outer = l.outer_angle_degrees.unwrap_or(30.0);
             if !(outer > 0.0 && outer <= 89.0) {
-                return Err(ctx.err("light.outer_angle_degrees", fmt_num(outer), "must be in (0, 89] degrees"));
+                return Err(ctx.err(k("outer_angle_degrees"), fmt_num(outer), "must be in (0, 89] degrees"));
             }
             let inner = l.inner_angle_degrees.unwrap_or(0.8 * outer);
             if !(0.0..=89.0).contains(&inner) {
-                return Err(ctx.err("light.inner_angle_degrees", fmt_num(inner), "must be in [0, 89] degrees"));
+                return Err(ctx.err(k("inner_angle_degrees"), fmt_num(inner), "must be in [0, 89] degrees"));
             }
             if inner > outer {
                 return Err(ctx.err(
-                    "light.inner_angle_degrees",
+                    k("inner_angle_degrees"),
                     fmt_num(inner),
-                    format!("must be ≤ light.outer_angle_degrees ({})", fmt_num(outer)),
+                    format!("must be ≤ {key}.outer_angle_degrees ({})", fmt_num(outer)),
                 ));
             }
             let texture = match &l.texture {
                 None => None,
                 Some(t) => {
-                    let full = ctx.path("light.texture", t)?;
-                    let tex = load_texture(&full).map_err(|m| ctx.err("light.texture", format!("{t:?}"), m))?;
+                    let full = ctx.path(&k("texture"), t)?;
+                    let tex = load_texture(&full).map_err(|m| ctx.err(k("texture"), format!("{t:?}"), m))?;
                     Some(Arc::new(tex))
                 }
             };

@@ -45,18 +45,19 @@ pub struct HostTextures {
     pub depth: wgpu::Texture,
     /// Surface radiance, `Rgba32Float`, linear.
     pub surface: wgpu::Texture,
-    /// Shadow map, `Depth32Float` array (1 or 6 layers).
-    pub shadow_map: wgpu::Texture,
-    /// The spot texture (1×1 white when the light has none).
-    pub spot_texture: wgpu::Texture,
+    /// Every light's shadow map, one `Depth32Float` array (light k's layers from its
+    /// `shadow_layer`, [`FrameDesc::assign_layers`]).
+    pub shadow_maps: wgpu::Texture,
+    /// The spot lights' projected textures, one array (1×1 white when no light has one).
+    pub spot_textures: wgpu::Texture,
     /// Host pass times.
     pub passes: Vec<PassTime>,
 }
 
 impl HostTextures {
-    /// `D2Array` view of the shadow map, as the effect binds it.
+    /// `D2Array` view of the shadow maps, as the effect binds it.
     pub fn shadow_view(&self) -> wgpu::TextureView {
-        shadow_array_view(&self.shadow_map)
+        shadow_array_view(&self.shadow_maps)
     }
     /// View of the depth buffer.
     pub fn depth_view(&self) -> wgpu::TextureView {
@@ -67,8 +68,11 @@ impl HostTextures {
     pub fn views(&self) -> HostViews {
         HostViews {
             depth: self.depth_view(),
-            shadow_map: self.shadow_view(),
-            spot_texture: self.spot_texture.create_view(&Default::default()),
+            shadow_maps: self.shadow_view(),
+            spot_textures: self.spot_textures.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            }),
         }
     }
 }
@@ -76,21 +80,21 @@ impl HostTextures {
 /// Views of a frame's host textures, as a technique binds them.
 pub struct HostViews {
     depth: wgpu::TextureView,
-    shadow_map: wgpu::TextureView,
-    spot_texture: wgpu::TextureView,
+    shadow_maps: wgpu::TextureView,
+    spot_textures: wgpu::TextureView,
 }
 
 impl HostViews {
-    /// The frame a technique renders: these views for `desc`, with the spot texture only when
-    /// `desc`'s light is a spot with a texture (the host binds a 1×1 white one otherwise).
+    /// The frame a technique renders: these views for `desc`, with the spot textures only when
+    /// a light of `desc` is a spot with a texture (the host binds a 1×1 white one otherwise).
     pub fn frame<'a>(&'a self, desc: &'a FrameDesc) -> GpuFrame<'a> {
-        let textured = matches!(&desc.light, crepuscular::Light::Spot { texture: Some(_), .. });
+        let textured = desc.lights.iter().any(|l| l.spot_texture().is_some());
         GpuFrame {
             desc,
             depth: &self.depth,
-            shadow_map: &self.shadow_map,
-            spot_texture: textured.then_some(&self.spot_texture),
-            rectified_shadow_map: None,
+            shadow_maps: &self.shadow_maps,
+            spot_textures: textured.then_some(&self.spot_textures),
+            rectified_shadow_maps: &[],
         }
     }
 }
@@ -195,8 +199,9 @@ impl GpuHost {
                 entries: &[
                     uniform_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
                     tex_entry(1, wgpu::TextureViewDimension::D2Array),
-                    tex_entry(2, wgpu::TextureViewDimension::D2),
+                    tex_entry(2, wgpu::TextureViewDimension::D2Array),
                     uniform_entry(3, wgpu::ShaderStages::FRAGMENT),
+                    uniform_entry(crepuscular::techniques::pass::LIGHTS_BINDING, wgpu::ShaderStages::FRAGMENT),
                 ],
             });
             let surface_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -438,15 +443,32 @@ impl GpuHost {
         Ok(cell.get_or_init(|| pipeline))
     }
 
-    /// Renders the shadow map, then depth and surface radiance for `desc`. Passes:
-    /// `shadow map` (one render pass per layer, timed together) and `surface`.
+    /// Renders every light's shadow map, then depth and surface radiance for `desc` (lit by
+    /// all its lights, each light's `scattering` aside). Passes: `shadow map` (one render pass
+    /// per light and layer, timed together) and `surface`. Each light's map goes to its
+    /// `shadow_layer` of one array as large as the largest ([`FrameDesc::shadow_array_extent`]),
+    /// its spot texture to its `texture_layer` ([`FrameDesc::assign_layers`] packs both).
     pub fn render(&self, gpu: &GpuContext, desc: &FrameDesc) -> Result<HostTextures, Error> {
-        let spot = match &desc.light {
-            crepuscular::Light::Spot { texture, .. } => texture.as_deref(),
-            _ => None,
-        };
-        let sp = &desc.shadow;
-        gpu.check_texture_size("shadow_map_size", sp.size, sp.size)?;
+        desc.validate_lights()?;
+        if desc.lights.len() > crepuscular::MAX_LIGHTS {
+            return Err(Error::invalid(
+                format!("lights[{}]", crepuscular::MAX_LIGHTS),
+                format!("{} lights", desc.lights.len()),
+                format!("the host renderer shades surfaces with at most {} lights", crepuscular::MAX_LIGHTS),
+            ));
+        }
+        let mut textures: Vec<(u32, &crepuscular::RgbTexture)> =
+            desc.lights.iter().filter_map(|l| l.spot_texture().map(|t| (l.texture_layer, t))).collect();
+        textures.sort_by_key(|(layer, _)| *layer);
+        if textures.iter().enumerate().any(|(i, (layer, _))| *layer != i as u32) {
+            return Err(Error::invalid(
+                "lights[].texture_layer",
+                format!("{:?}", textures.iter().map(|(l, _)| *l).collect::<Vec<_>>()),
+                "the host packs the textured spot lights into layers 0, 1, … (FrameDesc::assign_layers)",
+            ));
+        }
+        let (size, layers) = desc.shadow_array_extent();
+        gpu.check_texture_size("shadow_map_size", size, size)?;
         gpu.check_texture_size("image size", desc.width, desc.height)?;
         let device = &gpu.device;
         let tex = |label, w, h, layers, format| {
@@ -463,19 +485,25 @@ impl GpuHost {
                 view_formats: &[],
             })
         };
-        let (shadow_map, depth, surface) = gpu.scoped("allocating host textures", || {
+        let (shadow_maps, depth, surface) = gpu.scoped("allocating host textures", || {
             (
-                tex("shadow map", sp.size, sp.size, sp.layers, wgpu::TextureFormat::Depth32Float),
+                tex("shadow maps", size, size, layers, wgpu::TextureFormat::Depth32Float),
                 tex("camera depth", desc.width, desc.height, 1, wgpu::TextureFormat::Depth32Float),
                 tex("surface radiance", desc.width, desc.height, 1, wgpu::TextureFormat::Rgba32Float),
             )
         })?;
-        let spot_texture = gpu.upload_rgb_texture(spot);
+        let list: Vec<&crepuscular::RgbTexture> = textures.iter().map(|(_, t)| *t).collect();
+        let spot_textures = gpu.upload_spot_textures(&list);
         // The host is the tools' own renderer: its passes are submitted one by one and timed by
         // synchronised wall clock.
         let mut timer = Recorder::wall_clock(gpu);
-        let layer_groups: Vec<(wgpu::TextureView, wgpu::BindGroup)> = (0..sp.layers)
-            .map(|l| {
+        // (layer view, matrix, the light's map size, its convention) per light and layer.
+        let layer_groups: Vec<(wgpu::TextureView, wgpu::BindGroup, u32, DepthConvention)> = desc
+            .lights
+            .iter()
+            .flat_map(|fl| (0..fl.shadow.layers).map(move |l| (fl, l)))
+            .map(|(fl, l)| {
+                let sp = &fl.shadow;
                 let buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("shadow layer matrix"),
                     contents: bytemuck::cast_slice(&sp.view_proj[l as usize].to_cols_array()),
@@ -486,24 +514,24 @@ impl GpuHost {
                     layout: &self.shadow_layout,
                     entries: &[wgpu::BindGroupEntry { binding: 0, resource: buf.as_entire_binding() }],
                 });
-                let view = shadow_map.create_view(&wgpu::TextureViewDescriptor {
+                let view = shadow_maps.create_view(&wgpu::TextureViewDescriptor {
                     dimension: Some(wgpu::TextureViewDimension::D2),
-                    base_array_layer: l,
+                    base_array_layer: fl.shadow_layer + l,
                     array_layer_count: Some(1),
                     ..Default::default()
                 });
-                (view, bg)
+                (view, bg, sp.size, sp.depth)
             })
             .collect();
         timer.pass("shadow map", |enc, _| {
-            for (view, bg) in &layer_groups {
+            for (view, bg, n, convention) in &layer_groups {
                 let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("shadow map layer"),
                     color_attachments: &[],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                         view,
                         depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(sp.depth.far_value()),
+                            load: wgpu::LoadOp::Clear(convention.far_value()),
                             store: wgpu::StoreOp::Store,
                         }),
                         stencil_ops: None,
@@ -512,20 +540,36 @@ impl GpuHost {
                     occlusion_query_set: None,
                     multiview_mask: None,
                 });
-                pass.set_pipeline(&self.shadow_pipelines[(sp.depth == DepthConvention::Reversed) as usize]);
+                pass.set_pipeline(&self.shadow_pipelines[(*convention == DepthConvention::Reversed) as usize]);
+                // The light's map in the top-left n × n texels of its layers.
+                pass.set_viewport(0.0, 0.0, *n as f32, *n as f32, 0.0, 1.0);
                 pass.set_bind_group(0, bg, &[]);
                 pass.set_vertex_buffer(0, self.vertices.slice(..));
                 pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
                 pass.draw_indexed(0..self.index_count, 0, 0..1);
             }
         })?;
+        // Surfaces are lit by every light as it shines (its scattering scale is the effect's).
+        let mut lit = desc.clone();
+        for l in &mut lit.lights {
+            l.scattering = 1.0;
+        }
+        let all: Vec<usize> = (0..lit.lights.len()).collect();
+        let lights_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("surface lights"),
+            contents: bytemuck::bytes_of(&lit.lights_uniforms_of(&all)),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
         let frame_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("frame uniforms"),
             contents: bytemuck::bytes_of(&desc.uniforms()),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let shadow_view = shadow_array_view(&shadow_map);
-        let spot_view = spot_texture.create_view(&Default::default());
+        let shadow_view = shadow_array_view(&shadow_maps);
+        let spot_view = spot_textures.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
         let shading_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("surface shading"),
             contents: bytemuck::cast_slice(&self.shading.uniform()),
@@ -539,6 +583,7 @@ impl GpuHost {
                 wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&shadow_view) },
                 wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&spot_view) },
                 wgpu::BindGroupEntry { binding: 3, resource: shading_buf.as_entire_binding() },
+                crepuscular::techniques::pass::lights_binding(&lights_buf),
             ],
         });
         let depth_view = depth.create_view(&Default::default());
@@ -575,7 +620,7 @@ impl GpuHost {
             pass.draw_indexed(0..self.index_count, 0, 0..1);
         })?;
         let passes = timer.into_passes();
-        Ok(HostTextures { depth, surface, shadow_map, spot_texture, passes })
+        Ok(HostTextures { depth, surface, shadow_maps, spot_textures, passes })
     }
 }
 
@@ -585,11 +630,21 @@ pub fn hardware_depth_clamp(gpu: &GpuContext) -> bool {
     gpu.device.features().contains(wgpu::Features::DEPTH_CLIP_CONTROL)
 }
 
-/// Reads the shadow map back to the CPU.
-pub fn read_shadow_map(gpu: &GpuContext, t: &HostTextures, desc: &FrameDesc) -> Result<ShadowMap, Error> {
-    let mut depth = Vec::new();
-    for l in 0..desc.shadow.layers {
-        depth.extend(gpu.read_texture_f32(&t.shadow_map, l)?);
-    }
-    Ok(ShadowMap { projection: desc.shadow.clone(), depth })
+/// Reads every light's shadow map back to the CPU, one [`ShadowMap`] per light of `desc`.
+pub fn read_shadow_maps(gpu: &GpuContext, t: &HostTextures, desc: &FrameDesc) -> Result<Vec<ShadowMap>, Error> {
+    let full = t.shadow_maps.width();
+    desc.lights
+        .iter()
+        .map(|fl| {
+            let n = fl.shadow.size;
+            let mut depth = Vec::with_capacity((n * n * fl.shadow.layers) as usize);
+            for l in 0..fl.shadow.layers {
+                let layer = gpu.read_texture_f32(&t.shadow_maps, fl.shadow_layer + l)?;
+                for y in 0..n {
+                    depth.extend_from_slice(&layer[(y * full) as usize..(y * full + n) as usize]);
+                }
+            }
+            Ok(ShadowMap { projection: fl.shadow.clone(), depth })
+        })
+        .collect()
 }

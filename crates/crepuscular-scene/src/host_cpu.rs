@@ -16,19 +16,20 @@ use std::time::Instant;
 pub struct CpuHost {
     /// Camera depth, [0, 1], row-major from the top-left.
     pub depth: Vec<f32>,
-    /// The shadow map.
-    pub shadow_map: ShadowMap,
+    /// The shadow maps, one per light of the frame.
+    pub shadow_maps: Vec<ShadowMap>,
     /// Surface radiance.
     pub surface: Image,
     /// Pass times (wall clock).
     pub passes: Vec<PassTime>,
 }
 
-/// Renders the shadow map, depth (in the camera's depth convention) and surface radiance
-/// (shaded with `shading`) on the CPU.
+/// Renders every light's shadow map, depth (in the camera's depth convention) and surface
+/// radiance (shaded with `shading`, lit by every light) on the CPU.
 pub fn render(geometry: &Geometry, shading: &SurfaceShading, desc: &FrameDesc) -> CpuHost {
     let t0 = Instant::now();
-    let shadow_map = raster::render_shadow_map(geometry, &desc.shadow);
+    let shadow_maps: Vec<ShadowMap> = desc.lights.iter().map(|l| raster::render_shadow_map(geometry, &l.shadow)).collect();
+    let frame = crepuscular::CpuFrame { desc, depth: &[], shadow_maps: &shadow_maps, surface: None };
     let t1 = Instant::now();
     let vp = desc.camera.view_proj();
     let db = raster::rasterize_with(geometry, vp, desc.width, desc.height, desc.camera.depth);
@@ -49,13 +50,13 @@ pub fn render(geometry: &Geometry, shading: &SurfaceShading, desc: &FrameDesc) -
         let (x, y) = ((i as u32 % desc.width), (i as u32 / desc.width));
         // World position from the depth buffer, as the GPU's interpolated position would give.
         let p = inv.project_point3(desc.pixel_ndc(x, y).extend(db.depth[i]));
-        let l = surface_radiance(desc, shading, &shadow_map, p, lerp(|v| v.normal), lerp(|v| v.albedo));
+        let l = surface_radiance(&frame, shading, p, lerp(|v| v.normal), lerp(|v| v.albedo));
         *px = [l.x, l.y, l.z, 1.0];
     });
     let t2 = Instant::now();
     CpuHost {
         depth: db.depth,
-        shadow_map,
+        shadow_maps,
         surface,
         passes: vec![
             PassTime { name: "shadow map".into(), ms: (t1 - t0).as_secs_f64() * 1e3 },

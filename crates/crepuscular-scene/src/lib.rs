@@ -10,6 +10,6 @@ pub mod raster;
 pub mod scene;
 
 pub use host::{GpuHost, HostTextures};
-pub use scene::{Geometry, RenderSettings, Scene, Vertex};
+pub use scene::{Geometry, RenderSettings, Scene, SceneLight, Vertex};
 pub mod host;
 pub mod host_cpu;

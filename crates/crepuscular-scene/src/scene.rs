@@ -1,6 +1,6 @@
 //! The scene: what the host renderer draws and the effect lights.
 
-use crepuscular::{Bounds, Camera, Light, Medium, ShadowSettings};
+use crepuscular::{Bounds, Camera, FrameDesc, FrameLight, Light, Medium, ShadowProjection, ShadowSettings};
 use glam::Vec3;
 use std::collections::BTreeMap;
 
@@ -94,15 +94,64 @@ pub struct Scene {
     pub camera: Camera,
     /// Medium.
     pub medium: Medium,
-    /// The light.
-    pub light: Light,
+    /// The lights (at least one): a scene file's `[[lights]]` (or its one `[light]`).
+    pub lights: Vec<SceneLight>,
     /// World-space triangles.
     pub geometry: Geometry,
     /// Render settings.
     pub render: RenderSettings,
 }
 
+/// One light of a scene and how much it scatters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneLight {
+    /// The light.
+    pub light: Light,
+    /// Scale of its in-scattering (`scattering` in its `[[lights]]` table): 1 as it shines,
+    /// 0 opts it out of the effect (it still lights surfaces). Finite, ≥ 0. Default 1.
+    pub scattering: f32,
+}
+
+impl SceneLight {
+    /// `light`, scattering as it shines.
+    pub fn new(light: Light) -> Self {
+        Self { light, scattering: 1.0 }
+    }
+}
+
+impl From<Light> for SceneLight {
+    fn from(light: Light) -> Self {
+        Self::new(light)
+    }
+}
+
 impl Scene {
+    /// The frame description of the scene at its render size: its camera, each light with
+    /// its shadow projection fitted to the geometry ([`ShadowProjection::fit`], the scene's
+    /// shadow size and bias), layers packed in light order.
+    pub fn frame_desc(&self) -> FrameDesc {
+        let r = &self.render;
+        let aspect = r.width as f32 / r.height as f32;
+        let bounds = self.geometry.bounds();
+        let lights = self
+            .lights
+            .iter()
+            .map(|l| {
+                let shadow = ShadowProjection::fit(&l.light, &self.camera, aspect, bounds, r.shadow.size);
+                FrameLight { shadow_bias: r.shadow.bias, scattering: l.scattering, ..FrameLight::new(l.light.clone(), shadow) }
+            })
+            .collect();
+        let mut desc = FrameDesc {
+            camera: crepuscular::FrameCamera::look_at(&self.camera, aspect),
+            lights,
+            medium: self.medium.clone(),
+            width: r.width,
+            height: r.height,
+        };
+        desc.assign_layers();
+        desc
+    }
+
     /// How the host renderer shades the scene's surfaces (`render.ambient`,
     /// `render.shadow_normal_offset_texels`).
     pub fn shading(&self) -> crepuscular::integrand::SurfaceShading {

@@ -359,19 +359,12 @@ impl GpuContext {
         tex
     }
 
-    /// Uploads a spot texture as `Rgba32Float` (or a 1×1 white texture for `None`).
-    pub fn upload_rgb_texture(&self, tex: Option<&crate::RgbTexture>) -> wgpu::Texture {
-        match tex {
-            Some(t) => self.upload_texture(
-                "spot texture",
-                wgpu::TextureFormat::Rgba32Float,
-                t.width,
-                t.height,
-                1,
-                16,
-                bytemuck::cast_slice(&t.texels),
-            ),
-            None => self.upload_texture(
+    /// Uploads spot textures as one `Rgba32Float` array, one layer each, each in the top-left
+    /// corner of a layer as large as the largest (a 1×1 white layer for none): what
+    /// [`crate::GpuFrame::spot_textures`] binds, in [`crate::FrameDesc::assign_layers`]'s order.
+    pub fn upload_spot_textures(&self, textures: &[&crate::RgbTexture]) -> wgpu::Texture {
+        if textures.is_empty() {
+            return self.upload_texture(
                 "white",
                 wgpu::TextureFormat::Rgba32Float,
                 1,
@@ -379,8 +372,27 @@ impl GpuContext {
                 1,
                 16,
                 bytemuck::cast_slice(&[1.0f32; 4]),
-            ),
+            );
         }
+        let w = textures.iter().map(|t| t.width).max().unwrap_or(1);
+        let h = textures.iter().map(|t| t.height).max().unwrap_or(1);
+        let mut texels = vec![[1.0f32; 4]; (w * h) as usize * textures.len()];
+        for (layer, t) in textures.iter().enumerate() {
+            for y in 0..t.height {
+                for x in 0..t.width {
+                    texels[((layer as u32 * h + y) * w + x) as usize] = t.texels[(y * t.width + x) as usize];
+                }
+            }
+        }
+        self.upload_texture(
+            "spot textures",
+            wgpu::TextureFormat::Rgba32Float,
+            w,
+            h,
+            textures.len() as u32,
+            16,
+            bytemuck::cast_slice(&texels),
+        )
     }
 
     /// Creates the `Rgba32Float` storage texture a technique writes its in-scattering into.
@@ -433,25 +445,49 @@ pub fn test_gpu(test: &str) -> Option<GpuContext> {
     }
 }
 
-/// A CPU frame's depth, shadow map and spot texture uploaded as GPU textures (`R32Float`
-/// depth and shadow layers, `Rgba32Float` spot texture), so a GPU technique can run on exactly
-/// the inputs the CPU mirror sees.
+/// A CPU frame's depth, shadow maps and spot textures uploaded as GPU textures (`R32Float`
+/// depth and shadow layers, `Rgba32Float` spot textures), so a GPU technique can run on exactly
+/// the inputs the CPU mirror sees. Each light's map goes to its `shadow_layer`, each texture to
+/// its `texture_layer` ([`crate::FrameDesc::assign_layers`]).
 pub struct UploadedFrame {
     /// Camera depth (`R32Float`).
     pub depth: wgpu::TextureView,
-    /// Shadow map (`R32Float` array).
-    pub shadow_map: wgpu::TextureView,
-    /// Spot texture, if the light has one.
-    pub spot_texture: Option<wgpu::TextureView>,
+    /// Shadow maps (`R32Float` array).
+    pub shadow_maps: wgpu::TextureView,
+    /// Spot textures, if a light has one.
+    pub spot_textures: Option<wgpu::TextureView>,
 }
 
 impl UploadedFrame {
     /// Uploads the inputs of `frame`.
     pub fn new(gpu: &GpuContext, frame: &crate::CpuFrame) -> Result<Self, Error> {
+        frame.validate()?;
         let d = frame.desc;
-        let sp = &frame.shadow_map.projection;
         gpu.check_texture_size("image size", d.width, d.height)?;
-        gpu.check_texture_size("shadow_map_size", sp.size, sp.size)?;
+        let size = d.lights.iter().map(|l| l.shadow.size).max().unwrap_or(1);
+        let layers = d.lights.iter().map(|l| l.shadow_layer + l.shadow.layers).max().unwrap_or(1);
+        gpu.check_texture_size("shadow_map_size", size, size)?;
+        let mut depths = vec![1.0f32; (size * size * layers) as usize];
+        for (fl, sm) in d.lights.iter().zip(frame.shadow_maps) {
+            let n = fl.shadow.size;
+            for l in 0..fl.shadow.layers {
+                for y in 0..n {
+                    for x in 0..n {
+                        depths[(((fl.shadow_layer + l) * size + y) * size + x) as usize] = sm.texel(l, x, y);
+                    }
+                }
+            }
+        }
+        let mut textures: Vec<(u32, &crate::RgbTexture)> =
+            d.lights.iter().filter_map(|l| l.spot_texture().map(|t| (l.texture_layer, t))).collect();
+        textures.sort_by_key(|(layer, _)| *layer);
+        if textures.iter().enumerate().any(|(i, (layer, _))| *layer != i as u32) {
+            return Err(Error::invalid(
+                "lights[].texture_layer",
+                format!("{:?}", textures.iter().map(|(l, _)| *l).collect::<Vec<_>>()),
+                "the textured spot lights must use layers 0, 1, … in turn (FrameDesc::assign_layers)",
+            ));
+        }
         gpu.scoped("uploading a CPU frame", || {
             let depth = gpu.upload_texture(
                 "depth",
@@ -463,24 +499,23 @@ impl UploadedFrame {
                 bytemuck::cast_slice(frame.depth),
             );
             let shadow = gpu.upload_texture(
-                "shadow map",
+                "shadow maps",
                 wgpu::TextureFormat::R32Float,
-                sp.size,
-                sp.size,
-                sp.layers,
+                size,
+                size,
+                layers,
                 4,
-                bytemuck::cast_slice(&frame.shadow_map.depth),
+                bytemuck::cast_slice(&depths),
             );
-            Self {
-                depth: depth.create_view(&Default::default()),
-                shadow_map: shadow.create_view(&wgpu::TextureViewDescriptor {
-                    dimension: Some(wgpu::TextureViewDimension::D2Array),
-                    ..Default::default()
-                }),
-                spot_texture: frame
-                    .spot_texture()
-                    .map(|t| gpu.upload_rgb_texture(Some(t)).create_view(&Default::default())),
-            }
+            let array = wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            };
+            let spot = (!textures.is_empty()).then(|| {
+                let list: Vec<&crate::RgbTexture> = textures.iter().map(|(_, t)| *t).collect();
+                gpu.upload_spot_textures(&list).create_view(&array)
+            });
+            Self { depth: depth.create_view(&Default::default()), shadow_maps: shadow.create_view(&array), spot_textures: spot }
         })
     }
 
@@ -489,9 +524,9 @@ impl UploadedFrame {
         crate::GpuFrame {
             desc,
             depth: &self.depth,
-            shadow_map: &self.shadow_map,
-            spot_texture: self.spot_texture.as_ref(),
-            rectified_shadow_map: None,
+            shadow_maps: &self.shadow_maps,
+            spot_textures: self.spot_textures.as_ref(),
+            rectified_shadow_maps: &[],
         }
     }
 }

@@ -2,6 +2,7 @@
 //! L_scatt = ∫₀ˢ T(t)·σs·p(cos θ)·L_in(x_t)·V(x_t) dt. Each function here has a WGSL twin of the
 //! same name in `shaders/common.wgsl`.
 
+use crate::frame::{CpuFrame, FrameLight};
 use crate::model::{Light, Medium};
 use crate::shadow::ShadowMap;
 use glam::{Vec3, Vec4, Vec4Swizzles};
@@ -9,8 +10,8 @@ use glam::{Vec3, Vec4, Vec4Swizzles};
 /// Unshadowed incident radiance at `p` and the unit direction ω_l in which that light travels
 /// at `p`. Directional: E, no extinction along the light path. Spot / point:
 /// I·tex·cone·exp(−σt·d)/d². The spot texture is looked up through the shadow projection
-/// `spot_view_proj` (the spot's shadow frustum). Mirrors `light_incident` in WGSL.
-pub fn light_incident(light: &Light, medium: &Medium, spot_view_proj: &glam::Mat4, p: Vec3) -> (Vec3, Vec3) {
+/// `spot_view_proj` (the spot's shadow frustum). [`light_incident`] scales it for scattering.
+pub fn light_radiance(light: &Light, medium: &Medium, spot_view_proj: &glam::Mat4, p: Vec3) -> (Vec3, Vec3) {
     match light {
         Light::Directional { direction, color, intensity } => (*color * *intensity, direction.normalize()),
         Light::Point { position, color, intensity } => {
@@ -45,6 +46,14 @@ pub fn light_incident(light: &Light, medium: &Medium, spot_view_proj: &glam::Mat
     }
 }
 
+/// The radiance of one light of the frame at `p` as the in-scattering sees it:
+/// [`light_radiance`] × [`FrameLight::scattering`], and ω_l. Mirrors `light_incident` in WGSL
+/// (whose light colour carries the scale).
+pub fn light_incident(fl: &FrameLight, medium: &Medium, p: Vec3) -> (Vec3, Vec3) {
+    let (l, wl) = light_radiance(&fl.light, medium, &fl.shadow.view_proj[0], p);
+    (l * fl.scattering, wl)
+}
+
 /// Position of a local light (unused for directional lights).
 pub fn light_position(light: &Light) -> Vec3 {
     match light {
@@ -53,34 +62,39 @@ pub fn light_position(light: &Light) -> Vec3 {
     }
 }
 
-/// L_in(x)·V(x) and ω_l: the integrand without σs and the phase function, for passes that look
-/// the phase function up in a table. Mirrors `lit_incident` in WGSL.
-pub fn lit_incident(light: &Light, medium: &Medium, shadow: &ShadowMap, bias: f32, p: Vec3) -> (Vec3, Vec3) {
-    let (l_in, wl) = light_incident(light, medium, &shadow.projection.view_proj[0], p);
+/// L_in(x)·V(x)·scattering and ω_l of one light of the frame: the integrand without σs and the
+/// phase function, for passes that look the phase function up in a table. Mirrors
+/// `lit_incident` in WGSL (whose light colour carries [`FrameLight::scattering`]).
+pub fn lit_incident(fl: &FrameLight, medium: &Medium, shadow: &ShadowMap, p: Vec3) -> (Vec3, Vec3) {
+    let (l_in, wl) = light_incident(fl, medium, p);
     if l_in == Vec3::ZERO {
         return (l_in, wl);
     }
-    (l_in * shadow.visibility(light_position(light), p, bias), wl)
+    (l_in * shadow.visibility(light_position(&fl.light), p, fl.shadow_bias), wl)
 }
 
-/// σs·p(cos θ)·L_in(x)·V(x) at a point x on a view ray of unit direction `view_dir`: the
-/// in-scattered radiance per unit length before transmittance to the eye. Mirrors
-/// `inscatter_density` in WGSL.
-pub fn inscatter_density(
-    light: &Light,
-    medium: &Medium,
-    shadow: &ShadowMap,
-    bias: f32,
-    view_dir: Vec3,
-    p: Vec3,
-) -> Vec3 {
-    let (l_in, wl) = lit_incident(light, medium, shadow, bias, p);
+/// σs·p(cos θ)·L_in(x)·V(x) of one light at a point x on a view ray of unit direction
+/// `view_dir`: the in-scattered radiance per unit length before transmittance to the eye.
+/// Mirrors `inscatter_density` in WGSL.
+pub fn inscatter_density(fl: &FrameLight, medium: &Medium, shadow: &ShadowMap, view_dir: Vec3, p: Vec3) -> Vec3 {
+    let (l_in, wl) = lit_incident(fl, medium, shadow, p);
     if l_in == Vec3::ZERO {
         return Vec3::ZERO;
     }
     // cos θ = dot(ω_l, −ω): θ = 0 looking straight into the light (docs/MODEL.md §1).
     let cos_theta = -wl.dot(view_dir);
     medium.scattering * medium.phase.eval(cos_theta) * l_in
+}
+
+/// Σ_k σs·p_k·L_in,k·V_k over the lights `lights` (indices into the frame's lights, usually
+/// [`crate::FrameDesc::scattering_lights`]) at x: the density every march sums, one loop over
+/// the lights per sample (docs/MODEL.md §6). Mirrors `inscatter_density_all` in WGSL.
+pub fn inscatter_density_all(frame: &CpuFrame, lights: &[usize], view_dir: Vec3, p: Vec3) -> Vec3 {
+    let desc = frame.desc;
+    lights
+        .iter()
+        .map(|&k| inscatter_density(&desc.lights[k], &desc.medium, &frame.shadow_maps[k], view_dir, p))
+        .sum()
 }
 
 /// How a host renderer shades its surfaces — not part of the effect's frame: the
@@ -108,28 +122,23 @@ impl SurfaceShading {
     }
 }
 
-/// Lambert surface radiance with the same light and shadow map, plus ambient·albedo. The
-/// normal is flipped to face the camera (surfaces are double-sided). Mirrors
-/// `surface_radiance` in common.wgsl.
-pub fn surface_radiance(
-    desc: &crate::frame::FrameDesc,
-    shading: &SurfaceShading,
-    shadow: &ShadowMap,
-    p: Vec3,
-    normal: Vec3,
-    albedo: Vec3,
-) -> Vec3 {
+/// Lambert surface radiance from every light of the frame with its shadow map, plus
+/// ambient·albedo. The normal is flipped to face the camera (surfaces are double-sided).
+/// [`FrameLight::scattering`] does not dim surfaces. Mirrors `surface_radiance` in common.wgsl.
+pub fn surface_radiance(frame: &CpuFrame, shading: &SurfaceShading, p: Vec3, normal: Vec3, albedo: Vec3) -> Vec3 {
+    let desc = frame.desc;
     let mut n = normal.normalize_or_zero();
     if n.dot(desc.camera.position - p) < 0.0 {
         n = -n;
     }
-    let (l_in, wl) = light_incident(&desc.light, &desc.medium, &shadow.projection.view_proj[0], p);
-    let cosine = n.dot(-wl).max(0.0);
     let mut direct = Vec3::ZERO;
-    if cosine > 0.0 && l_in.max_element() > 0.0 {
-        let v =
-            shadow.visibility_pcf(light_position(&desc.light), p, n, desc.shadow_bias, shading.normal_offset_texels);
-        direct = albedo / std::f32::consts::PI * l_in * cosine * v;
+    for (fl, shadow) in desc.lights.iter().zip(frame.shadow_maps) {
+        let (l_in, wl) = light_radiance(&fl.light, &desc.medium, &fl.shadow.view_proj[0], p);
+        let cosine = n.dot(-wl).max(0.0);
+        if cosine > 0.0 && l_in.max_element() > 0.0 {
+            let v = shadow.visibility_pcf(light_position(&fl.light), p, n, fl.shadow_bias, shading.normal_offset_texels);
+            direct += albedo / std::f32::consts::PI * l_in * cosine * v;
+        }
     }
     direct + shading.ambient * albedo
 }

@@ -9,7 +9,8 @@
 
 use crate::error::Error;
 use crate::frame::{CpuFrame, FrameDesc};
-use crate::integrand::inscatter_density;
+use crate::frame::FrameLight;
+use crate::integrand::inscatter_density_all;
 use crate::model::Light;
 use crate::model::segment_transmittance;
 use glam::Vec3;
@@ -176,12 +177,50 @@ pub const REACH_OPTICAL_DEPTH: f32 = 13.815511;
 /// In light fog (σt = 0.025 m⁻¹) R = 553 m and nothing changes; in a dense medium (σt = 5 m⁻¹)
 /// R = 2.8 m, and the N steps go where there is light instead of 200 m of darkness.
 /// Mirrors `light_reach` in common.wgsl.
-pub fn light_reach(desc: &FrameDesc) -> Option<(Vec3, f32)> {
-    let sigma = desc.medium.extinction().min_element();
-    match &desc.light {
+pub fn light_reach(fl: &FrameLight, medium: &crate::Medium) -> Option<(Vec3, f32)> {
+    let sigma = medium.extinction().min_element();
+    match &fl.light {
         Light::Directional { .. } => None,
         _ if sigma <= 0.0 => None,
         Light::Spot { position, .. } | Light::Point { position, .. } => Some((*position, REACH_OPTICAL_DEPTH / sigma)),
+    }
+}
+
+/// What a march needs of each light that reaches the view: its index in the frame's lights,
+/// its spot cone and its reach. Built once per frame ([`MarchLights::of`]).
+#[derive(Clone, Debug, Default)]
+pub struct MarchLights {
+    /// Indices into [`FrameDesc::lights`] ([`FrameDesc::scattering_lights`]).
+    pub indices: Vec<usize>,
+    /// Each light's cone ([`SpotCone::of`]).
+    pub cones: Vec<Option<SpotCone>>,
+    /// Each light's reach ([`light_reach`]).
+    pub reaches: Vec<Option<(Vec3, f32)>>,
+}
+
+impl MarchLights {
+    /// The lights of `desc` that reach the view.
+    pub fn of(desc: &FrameDesc) -> Self {
+        let indices = desc.scattering_lights();
+        let cones = indices.iter().map(|&k| SpotCone::of(&desc.lights[k].light)).collect();
+        let reaches = indices.iter().map(|&k| light_reach(&desc.lights[k], &desc.medium)).collect();
+        Self { indices, cones, reaches }
+    }
+
+    /// The interval of the view ray o + t·d, t in [0, s], that one march covers for all the
+    /// lights: the smallest interval holding every light's [`march_interval`] (a single light's
+    /// own interval; (0, s) as soon as one light is directional or marched `Fixed`). Empty
+    /// (0, 0) when no light reaches the ray. Mirrors `lights_interval` in WGSL.
+    pub fn interval(&self, o: Vec3, d: Vec3, s: f32, policy: SpotSteps, denominator: f32) -> (f32, f32) {
+        let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+        for (cone, reach) in self.cones.iter().zip(&self.reaches) {
+            let iv = march_interval(cone.as_ref(), *reach, o, d, s, policy, denominator);
+            if iv.1 > iv.0 {
+                lo = lo.min(iv.0);
+                hi = hi.max(iv.1);
+            }
+        }
+        if hi > lo { (lo, hi) } else { (0.0, 0.0) }
     }
 }
 
@@ -273,7 +312,16 @@ pub fn mean_extinction(desc: &FrameDesc) -> f32 {
 /// exactly over the step (an improvement on eq. 1's exp(−τ(s − l))·Δl that is exact for a
 /// constant integrand).
 /// Mirrors `march_steps` in common.wgsl.
-pub fn march_steps(frame: &CpuFrame, dir: Vec3, iv: (f32, f32), n: u32, first: u32, stride: u32, j: f32) -> Vec3 {
+pub fn march_steps(
+    frame: &CpuFrame,
+    lights: &MarchLights,
+    dir: Vec3,
+    iv: (f32, f32),
+    n: u32,
+    first: u32,
+    stride: u32,
+    j: f32,
+) -> Vec3 {
     let (a, b) = iv;
     if b <= a {
         return Vec3::ZERO;
@@ -290,9 +338,9 @@ pub fn march_steps(frame: &CpuFrame, dir: Vec3, iv: (f32, f32), n: u32, first: u
         let t0 = a + i as f32 * delta;
         let t = t0 + off;
         let p = o + dir * t;
-        sum += inscatter_density(&desc.light, &desc.medium, frame.shadow_map, desc.shadow_bias, dir, p)
-            * (-st * t0).exp()
-            * seg;
+        // One loop over the samples; every light at each (docs/MODEL.md §6): the position and
+        // the transmittance are shared, the lights' densities summed.
+        sum += inscatter_density_all(frame, &lights.indices, dir, p) * (-st * t0).exp() * seg;
         i += stride;
     }
     sum
@@ -317,25 +365,12 @@ pub struct PixelMarch {
 /// Eq. 1 of Tóth & Umenhoffer 2009 for pixel (x, y), ray `dir`, surface distance `s`: N steps
 /// over the spot-step policy's interval, sampled at step midpoints or at the pixel's jitter.
 /// Mirrors `march_pixel` in common.wgsl.
-pub fn march_pixel(
-    frame: &CpuFrame,
-    cone: Option<&SpotCone>,
-    m: &PixelMarch,
-    x: u32,
-    y: u32,
-    dir: Vec3,
-    s: f32,
-) -> Vec3 {
-    let reach = light_reach(frame.desc);
-    let iv = march_interval(cone, reach, frame.desc.camera.position, dir, s, m.spot_steps, m.spot_denominator);
+pub fn march_pixel(frame: &CpuFrame, lights: &MarchLights, m: &PixelMarch, x: u32, y: u32, dir: Vec3, s: f32) -> Vec3 {
+    let iv = lights.interval(frame.desc.camera.position, dir, s, m.spot_steps, m.spot_denominator);
     let j = if m.jitter { crate::shaders::pixel_jitter(x, y, m.frame_index) } else { 0.5 };
-    march_steps(frame, dir, iv, m.steps, 0, 1, j)
+    march_steps(frame, lights, dir, iv, m.steps, 0, 1, j)
 }
 
-/// The cone of the frame's light under a policy: what `march_interval` needs per frame.
-pub fn frame_cone(desc: &FrameDesc) -> Option<SpotCone> {
-    SpotCone::of(&desc.light)
-}
 
 #[cfg(test)]
 mod tests {

@@ -264,8 +264,8 @@ impl RgbTexture {
     }
 }
 
-/// The light source. One light per frame; run the effect once per light and add the results
-/// for several (Tóth & Umenhoffer 2009 §4).
+/// A light source. A frame holds any number of them ([`crate::FrameDesc::lights`], each with
+/// its shadow map); the in-scattering is the sum over the lights (docs/MODEL.md §6).
 #[derive(Clone, Debug, PartialEq)]
 pub enum Light {
     /// A distant light (sun). Radiance scale E = colour·intensity arrives unattenuated: no
@@ -322,6 +322,14 @@ impl Light {
             Light::Directional { .. } => crate::frame::LIGHT_DIRECTIONAL,
             Light::Spot { .. } => crate::frame::LIGHT_SPOT,
             Light::Point { .. } => crate::frame::LIGHT_POINT,
+        }
+    }
+    /// colour × intensity: E of a directional light, I of a spot or point light (rgb).
+    pub fn radiance_scale(&self) -> Vec3 {
+        match self {
+            Light::Directional { color, intensity, .. }
+            | Light::Spot { color, intensity, .. }
+            | Light::Point { color, intensity, .. } => *color * *intensity,
         }
     }
     /// Number of shadow-map layers this light uses (six cube faces for a point light).

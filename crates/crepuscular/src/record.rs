@@ -190,6 +190,11 @@ impl<'a> Recorder<'a> {
         }
     }
 
+    /// The counters asked for since the last call (one technique run's).
+    pub(crate) fn take_counters(&mut self) -> Option<Counters> {
+        self.counters.take()
+    }
+
     /// The recorded passes (0 ms except in wall-clock mode).
     pub fn into_passes(self) -> Vec<PassTime> {
         self.passes

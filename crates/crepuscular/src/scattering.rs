@@ -41,7 +41,12 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 /// rasterize prefiltered's rectified map with hardware depth clamping.
 pub struct Scattering {
     gpu: GpuContext,
-    technique: AnyGpuTechnique,
+    /// The technique; for one that renders a light per run ([`crate::techniques::TechniqueInfo::per_light`]),
+    /// one instance per light that reaches the view (made as lights appear), each with its own
+    /// per-light textures and bind groups.
+    techniques: Vec<AnyGpuTechnique>,
+    /// The sum over lights of a per-light technique (made for the first frame with two lights).
+    sum: Option<crate::light_sum::LightSum>,
     /// The in-scattering's format.
     output: wgpu::TextureFormat,
     mode: StatsMode,
@@ -57,10 +62,42 @@ pub struct Scattering {
     latest: Option<TechniqueStats>,
 }
 
-/// One encoded frame's stats, waiting for its timings and counters.
+/// One encoded frame's stats, waiting for its timings and counters: its passes in recorded
+/// order (timestamps arrive in that order) and one part per technique run (per light for a
+/// per-light technique), each with its GPU counters.
 struct Pending {
+    passes: Vec<PassTime>,
+    timing: String,
+    lights: usize,
+    parts: Vec<Part>,
+}
+
+struct Part {
     stats: TechniqueStats,
     counters: Option<(wgpu::Buffer, ApplyCounters)>,
+}
+
+impl Pending {
+    /// The frame's stats once its timings and counters are in: the parts' counters applied,
+    /// the parts summed ([`TechniqueStats::sum`]) and the passes of the same name added.
+    fn finish(self, mut take: impl FnMut(wgpu::Buffer) -> Vec<u8>) -> TechniqueStats {
+        let parts = self
+            .parts
+            .into_iter()
+            .map(|mut p| {
+                if let Some((buffer, apply)) = p.counters {
+                    let bytes = take(buffer);
+                    apply(&bytes, &mut p.stats);
+                }
+                p.stats
+            })
+            .collect();
+        let mut stats = TechniqueStats::sum(parts);
+        stats.passes = PassTime::merge(self.passes);
+        stats.timing = self.timing;
+        stats.extra.insert("lights".into(), self.lights as f64);
+        stats
+    }
 }
 
 /// The frames of one submission, their readbacks being mapped.
@@ -109,7 +146,8 @@ impl Scattering {
         let technique = AnyGpuTechnique::new(gpu, settings, output)?;
         let mut s = Self {
             gpu: gpu.clone(),
-            technique,
+            techniques: vec![technique],
+            sum: None,
             output,
             mode: StatsMode::Deferred,
             profiler: None,
@@ -153,7 +191,8 @@ impl Scattering {
             return Err(Error::invalid("output format", format!("{format:?}"), "must be Rgba32Float or Rgba16Float"));
         }
         if format != self.output {
-            self.technique = AnyGpuTechnique::new(&self.gpu, self.technique.settings(), format)?;
+            self.techniques = vec![AnyGpuTechnique::new(&self.gpu, self.settings(), format)?];
+            self.sum = None;
             self.output = format;
         }
         Ok(self)
@@ -188,17 +227,18 @@ impl Scattering {
 
     /// The technique's name.
     pub fn name(&self) -> &'static str {
-        self.technique.name()
+        self.techniques[0].name()
     }
 
     /// The technique's current settings.
     pub fn settings(&self) -> TechniqueSettings {
-        self.technique.settings()
+        self.techniques[0].settings()
     }
 
-    /// The technique itself, for its debug views and intermediate textures.
+    /// The technique itself, for its debug views and intermediate textures (of the first light
+    /// that reached the view, for a per-light technique).
     pub fn technique(&self) -> &AnyGpuTechnique {
-        &self.technique
+        &self.techniques[0]
     }
 
     /// The device and queue this runs on.
@@ -212,19 +252,30 @@ impl Scattering {
     /// [`Scattering`]). Settings out of range are an error and change nothing.
     pub fn update(&mut self, settings: &TechniqueSettings) -> Result<bool, Error> {
         settings.validate()?;
-        Ok(self.technique.update(settings))
+        let mut same = true;
+        for t in &mut self.techniques {
+            same &= t.update(settings);
+        }
+        Ok(same)
     }
 
     /// Bytes of GPU memory the technique holds (not counting the caller's textures).
     pub fn gpu_memory_bytes(&self) -> u64 {
-        self.technique.gpu_memory_bytes()
+        self.techniques.iter().map(|t| t.gpu_memory_bytes()).sum::<u64>()
+            + self.sum.as_ref().map_or(0, |s| s.gpu_memory_bytes())
     }
 
-    /// The host raster this frame would use, if any: `prefiltered`'s projective rectified
-    /// shadow map (Klehm et al. 2014, §4.2). A host that can rasterize its scene from these
-    /// matrices passes the result as [`GpuFrame::rectified_shadow_map`].
-    pub fn raster_request(&self, desc: &FrameDesc) -> Option<crate::techniques::prefiltered::RectifiedRaster> {
-        self.technique.settings().raster_request(desc)
+    /// How many times the technique's bind groups were built, over its per-light instances.
+    pub fn bind_group_builds(&self) -> u64 {
+        self.techniques.iter().map(|t| t.bind_group_builds()).sum()
+    }
+
+    /// The host rasters this frame would use, one per light of `desc.lights` (None for most):
+    /// `prefiltered`'s projective rectified shadow maps (Klehm et al. 2014, §4.2). A host that
+    /// can rasterize its scene from these matrices passes the results as
+    /// [`GpuFrame::rectified_shadow_maps`].
+    pub fn raster_requests(&self, desc: &FrameDesc) -> Vec<Option<crate::techniques::prefiltered::RectifiedRaster>> {
+        self.settings().raster_requests(desc)
     }
 
     /// Records the in-scattering of `frame` into `output` (a `STORAGE_BINDING` view of a
@@ -252,39 +303,110 @@ impl Scattering {
             StatsMode::Deferred => Recorder::encoder(&self.gpu, encoder, profiler, &mut self.belt, measured),
             StatsMode::Off => Recorder::encoder(&self.gpu, encoder, None, &mut self.belt, false),
         };
-        let result = self.technique.encode(&self.gpu, &mut rec, frame, output);
+        let lights = frame.desc.scattering_lights().len();
+        let result =
+            Self::encode_lights(&self.gpu, &mut self.techniques, &mut self.sum, self.output, &mut rec, frame, output);
         let timing = rec.mode();
-        let (passes, counters) = rec.finish();
+        let (passes, _) = rec.finish();
         // The uniform uploads recorded into the encoder are complete: the caller may submit.
         self.belt.finish();
-        let mut stats = result?;
-        stats.passes = passes;
-        stats.timing = timing.into();
+        let parts = result?;
+        let pending = Pending { passes, timing: timing.into(), lights, parts };
         match self.mode {
             StatsMode::WallClock => {
-                if let Some(c) = counters {
-                    let bytes = read_buffer(&self.gpu, &c.buffer)?;
-                    (c.apply)(&bytes, &mut stats);
+                let gpu = &self.gpu;
+                let mut failed = None;
+                let stats = pending.finish(|b| {
+                    read_buffer(gpu, &b).unwrap_or_else(|e| {
+                        failed = Some(e);
+                        Vec::new()
+                    })
+                });
+                if let Some(e) = failed {
+                    return Err(e);
                 }
                 self.latest = Some(stats);
             }
-            StatsMode::Off => self.latest = Some(stats),
+            StatsMode::Off => self.latest = Some(pending.finish(|_| Vec::new())),
             // Too many frames wait for their readbacks: this one is not measured.
             StatsMode::Deferred if !measured => {}
             StatsMode::Deferred => {
-                let counters = counters.map(|c| {
-                    let size = c.buffer.size();
-                    let slot = self.take_readback(size);
-                    encoder.copy_buffer_to_buffer(&c.buffer, 0, &slot, 0, size);
-                    (slot, c.apply)
-                });
+                let mut pending = pending;
+                for part in &mut pending.parts {
+                    if let Some((buffer, apply)) = part.counters.take() {
+                        let size = buffer.size();
+                        let slot = self.take_readback(size);
+                        encoder.copy_buffer_to_buffer(&buffer, 0, &slot, 0, size);
+                        part.counters = Some((slot, apply));
+                    }
+                }
                 if let Some(p) = self.profiler.as_mut().filter(|_| self.gpu.timestamps) {
                     p.resolve_queries(encoder);
                 }
-                self.recorded.push(Pending { stats, counters });
+                self.recorded.push(pending);
             }
         }
         Ok(())
+    }
+
+    /// Records the technique for the frame's lights: once for a technique that marches every
+    /// light at each sample; once per light that reaches the view, summed, for a per-light one.
+    #[allow(clippy::too_many_arguments)]
+    fn encode_lights(
+        gpu: &GpuContext,
+        techniques: &mut Vec<AnyGpuTechnique>,
+        light_sum: &mut Option<crate::light_sum::LightSum>,
+        format: wgpu::TextureFormat,
+        rec: &mut Recorder,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<Vec<Part>, Error> {
+        let desc = frame.desc;
+        let run = |t: &mut AnyGpuTechnique, rec: &mut Recorder, f: &GpuFrame, out: &wgpu::TextureView| {
+            let stats = t.encode(gpu, rec, f, out)?;
+            let counters = rec.take_counters().map(|c| (c.buffer, c.apply));
+            Ok::<Part, Error>(Part { stats, counters })
+        };
+        if !techniques[0].info().per_light {
+            return Ok(vec![run(&mut techniques[0], rec, frame, output)?]);
+        }
+        let lights = desc.scattering_lights();
+        let settings = techniques[0].settings();
+        while techniques.len() < lights.len() {
+            techniques.push(AnyGpuTechnique::new(gpu, settings.clone(), format)?);
+        }
+        let descs: Vec<FrameDesc> = lights.iter().map(|&k| desc.with_light(k)).collect();
+        let frames: Vec<GpuFrame> = lights.iter().zip(&descs).map(|(&k, d)| frame.with_light(d, k)).collect();
+        match frames.as_slice() {
+            [] => {
+                let sum = match light_sum {
+                    Some(s) => s,
+                    None => light_sum.insert(crate::light_sum::LightSum::new(gpu, format)?),
+                };
+                sum.clear(gpu, rec, output)?;
+                Ok(vec![Part { stats: TechniqueStats::empty(techniques[0].name(), "gpu"), counters: None }])
+            }
+            [one] => Ok(vec![run(&mut techniques[0], rec, one, output)?]),
+            many => {
+                let sum = match light_sum {
+                    Some(s) => s,
+                    None => light_sum.insert(crate::light_sum::LightSum::new(gpu, format)?),
+                };
+                let [light, a, b] = sum.views(gpu, desc.width, desc.height)?;
+                let acc = [a, b];
+                let mut parts = Vec::with_capacity(many.len());
+                for (i, (f, t)) in many.iter().zip(techniques.iter_mut()).enumerate() {
+                    if i == 0 {
+                        parts.push(run(t, rec, f, &acc[0])?);
+                        continue;
+                    }
+                    parts.push(run(t, rec, f, &light)?);
+                    let out = if i == many.len() - 1 { output } else { &acc[i % 2] };
+                    sum.add(gpu, rec, &acc[(i - 1) % 2], &light, out)?;
+                }
+                Ok(parts)
+            }
+        }
     }
 
     /// Marks the end of a frame: call it once after submitting the encoder(s) that hold the
@@ -303,16 +425,14 @@ impl Scattering {
         };
         let mapped = Arc::new(AtomicUsize::new(0));
         let mut expected = 0;
-        for f in &frames {
-            if let Some((buffer, _)) = &f.counters {
-                expected += 1;
-                let mapped = mapped.clone();
-                buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-                    if r.is_ok() {
-                        mapped.fetch_add(1, Ordering::AcqRel);
-                    }
-                });
-            }
+        for (buffer, _) in frames.iter().flat_map(|f| &f.parts).filter_map(|p| p.counters.as_ref()) {
+            expected += 1;
+            let mapped = mapped.clone();
+            buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                if r.is_ok() {
+                    mapped.fetch_add(1, Ordering::AcqRel);
+                }
+            });
         }
         self.in_flight.push_back(InFlight { frames, mapped, expected, timed });
     }
@@ -352,18 +472,18 @@ impl Scattering {
             let done = self.in_flight.pop_front().expect("front exists");
             let mut times = times.into_iter().flatten();
             for mut f in done.frames {
-                for pass in &mut f.stats.passes {
+                for pass in &mut f.passes {
                     if let Some(r) = times.next() {
                         pass.ms = r.time.map_or(0.0, |t| (t.end - t.start) * 1e3);
                     }
                 }
-                if let Some((buffer, apply)) = f.counters {
+                let free = &mut self.free_readbacks;
+                self.latest = Some(f.finish(|buffer| {
                     let bytes = buffer.slice(..).get_mapped_range().to_vec();
                     buffer.unmap();
-                    apply(&bytes, &mut f.stats);
-                    self.free_readbacks.push(buffer);
-                }
-                self.latest = Some(f.stats);
+                    free.push(buffer);
+                    bytes
+                }));
             }
         }
     }
@@ -382,7 +502,7 @@ impl Scattering {
         let mut encoder = self
             .gpu
             .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(self.technique.name()) });
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(self.name()) });
         self.encode(&mut encoder, frame, output)?;
         self.gpu.scoped("submitting the frame", || self.gpu.queue.submit([encoder.finish()]))?;
         self.end_frame();
@@ -455,25 +575,58 @@ fn check_frame(
     if (depth.width(), depth.height()) != (w, h) {
         return Err(Error::invalid("depth", size(depth), format!("must be the frame's size {w}×{h}")));
     }
-    let sm = frame.shadow_map.texture();
-    let sp = &d.shadow;
-    let layers = if matches!(d.light, crate::Light::Point { .. }) { 6 } else { 1 };
-    if sp.layers != layers || sm.depth_or_array_layers() < layers {
-        return Err(Error::invalid(
-            "shadow_map",
-            size(sm),
-            format!("a {} light needs {layers} layer(s) (the frame says {})", d.light.kind_name(), sp.layers),
-        ));
-    }
-    if (sm.width(), sm.height()) != (sp.size, sp.size) {
-        return Err(Error::invalid(
-            "shadow_map",
-            size(sm),
-            format!("must be {0}×{0} (the frame's shadow size)", sp.size),
-        ));
-    }
+    d.validate_lights()?;
+    let sm = frame.shadow_maps.texture();
     if !matches!(sm.format(), wgpu::TextureFormat::Depth32Float | wgpu::TextureFormat::R32Float) {
-        return Err(Error::invalid("shadow_map", format!("{:?}", sm.format()), "must be Depth32Float or R32Float"));
+        return Err(Error::invalid("shadow_maps", format!("{:?}", sm.format()), "must be Depth32Float or R32Float"));
+    }
+    for (k, fl) in d.lights.iter().enumerate() {
+        let sp = &fl.shadow;
+        if fl.shadow_layer + sp.layers > sm.depth_or_array_layers() {
+            return Err(Error::invalid(
+                "shadow_maps",
+                size(sm),
+                format!(
+                    "lights[{k}] ({}) needs layers {}..{} (shadow_layer {} + {} layer(s))",
+                    fl.light.kind_name(),
+                    fl.shadow_layer,
+                    fl.shadow_layer + sp.layers,
+                    fl.shadow_layer,
+                    sp.layers
+                ),
+            ));
+        }
+        if sp.size > sm.width() || sp.size > sm.height() {
+            return Err(Error::invalid(
+                "shadow_maps",
+                size(sm),
+                format!("lights[{k}]'s shadow map is {0}×{0} (shadow.size), larger than the texture", sp.size),
+            ));
+        }
+        if let Some(t) = fl.spot_texture() {
+            let Some(view) = frame.spot_textures else {
+                return Err(Error::invalid(
+                    "spot_textures",
+                    "None",
+                    format!("lights[{k}] has a projected texture: pass the spot-texture array"),
+                ));
+            };
+            let tex = view.texture();
+            if fl.texture_layer >= tex.depth_or_array_layers() || t.width > tex.width() || t.height > tex.height() {
+                return Err(Error::invalid(
+                    "spot_textures",
+                    size(tex),
+                    format!("lights[{k}]'s {}×{} texture in layer {} does not fit", t.width, t.height, fl.texture_layer),
+                ));
+            }
+        }
+    }
+    if !frame.rectified_shadow_maps.is_empty() && frame.rectified_shadow_maps.len() != d.lights.len() {
+        return Err(Error::invalid(
+            "rectified_shadow_maps",
+            frame.rectified_shadow_maps.len(),
+            format!("one entry (or None) per light: the frame has {}", d.lights.len()),
+        ));
     }
     Ok(())
 }
@@ -482,14 +635,47 @@ impl TechniqueSettings {
     /// Runs the technique's CPU implementation on `frame`. `rectified` is the host's raster of
     /// [`TechniqueSettings::raster_request`] (`prefiltered` only; None: resampled from the
     /// shadow map). `progress(done, total)` is called as long work (the reference) advances.
+    /// `rectified` holds one entry per light of the frame (or none at all). A technique that
+    /// renders one light per run ([`crate::techniques::TechniqueInfo::per_light`]) runs once per light
+    /// that reaches the view and the images are added, as on the GPU.
     pub fn render_cpu(
         &self,
         frame: &CpuFrame,
-        rectified: Option<&[f32]>,
+        rectified: &[Option<&[f32]>],
         progress: &(dyn Fn(u64, u64) + Sync),
     ) -> Result<(Image, TechniqueStats), Error> {
         self.validate()?;
-        let (image, stats) = self.render_cpu_unchecked(frame, rectified, progress)?;
+        frame.validate()?;
+        let desc = frame.desc;
+        let lights = desc.scattering_lights();
+        let (image, mut stats) = if !self.info().per_light {
+            self.render_cpu_unchecked(frame, None, progress)?
+        } else {
+            let mut sum = Image::new(desc.width, desc.height);
+            for p in &mut sum.pixels {
+                *p = [0.0, 0.0, 0.0, 1.0];
+            }
+            let mut parts = Vec::new();
+            for (i, &k) in lights.iter().enumerate() {
+                let sub = desc.with_light(k);
+                let part = frame.with_light(&sub, k);
+                let (img, st) = self.render_cpu_unchecked(&part, rectified.get(k).copied().flatten(), progress)?;
+                if i == 0 {
+                    sum = img;
+                } else {
+                    // The GPU's light sum (light_sum.wgsl): rgb added, alpha of the first.
+                    for (s, p) in sum.pixels.iter_mut().zip(&img.pixels) {
+                        for c in 0..3 {
+                            s[c] += p[c];
+                        }
+                    }
+                }
+                parts.push(st);
+            }
+            let stats = if parts.is_empty() { TechniqueStats::empty(self.name(), "cpu") } else { TechniqueStats::sum(parts) };
+            (sum, stats)
+        };
+        stats.extra.insert("lights".into(), lights.len() as f64);
         if !image.all_finite() {
             return Err(Error::invalid(
                 self.name(),
@@ -498,6 +684,19 @@ impl TechniqueSettings {
             ));
         }
         Ok((image, stats))
+    }
+
+    /// The host rasters a frame would use, one per light of `desc.lights` (see
+    /// [`crate::Scattering::raster_requests`]): a per-light technique's request for each light
+    /// that reaches the view, None for the others.
+    pub fn raster_requests(&self, desc: &FrameDesc) -> Vec<Option<crate::techniques::prefiltered::RectifiedRaster>> {
+        let mut out = vec![None; desc.lights.len()];
+        if self.info().per_light {
+            for k in desc.scattering_lights() {
+                out[k] = self.raster_request(&desc.with_light(k));
+            }
+        }
+        out
     }
 
     /// The times of a host raster as the first pass of `stats` (what a tool that rasterized

@@ -36,7 +36,46 @@ pub struct TechniqueStats {
     pub extra: BTreeMap<String, f64>,
 }
 
+impl PassTime {
+    /// The passes with the same name added into one (at the first one's place): a frame's
+    /// passes over all its lights, as a per-light technique records them once per light.
+    pub fn merge(passes: Vec<PassTime>) -> Vec<PassTime> {
+        let mut out: Vec<PassTime> = Vec::with_capacity(passes.len());
+        for p in passes {
+            match out.iter_mut().find(|q| q.name == p.name) {
+                Some(q) => q.ms += p.ms,
+                None => out.push(p),
+            }
+        }
+        out
+    }
+}
+
 impl TechniqueStats {
+    /// No work: what a frame whose lights all miss the view reports.
+    pub fn empty(technique: &str, backend: &str) -> Self {
+        Self { technique: technique.into(), backend: backend.into(), ..Default::default() }
+    }
+
+    /// The stats of one frame rendered in parts (a per-light technique's runs, one per light):
+    /// passes merged by name ([`PassTime::merge`]), samples, memory and every technique-specific
+    /// figure added (counts over the lights). One part is returned as it is.
+    pub fn sum(parts: Vec<TechniqueStats>) -> TechniqueStats {
+        let mut it = parts.into_iter();
+        let Some(mut total) = it.next() else { return TechniqueStats::default() };
+        let mut passes = std::mem::take(&mut total.passes);
+        for p in it {
+            passes.extend(p.passes);
+            total.raymarched_samples += p.raymarched_samples;
+            total.gpu_memory_bytes += p.gpu_memory_bytes;
+            for (k, v) in p.extra {
+                *total.extra.entry(k).or_insert(0.0) += v;
+            }
+        }
+        total.passes = PassTime::merge(passes);
+        total
+    }
+
     /// Sum of the pass times, ms.
     pub fn total_ms(&self) -> f64 {
         self.passes.iter().map(|p| p.ms).sum()

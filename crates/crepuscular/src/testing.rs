@@ -5,7 +5,7 @@
 use crate::frame::FrameDesc;
 use crate::stats::TechniqueStats;
 use crate::{
-    Bounds, Camera, Error, FrameCamera, GpuContext, GpuFrame, Light, Medium, Phase, Scattering, ShadowMap,
+    Bounds, Camera, Error, FrameCamera, FrameLight, GpuContext, GpuFrame, Light, Medium, Phase, Scattering, ShadowMap,
     ShadowProjection, StatsMode, TechniqueSettings,
 };
 use glam::{DVec3, Vec3};
@@ -17,6 +17,13 @@ pub const WALL_DISTANCE: f32 = 30.0;
 /// `w × h` pixels, with an empty 64² shadow map (nothing casts shadows, V = 1). Returns the
 /// description, the depth buffer and the shadow map.
 pub fn wall_frame(light: Light, medium: Medium, w: u32, h: u32) -> (FrameDesc, Vec<f32>, ShadowMap) {
+    let (desc, depth, mut maps) = wall_frame_lights(vec![light], medium, w, h);
+    (desc, depth, maps.remove(0))
+}
+
+/// [`wall_frame`] with several lights, each with its own empty shadow map (layers packed in
+/// order, [`FrameDesc::assign_layers`]).
+pub fn wall_frame_lights(lights: Vec<Light>, medium: Medium, w: u32, h: u32) -> (FrameDesc, Vec<f32>, Vec<ShadowMap>) {
     let camera = Camera {
         position: Vec3::ZERO,
         look_at: Vec3::new(0.0, 0.0, -1.0),
@@ -27,30 +34,49 @@ pub fn wall_frame(light: Light, medium: Medium, w: u32, h: u32) -> (FrameDesc, V
     };
     let aspect = w as f32 / h as f32;
     let bounds = Bounds { min: Vec3::splat(-40.0), max: Vec3::new(40.0, 40.0, 1.0) };
-    let shadow = ShadowProjection::fit(&light, &camera, aspect, bounds, 64);
-    let sm = ShadowMap { projection: shadow.clone(), depth: vec![1.0; shadow.layers as usize * 64 * 64] };
+    let lights: Vec<FrameLight> = lights
+        .into_iter()
+        .map(|light| {
+            let shadow = ShadowProjection::fit(&light, &camera, aspect, bounds, 64);
+            FrameLight::new(light, shadow)
+        })
+        .collect();
+    let maps = lights
+        .iter()
+        .map(|l| ShadowMap { projection: l.shadow.clone(), depth: vec![1.0; l.shadow.layers as usize * 64 * 64] })
+        .collect();
     // The wall's depth-buffer value at its view depth.
     let camera = FrameCamera::look_at(&camera, aspect);
     let depth = vec![camera.depth_of(WALL_DISTANCE); (w * h) as usize];
-    let desc = FrameDesc { camera, light, medium, shadow, shadow_bias: 0.02, width: w, height: h };
-    (desc, depth, sm)
+    let mut desc = FrameDesc { camera, lights, medium, width: w, height: h };
+    desc.assign_layers();
+    (desc, depth, maps)
 }
 
-/// The in-scattering of a sun at pixel (x, y) of a [`wall_frame`], in f64:
-/// σs·p·E·(1 − e^(−σt·s))/σt, and σs·p·E·s where a channel's σt is 0. Panics for another light.
+/// The in-scattering of the frame's suns at pixel (x, y) of a [`wall_frame`], in f64: the sum
+/// over the lights of σs·p·E·(1 − e^(−σt·s))/σt (σs·p·E·s where a channel's σt is 0), each
+/// scaled by its `scattering`. Panics for a light that is not directional.
 pub fn wall_closed_form(desc: &FrameDesc, x: u32, y: u32) -> DVec3 {
-    let Light::Directional { direction, color, intensity } = &desc.light else {
-        panic!("wall_closed_form: the closed form is for a directional light")
-    };
     let inv = desc.camera.view_proj().as_dmat4().inverse();
     let (w, h) = (desc.width as f64, desc.height as f64);
     let ndc = DVec3::new((x as f64 + 0.5) / w * 2.0 - 1.0, 1.0 - (y as f64 + 0.5) / h * 2.0, 1.0);
     let dir = inv.project_point3(ndc).normalize();
     let s = WALL_DISTANCE as f64 / dir.dot(DVec3::NEG_Z);
     let st = desc.medium.extinction().as_dvec3();
-    let p = DVec3::from(desc.medium.phase.eval_f64(-direction.as_dvec3().normalize().dot(dir)));
     let f = |st: f64| if st > 0.0 { (1.0 - (-st * s).exp()) / st } else { s };
-    desc.medium.scattering.as_dvec3() * p * color.as_dvec3() * *intensity as f64 * DVec3::new(f(st.x), f(st.y), f(st.z))
+    let mut sum = DVec3::ZERO;
+    for fl in &desc.lights {
+        let Light::Directional { direction, color, intensity } = &fl.light else {
+            panic!("wall_closed_form: the closed form is for directional lights")
+        };
+        let p = DVec3::from(desc.medium.phase.eval_f64(-direction.as_dvec3().normalize().dot(dir)));
+        sum += desc.medium.scattering.as_dvec3()
+            * p
+            * color.as_dvec3()
+            * (*intensity as f64 * fl.scattering as f64)
+            * DVec3::new(f(st.x), f(st.y), f(st.z));
+    }
+    sum
 }
 
 /// The media the closed-form tests sweep: each phase function, coloured and grey σs, with and

@@ -42,7 +42,7 @@ fn directional_closed_form(desc: &FrameDesc) -> Image {
 
 /// Composite Gauss–Legendre (5 points × 4096 panels) of the point-light integral, f64.
 fn point_quadrature(desc: &FrameDesc) -> Image {
-    let Light::Point { position, color, intensity } = &desc.light else { unreachable!() };
+    let Light::Point { position, color, intensity } = &desc.lights[0].light else { unreachable!() };
     let st = desc.medium.extinction().as_dvec3();
     let ss = desc.medium.scattering.as_dvec3();
     let lp = position.as_dvec3();
@@ -67,7 +67,7 @@ fn point_quadrature(desc: &FrameDesc) -> Image {
                     let d = v.length();
                     let wl = v / d;
                     let p = DVec3::from(desc.medium.phase.eval_f64(-wl.dot(dir)));
-                    let f = (-st * t).exp() * ss * p * color.as_dvec3() * *intensity as f64 * (-st * d).exp() / (d * d);
+                    let f = (-st * t).exp() * ss * p * color.as_dvec3() * (*intensity as f64) * (-st * d).exp() / (d * d);
                     sum += f * wi * 0.5 * h;
                 }
             }
@@ -88,7 +88,7 @@ fn sun() -> Light {
 }
 
 fn cpu_frame<'a>(d: &'a FrameDesc, depth: &'a [f32], sm: &'a ShadowMap) -> CpuFrame<'a> {
-    CpuFrame { desc: d, depth, shadow_map: sm, surface: None }
+    CpuFrame { desc: d, depth, shadow_maps: std::slice::from_ref(sm), surface: None }
 }
 
 #[test]

@@ -3,6 +3,7 @@
 //! so that tests can drive them with synthetic events.
 
 use super::*;
+use crepuscular_scene::SceneLight;
 
 /// Orbit camera about `target`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,8 +50,10 @@ pub(crate) fn rotate_direction(d: Vec3, yaw: f32, pitch: f32) -> Vec3 {
 pub(crate) struct Controls {
     /// The camera.
     pub(crate) orbit: Orbit,
-    /// The light (direction, position, aim).
-    pub(crate) light: Light,
+    /// The lights (direction, position, aim, scattering), at least one.
+    pub(crate) lights: Vec<SceneLight>,
+    /// The light the mouse steers and the panel edits (an index into `lights`).
+    pub(crate) selected: usize,
     /// Ignore the wheel until egui's smooth scrolling has run out, so that the rest of a wheel
     /// turn does not move a camera just reset or loaded.
     pub(crate) settle_scroll: bool,
@@ -74,7 +77,40 @@ pub(crate) struct InputOutcome {
 impl Controls {
     /// The camera and light of `scene`.
     pub(crate) fn of(scene: &Scene) -> Self {
-        Self { orbit: Orbit::from_camera(&scene.camera), light: scene.light.clone(), settle_scroll: true }
+        Self { orbit: Orbit::from_camera(&scene.camera), lights: scene.lights.clone(), selected: 0, settle_scroll: true }
+    }
+
+    /// The selected light.
+    #[cfg(test)]
+    pub(crate) fn light(&self) -> &Light {
+        &self.lights[self.selected.min(self.lights.len() - 1)].light
+    }
+
+    /// The selected light, to edit.
+    pub(crate) fn light_mut(&mut self) -> &mut Light {
+        let i = self.selected.min(self.lights.len() - 1);
+        &mut self.lights[i].light
+    }
+
+    /// Adds `light` (scattering as it shines) and selects it; refused (false) at
+    /// [`crepuscular::MAX_LIGHTS`].
+    pub(crate) fn add_light(&mut self, light: Light) -> bool {
+        if self.lights.len() >= crepuscular::MAX_LIGHTS {
+            return false;
+        }
+        self.lights.push(SceneLight::new(light));
+        self.selected = self.lights.len() - 1;
+        true
+    }
+
+    /// Removes the selected light; refused (false) for the last one (a frame needs a light).
+    pub(crate) fn remove_light(&mut self) -> bool {
+        if self.lights.len() <= 1 {
+            return false;
+        }
+        self.lights.remove(self.selected.min(self.lights.len() - 1));
+        self.selected = self.selected.min(self.lights.len() - 1);
+        true
     }
 
     /// Reads one frame's pointer and keyboard input over `rect` (the scene area, behind the
@@ -157,18 +193,19 @@ impl Controls {
         let right = self.orbit.right();
         let up = right.cross(self.orbit.forward());
         let mv = |p: &mut Vec3, dist: f32| *p += (d.x * right - d.y * up) * dist.max(0.5) * 0.002;
-        match &mut self.light {
+        let eye = self.orbit.position();
+        match self.light_mut() {
             Light::Directional { direction, .. } => *direction = rotate_direction(*direction, yaw, pitch),
             Light::Spot { direction, position, .. } => {
                 if shift {
-                    let dist = (*position - self.orbit.position()).length();
+                    let dist = (*position - eye).length();
                     mv(position, dist);
                 } else {
                     *direction = rotate_direction(*direction, yaw, pitch);
                 }
             }
             Light::Point { position, .. } => {
-                let dist = (*position - self.orbit.position()).length();
+                let dist = (*position - eye).length();
                 mv(position, dist);
             }
         }
@@ -221,11 +258,11 @@ mod tests {
     fn controls(light: Light) -> Controls {
         let camera =
             crepuscular::Camera { position: Vec3::new(0.0, 2.0, 10.0), look_at: Vec3::ZERO, ..Default::default() };
-        Controls { orbit: Orbit::from_camera(&camera), light, settle_scroll: false }
+        Controls { orbit: Orbit::from_camera(&camera), lights: vec![light.into()], selected: 0, settle_scroll: false }
     }
 
     fn sun() -> Light {
-        crepuscular_scene::builtin::builtin("colonnade").unwrap().light
+        crepuscular_scene::builtin::builtin("colonnade").unwrap().lights[0].light.clone()
     }
 
     /// A press at `from`, moves in `steps` equal steps to `to`, a release: one event per frame.
@@ -281,7 +318,7 @@ mod tests {
         assert_eq!(c.orbit.pitch, before.orbit.pitch);
         assert!(close(c.orbit.target, before.orbit.target) && c.orbit.distance == before.orbit.distance);
         assert!(!close(c.orbit.position(), before.orbit.position()));
-        assert_eq!(c.light, before.light, "orbiting must not move the light");
+        assert_eq!(c.light(), before.light(), "orbiting must not move the light");
         // Dragging up tilts it.
         let mut c = controls(sun());
         drive(
@@ -323,7 +360,7 @@ mod tests {
             drive(&mut c, drag(button, modifiers, egui::pos2(100.0, 90.0), egui::pos2(160.0, 60.0)), false);
             assert_eq!(c.orbit, before.orbit, "{button:?}: the camera moved");
             let (Light::Directional { direction: d0, .. }, Light::Directional { direction: d1, .. }) =
-                (&before.light, &c.light)
+                (before.light(), c.light())
             else {
                 unreachable!("colonnade has a sun")
             };
@@ -334,7 +371,7 @@ mod tests {
 
     #[test]
     fn right_drag_aims_a_spot_and_shift_right_drag_moves_it() {
-        let spot = crepuscular_scene::builtin::builtin("stained-glass").unwrap().light;
+        let spot = crepuscular_scene::builtin::builtin("stained-glass").unwrap().lights[0].light.clone();
         let parts = |l: &Light| match l {
             Light::Spot { position, direction, .. } => (*position, *direction),
             _ => unreachable!("stained-glass has a spot light"),
@@ -345,7 +382,7 @@ mod tests {
             drag(egui::PointerButton::Secondary, Default::default(), egui::pos2(100.0, 90.0), egui::pos2(160.0, 90.0)),
             false,
         );
-        let ((p0, d0), (p1, d1)) = (parts(&spot), parts(&c.light));
+        let ((p0, d0), (p1, d1)) = (parts(&spot), parts(c.light()));
         assert!(close(p0, p1) && d0.dot(d1) < 0.99, "aim: {p0} {d0} → {p1} {d1}");
         let mut c = controls(spot.clone());
         drive(
@@ -358,17 +395,17 @@ mod tests {
             ),
             false,
         );
-        let (p1, d1) = parts(&c.light);
+        let (p1, d1) = parts(c.light());
         assert!(close(d0, d1) && (p1 - p0).dot(c.orbit.right()) > 0.05, "move: {p0} {d0} → {p1} {d1}");
         // A point light has no aim: a right drag moves it.
-        let point = crepuscular_scene::builtin::builtin("cage").unwrap().light;
+        let point = crepuscular_scene::builtin::builtin("cage").unwrap().lights[0].light.clone();
         let mut c = controls(point.clone());
         drive(
             &mut c,
             drag(egui::PointerButton::Secondary, Default::default(), egui::pos2(100.0, 90.0), egui::pos2(100.0, 40.0)),
             false,
         );
-        let (Light::Point { position: a, .. }, Light::Point { position: b, .. }) = (&point, &c.light) else {
+        let (Light::Point { position: a, .. }, Light::Point { position: b, .. }) = (&point, c.light()) else {
             unreachable!("cage has a point light")
         };
         assert!((b - a).y > 0.05, "dragging up moves a point light up: {a} → {b}");

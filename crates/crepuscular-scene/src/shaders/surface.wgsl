@@ -3,7 +3,7 @@
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var shadow_map: texture_2d_array<f32>;
-@group(0) @binding(2) var spot_tex: texture_2d<f32>;
+@group(0) @binding(2) var spot_tex: texture_2d_array<f32>;
 // The host's SurfaceShading: ambient (rgb), normal offset in shadow texels (w).
 @group(0) @binding(3) var<uniform> shading: vec4<f32>;
 

@@ -10,31 +10,57 @@ struct Frame {
     inv_projection: mat4x4<f32>,
     inv_view: mat4x4<f32>,
     view_proj: mat4x4<f32>,
-    shadow_view_proj: array<mat4x4<f32>, 6>,
     camera_pos: vec4<f32>,
     camera_fwd: vec4<f32>,
-    light_pos: vec4<f32>,
-    light_dir: vec4<f32>,
-    light_color: vec4<f32>,
     sigma_s: vec4<f32>,
     sigma_a: vec4<f32>,
     rayleigh_fraction: vec4<f32>,
+    depth_params: vec4<f32>,
+    width: u32,
+    height: u32,
+    phase_kind: u32,
+    _pad: u32,
+}
+
+// One light (frame.rs LightUniforms).
+struct Light {
+    shadow_view_proj: array<mat4x4<f32>, 6>,
+    position: vec4<f32>,
+    direction: vec4<f32>, // xyz; w: cos of the spot's outer angle
+    color: vec4<f32>,     // rgb: colour × intensity × scattering; w: cos of the spot's inner angle
     shadow_near: f32,
     shadow_far: f32,
     shadow_bias: f32,
     shadow_texel: f32,
-    depth_params: vec4<f32>,
-    width: u32,
-    height: u32,
-    light_kind: u32,
-    phase_kind: u32,
+    kind: u32,
     shadow_layers: u32,
     shadow_size: u32,
     shadow_orthographic: u32,
-    spot_textured: u32,
+    shadow_first_layer: u32,
+    shadow_clear: f32,
+    texture_layer: u32,
+    _pad0: u32,
+    texture_size: vec2<u32>,
+    _pad1: vec2<u32>,
 }
 
-// Frame::light_kind and Frame::phase_kind (frame.rs LIGHT_* and PHASE_*).
+// frame.rs MAX_LIGHTS, LightsUniforms.
+const MAX_LIGHTS: u32 = 16u;
+const NO_TEXTURE: u32 = 0xffffffffu;
+
+struct Lights {
+    count: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+    items: array<Light, 16>,
+}
+
+// The frame's lights that reach the view (pass.rs LIGHTS_BINDING): bound by every pass that
+// evaluates a light.
+@group(0) @binding(15) var<uniform> lights: Lights;
+
+// Light::kind and Frame::phase_kind (frame.rs LIGHT_* and PHASE_*).
 const LIGHT_DIRECTIONAL: u32 = 0u;
 const LIGHT_SPOT: u32 = 1u;
 const LIGHT_POINT: u32 = 2u;
@@ -146,15 +172,15 @@ fn cube_face(v: vec3<f32>) -> u32 {
 }
 
 // shadow.rs ShadowProjection::linear.
-fn shadow_linear_depth(f: Frame, d: f32) -> f32 {
-    // A reversed-Z shadow map (clear value 0, depth_params.w) swaps near and far.
-    var near = f.shadow_near;
-    var far = f.shadow_far;
-    if f.depth_params.w == 0.0 {
-        near = f.shadow_far;
-        far = f.shadow_near;
+fn shadow_linear_depth(l: Light, d: f32) -> f32 {
+    // A reversed-Z shadow map (clear value 0) swaps near and far.
+    var near = l.shadow_near;
+    var far = l.shadow_far;
+    if l.shadow_clear == 0.0 {
+        near = l.shadow_far;
+        far = l.shadow_near;
     }
-    if f.shadow_orthographic == 1u {
+    if l.shadow_orthographic == 1u {
         return near + d * (far - near);
     }
     return linear_depth(d, near, far);
@@ -162,22 +188,22 @@ fn shadow_linear_depth(f: Frame, d: f32) -> f32 {
 
 struct ShadowCoord {
     valid: bool,
-    layer: u32,
+    layer: u32, // the light's own layer (0, or a cube face)
     texel: vec2<u32>,
     depth: f32, // linear light-space depth of the point
     uv: vec2<f32>,
 }
 
 // shadow.rs ShadowMap::coord.
-fn shadow_coord(f: Frame, p: vec3<f32>) -> ShadowCoord {
+fn shadow_coord(l: Light, p: vec3<f32>) -> ShadowCoord {
     var sc: ShadowCoord;
     sc.valid = false;
     var layer = 0u;
-    if f.shadow_layers == 6u {
-        layer = cube_face(p - f.light_pos.xyz);
+    if l.shadow_layers == 6u {
+        layer = cube_face(p - l.position.xyz);
     }
     sc.layer = layer;
-    let c = f.shadow_view_proj[layer] * vec4<f32>(p, 1.0);
+    let c = l.shadow_view_proj[layer] * vec4<f32>(p, 1.0);
     if c.w <= 0.0 {
         return sc;
     }
@@ -185,36 +211,43 @@ fn shadow_coord(f: Frame, p: vec3<f32>) -> ShadowCoord {
     if ndc.z < 0.0 || ndc.z > 1.0 || abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 {
         return sc;
     }
-    let n = f32(f.shadow_size);
+    let n = f32(l.shadow_size);
     sc.uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
     sc.texel = vec2<u32>(min(floor(sc.uv * n), vec2<f32>(n - 1.0)));
-    sc.depth = shadow_linear_depth(f, ndc.z);
+    sc.depth = shadow_linear_depth(l, ndc.z);
     sc.valid = true;
     return sc;
 }
 
+// The stored linear depth at texel t of the light's layer (shadow.rs ShadowMap::texel).
+fn shadow_stored(l: Light, shadow_map: texture_2d_array<f32>, t: vec2<i32>, layer: u32) -> f32 {
+    return shadow_linear_depth(l, textureLoad(shadow_map, t, i32(l.shadow_first_layer + layer), 0).r);
+}
+
 // shadow.rs ShadowMap::visibility: 1 lit, 0 shadowed; outside the map is lit.
-fn shadow_visibility(f: Frame, shadow_map: texture_2d_array<f32>, p: vec3<f32>, bias: f32) -> f32 {
-    let sc = shadow_coord(f, p);
+fn shadow_visibility(l: Light, shadow_map: texture_2d_array<f32>, p: vec3<f32>) -> f32 {
+    let sc = shadow_coord(l, p);
     if !sc.valid {
         return 1.0;
     }
-    let stored = shadow_linear_depth(f, textureLoad(shadow_map, vec2<i32>(sc.texel), i32(sc.layer), 0).r);
-    return select(0.0, 1.0, sc.depth <= stored + bias);
+    let stored = shadow_stored(l, shadow_map, vec2<i32>(sc.texel), sc.layer);
+    return select(0.0, 1.0, sc.depth <= stored + l.shadow_bias);
 }
 
-// model.rs RgbTexture::sample: bilinear, clamp to edge, four loads.
-fn sample_spot_texture(tex: texture_2d<f32>, uv: vec2<f32>) -> vec3<f32> {
-    let dim = vec2<i32>(textureDimensions(tex));
+// model.rs RgbTexture::sample: bilinear, clamp to edge, four loads, in the top-left `size`
+// texels of layer `layer`.
+fn sample_spot_texture(tex: texture_2d_array<f32>, layer: u32, size: vec2<u32>, uv: vec2<f32>) -> vec3<f32> {
+    let dim = vec2<i32>(size);
     let x = uv * vec2<f32>(dim) - 0.5;
     let x0 = floor(x);
     let fr = x - x0;
     let i = vec2<i32>(x0);
     let hi = dim - vec2<i32>(1);
-    let t00 = textureLoad(tex, clamp(i, vec2<i32>(0), hi), 0).rgb;
-    let t10 = textureLoad(tex, clamp(i + vec2<i32>(1, 0), vec2<i32>(0), hi), 0).rgb;
-    let t01 = textureLoad(tex, clamp(i + vec2<i32>(0, 1), vec2<i32>(0), hi), 0).rgb;
-    let t11 = textureLoad(tex, clamp(i + vec2<i32>(1, 1), vec2<i32>(0), hi), 0).rgb;
+    let ly = i32(layer);
+    let t00 = textureLoad(tex, clamp(i, vec2<i32>(0), hi), ly, 0).rgb;
+    let t10 = textureLoad(tex, clamp(i + vec2<i32>(1, 0), vec2<i32>(0), hi), ly, 0).rgb;
+    let t01 = textureLoad(tex, clamp(i + vec2<i32>(0, 1), vec2<i32>(0), hi), ly, 0).rgb;
+    let t11 = textureLoad(tex, clamp(i + vec2<i32>(1, 1), vec2<i32>(0), hi), ly, 0).rgb;
     let a = mix(t00, t10, fr.x);
     let b = mix(t01, t11, fr.x);
     return mix(a, b, fr.y);
@@ -230,61 +263,62 @@ fn smooth_cone(cos_outer: f32, cos_inner: f32, c: f32) -> f32 {
     return t * t * (3.0 - 2.0 * t);
 }
 
-// integrand.rs light_incident.
-fn light_incident(f: Frame, spot_tex: texture_2d<f32>, p: vec3<f32>) -> Incident {
+// integrand.rs light_incident (with the light's scattering scale in its colour).
+fn light_incident(f: Frame, l: Light, spot_tex: texture_2d_array<f32>, p: vec3<f32>) -> Incident {
     var r: Incident;
-    let kind = f.light_kind;
+    let kind = l.kind;
     if kind == LIGHT_DIRECTIONAL {
-        r.radiance = f.light_color.xyz;
-        r.dir = f.light_dir.xyz;
+        r.radiance = l.color.xyz;
+        r.dir = l.direction.xyz;
         return r;
     }
-    let v = p - f.light_pos.xyz;
+    let v = p - l.position.xyz;
     let d2 = max(dot(v, v), 1e-8);
     let d = sqrt(d2);
     r.dir = v / d;
     let att = exp(-extinction(f) * d) / d2;
     if kind == LIGHT_POINT {
-        r.radiance = f.light_color.xyz * att;
+        r.radiance = l.color.xyz * att;
         return r;
     }
-    let cone = smooth_cone(f.light_dir.w, f.light_color.w, dot(r.dir, f.light_dir.xyz));
+    let cone = smooth_cone(l.direction.w, l.color.w, dot(r.dir, l.direction.xyz));
     if cone <= 0.0 {
         r.radiance = vec3<f32>(0.0);
         return r;
     }
     var tex = vec3<f32>(1.0);
-    if f.spot_textured == 1u {
-        let c = f.shadow_view_proj[0] * vec4<f32>(p, 1.0);
+    if l.texture_layer != NO_TEXTURE {
+        let c = l.shadow_view_proj[0] * vec4<f32>(p, 1.0);
         if c.w > 0.0 {
             let ndc = c.xy / c.w;
-            tex = sample_spot_texture(spot_tex, vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5));
+            tex = sample_spot_texture(spot_tex, l.texture_layer, l.texture_size, vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5));
         }
     }
-    r.radiance = f.light_color.xyz * cone * att * tex;
+    r.radiance = l.color.xyz * cone * att * tex;
     return r;
 }
 
 // integrand.rs lit_incident: L_in(x)·V(x) and ω_l — the integrand without σs and the phase
 // function, for passes that look the phase function up in a table.
-fn lit_incident(f: Frame, shadow_map: texture_2d_array<f32>, spot_tex: texture_2d<f32>, p: vec3<f32>) -> Incident {
-    var li = light_incident(f, spot_tex, p);
+fn lit_incident(f: Frame, l: Light, shadow_map: texture_2d_array<f32>, spot_tex: texture_2d_array<f32>, p: vec3<f32>) -> Incident {
+    var li = light_incident(f, l, spot_tex, p);
     if all(li.radiance == vec3<f32>(0.0)) {
         return li;
     }
-    li.radiance *= shadow_visibility(f, shadow_map, p, f.shadow_bias);
+    li.radiance *= shadow_visibility(l, shadow_map, p);
     return li;
 }
 
-// integrand.rs inscatter_density: σs·p(cos θ)·L_in(x)·V(x).
+// integrand.rs inscatter_density: σs·p(cos θ)·L_in(x)·V(x) of one light.
 fn inscatter_density(
     f: Frame,
+    l: Light,
     shadow_map: texture_2d_array<f32>,
-    spot_tex: texture_2d<f32>,
+    spot_tex: texture_2d_array<f32>,
     view_dir: vec3<f32>,
     p: vec3<f32>,
 ) -> vec3<f32> {
-    let li = lit_incident(f, shadow_map, spot_tex, p);
+    let li = lit_incident(f, l, shadow_map, spot_tex, p);
     if all(li.radiance == vec3<f32>(0.0)) {
         return vec3<f32>(0.0);
     }
@@ -292,23 +326,38 @@ fn inscatter_density(
     return f.sigma_s.xyz * phase(f, cos_theta) * li.radiance;
 }
 
+// integrand.rs inscatter_density_all: the sum over the frame's lights (docs/MODEL.md §6).
+fn inscatter_density_all(
+    f: Frame,
+    shadow_map: texture_2d_array<f32>,
+    spot_tex: texture_2d_array<f32>,
+    view_dir: vec3<f32>,
+    p: vec3<f32>,
+) -> vec3<f32> {
+    var sum = vec3<f32>(0.0);
+    for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
+        sum += inscatter_density(f, lights.items[k], shadow_map, spot_tex, view_dir, p);
+    }
+    return sum;
+}
+
 // ---- Where the N steps go (march.rs; Wyman & Ramsey 2008, Appendix B) ----
 
 // march.rs SpotCone::contains: inside the forward cone of the spot light.
-fn cone_contains(f: Frame, p: vec3<f32>) -> bool {
-    let v = p - f.light_pos.xyz;
-    return dot(v, f.light_dir.xyz) >= f.light_dir.w * length(v);
+fn cone_contains(l: Light, p: vec3<f32>) -> bool {
+    let v = p - l.position.xyz;
+    return dot(v, l.direction.xyz) >= l.direction.w * length(v);
 }
 
 // march.rs cone_interval: the part [t0, t1] of o + t·d, t in [0, s], inside the cone
 // (t1 <= t0 when the ray misses it). Roots of (v·a)² = cos²·|v|², then midpoint tests.
-fn cone_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32) -> vec2<f32> {
+fn cone_interval(l: Light, o: vec3<f32>, d: vec3<f32>, s: f32) -> vec2<f32> {
     if s <= 0.0 {
         return vec2<f32>(0.0);
     }
-    let axis = f.light_dir.xyz;
-    let v = o - f.light_pos.xyz;
-    let c2 = f.light_dir.w * f.light_dir.w;
+    let axis = l.direction.xyz;
+    let v = o - l.position.xyz;
+    let c2 = l.direction.w * l.direction.w;
     let dv = dot(d, axis);
     let va = dot(v, axis);
     let qa = dv * dv - c2;
@@ -334,7 +383,7 @@ fn cone_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32) -> vec2<f32> {
     for (var i = 0; i < 3; i++) {
         let a = bounds[i];
         let b = bounds[i + 1];
-        if b > a && cone_contains(f, o + d * (0.5 * (a + b))) {
+        if b > a && cone_contains(l, o + d * (0.5 * (a + b))) {
             t0 = min(t0, a);
             t1 = max(t1, b);
         }
@@ -362,16 +411,16 @@ fn smooth_denominator(den: f32, k: f32) -> f32 {
 
 // march.rs march_interval: the interval of the view ray a technique marches with its N steps.
 // policy: 0 fixed, 1 exact-cone, 2 appendix-b-constant, 3 appendix-b-smoothstep.
-fn policy_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
-    if f.light_kind != LIGHT_SPOT || policy == 0u {
+fn policy_interval(l: Light, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
+    if l.kind != LIGHT_SPOT || policy == 0u {
         return vec2<f32>(0.0, s);
     }
-    let c = cone_interval(f, o, d, s);
+    let c = cone_interval(l, o, d, s);
     if c.y <= c.x || policy == 1u {
         return c;
     }
-    let dist = length(o + d * c.x - f.light_pos.xyz);
-    let ab = appendix_b_chord(dist, dot(d, f.light_dir.xyz), f.light_dir.w);
+    let dist = length(o + d * c.x - l.position.xyz);
+    let ab = appendix_b_chord(dist, dot(d, l.direction.xyz), l.direction.w);
     var den = denominator;
     if policy == 3u {
         den = smooth_denominator(ab.y, denominator);
@@ -383,10 +432,10 @@ fn policy_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, de
 // its light-path transmittance is below 1e-6 in every channel; 0 = unlimited.
 const REACH_OPTICAL_DEPTH: f32 = 13.815511;
 
-fn light_reach(f: Frame) -> f32 {
+fn light_reach(f: Frame, l: Light) -> f32 {
     let st = extinction(f);
     let sigma = min(st.x, min(st.y, st.z));
-    if f.light_kind == LIGHT_DIRECTIONAL || sigma <= 0.0 {
+    if l.kind == LIGHT_DIRECTIONAL || sigma <= 0.0 {
         return 0.0;
     }
     return REACH_OPTICAL_DEPTH / sigma;
@@ -405,13 +454,31 @@ fn clip_to_sphere(iv: vec2<f32>, o: vec3<f32>, d: vec3<f32>, c: vec3<f32>, r: f3
 }
 
 // march.rs march_interval: the policy's interval, cut to a local light's reach.
-fn march_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
-    let iv = policy_interval(f, o, d, s, policy, denominator);
-    let r = light_reach(f);
+fn march_interval(f: Frame, l: Light, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
+    let iv = policy_interval(l, o, d, s, policy, denominator);
+    let r = light_reach(f, l);
     if r > 0.0 && iv.y > iv.x {
-        return clip_to_sphere(iv, o, d, f.light_pos.xyz, r);
+        return clip_to_sphere(iv, o, d, l.position.xyz, r);
     }
     return iv;
+}
+
+// march.rs MarchLights::interval: the smallest interval holding every light's march_interval;
+// empty (0, 0) when no light reaches the ray.
+fn lights_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
+    var lo = 3.4e38;
+    var hi = -3.4e38;
+    for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
+        let iv = march_interval(f, lights.items[k], o, d, s, policy, denominator);
+        if iv.y > iv.x {
+            lo = min(lo, iv.x);
+            hi = max(hi, iv.y);
+        }
+    }
+    if hi > lo {
+        return vec2<f32>(lo, hi);
+    }
+    return vec2<f32>(0.0);
 }
 
 // march.rs step_offset: the j-quantile of the transmittance over a step of length delta.
@@ -438,35 +505,36 @@ fn pixel_jitter(px: vec2<u32>, frame: u32) -> f32 {
 
 // shadow.rs ShadowMap::visibility_pcf: 3×3 percentage-closer filter for surfaces, with the
 // point pushed along the surface normal by `normal_offset_texels` shadow texels.
-fn shadow_pcf(f: Frame, shadow_map: texture_2d_array<f32>, p: vec3<f32>, n: vec3<f32>, offset_texels: f32) -> f32 {
-    var texel = f.shadow_texel;
-    if f.shadow_orthographic == 0u {
-        texel *= length(p - f.light_pos.xyz);
+fn shadow_pcf(l: Light, shadow_map: texture_2d_array<f32>, p: vec3<f32>, n: vec3<f32>, offset_texels: f32) -> f32 {
+    var texel = l.shadow_texel;
+    if l.shadow_orthographic == 0u {
+        texel *= length(p - l.position.xyz);
     }
     let q = p + n * (offset_texels * texel);
-    let sc = shadow_coord(f, q);
+    let sc = shadow_coord(l, q);
     if !sc.valid {
         return 1.0;
     }
-    let size = i32(f.shadow_size);
+    let size = i32(l.shadow_size);
     var sum = 0.0;
     for (var dy = -1; dy <= 1; dy++) {
         for (var dx = -1; dx <= 1; dx++) {
             let t = clamp(vec2<i32>(sc.texel) + vec2<i32>(dx, dy), vec2<i32>(0), vec2<i32>(size - 1));
-            let stored = shadow_linear_depth(f, textureLoad(shadow_map, t, i32(sc.layer), 0).r);
-            sum += select(0.0, 1.0, sc.depth <= stored + f.shadow_bias);
+            let stored = shadow_stored(l, shadow_map, t, sc.layer);
+            sum += select(0.0, 1.0, sc.depth <= stored + l.shadow_bias);
         }
     }
     return sum / 9.0;
 }
 
-// integrand.rs surface_radiance: Lambert with the same light and shadow map, plus ambient.
-// `shading`: the host's SurfaceShading, ambient (rgb) and normal offset in texels (w).
+// integrand.rs surface_radiance: Lambert from every light with its shadow map, plus ambient.
+// `shading`: the host's SurfaceShading, ambient (rgb) and normal offset in texels (w). The host
+// binds all its lights here (scattering 1).
 fn surface_radiance(
     f: Frame,
     shading: vec4<f32>,
     shadow_map: texture_2d_array<f32>,
-    spot_tex: texture_2d<f32>,
+    spot_tex: texture_2d_array<f32>,
     p: vec3<f32>,
     normal: vec3<f32>,
     albedo: vec3<f32>,
@@ -475,11 +543,14 @@ fn surface_radiance(
     if dot(n, f.camera_pos.xyz - p) < 0.0 {
         n = -n;
     }
-    let li = light_incident(f, spot_tex, p);
-    let cosine = max(dot(n, -li.dir), 0.0);
     var direct = vec3<f32>(0.0);
-    if cosine > 0.0 && any(li.radiance > vec3<f32>(0.0)) {
-        direct = albedo / PI * li.radiance * cosine * shadow_pcf(f, shadow_map, p, n, shading.w);
+    for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
+        let l = lights.items[k];
+        let li = light_incident(f, l, spot_tex, p);
+        let cosine = max(dot(n, -li.dir), 0.0);
+        if cosine > 0.0 && any(li.radiance > vec3<f32>(0.0)) {
+            direct += albedo / PI * li.radiance * cosine * shadow_pcf(l, shadow_map, p, n, shading.w);
+        }
     }
     return direct + shading.xyz * albedo;
 }
@@ -491,7 +562,7 @@ fn surface_radiance(
 fn march_steps(
     f: Frame,
     shadow_map: texture_2d_array<f32>,
-    spot_tex: texture_2d<f32>,
+    spot_tex: texture_2d_array<f32>,
     dir: vec3<f32>,
     iv: vec2<f32>,
     n: u32,
@@ -511,7 +582,8 @@ fn march_steps(
         let t0 = iv.x + f32(i) * delta;
         let t = t0 + off;
         let p = f.camera_pos.xyz + dir * t;
-        sum += inscatter_density(f, shadow_map, spot_tex, dir, p) * exp(-st * t0) * seg;
+        // One loop over the samples, every light at each (docs/MODEL.md §6).
+        sum += inscatter_density_all(f, shadow_map, spot_tex, dir, p) * exp(-st * t0) * seg;
     }
     return sum;
 }
@@ -521,7 +593,7 @@ fn march_steps(
 fn march_pixel(
     f: Frame,
     shadow_map: texture_2d_array<f32>,
-    spot_tex: texture_2d<f32>,
+    spot_tex: texture_2d_array<f32>,
     px: vec2<u32>,
     dir: vec3<f32>,
     s: f32,
@@ -531,7 +603,7 @@ fn march_pixel(
     spot_steps: u32,
     spot_denominator: f32,
 ) -> vec3<f32> {
-    let iv = march_interval(f, f.camera_pos.xyz, dir, s, spot_steps, spot_denominator);
+    let iv = lights_interval(f, f.camera_pos.xyz, dir, s, spot_steps, spot_denominator);
     var j = 0.5;
     if jitter == 1u {
         j = pixel_jitter(px, frame_index);

@@ -63,6 +63,12 @@ pub struct TechniqueInfo {
     pub gpu: bool,
     /// Runs on the CPU.
     pub cpu: bool,
+    /// How it handles several lights (docs/MODEL.md §6). False: one march evaluates every light
+    /// at each sample (the positions, transmittance and per-pixel work are shared). True: its
+    /// structure depends on where the light is (epipolar lines, a rectified map), so it runs
+    /// once per light that reaches the view, on [`FrameDesc::with_light`], and
+    /// [`crate::Scattering`] and [`TechniqueSettings::render_cpu`] add the lights up.
+    pub per_light: bool,
 }
 
 /// What a technique's folder provides to the registry (the `registry!` macro below): its description, its
@@ -81,7 +87,7 @@ pub trait Technique: Clone + std::fmt::Debug + Default + serde::Serialize + serd
         rectified: Option<&[f32]>,
         progress: &(dyn Fn(u64, u64) + Sync),
     ) -> Result<(Image, TechniqueStats), Error>;
-    /// The host raster the technique wants for this frame (only `prefiltered` has one).
+    /// The host raster the technique wants for a one-light frame (only `prefiltered` has one).
     fn raster_request(&self, _desc: &FrameDesc) -> Option<prefiltered::RectifiedRaster> {
         None
     }
@@ -184,7 +190,15 @@ macro_rules! registry {
                 !matches!(self, $(Self::$cvariant(_))|*)
             }
 
-            /// The host raster this frame would use (see [`crate::Scattering::raster_request`]).
+            /// The technique's name, summary and paper.
+            pub fn info(&self) -> &'static TechniqueInfo {
+                match self {
+                    $(Self::$variant(_) => &<$module::$settings as Technique>::INFO,)*
+                    $(Self::$cvariant(_) => &<$cmodule::$csettings as Technique>::INFO,)*
+                }
+            }
+
+            /// The host raster of a one-light frame (see [`crate::Scattering::raster_requests`]).
             pub fn raster_request(&self, desc: &FrameDesc) -> Option<prefiltered::RectifiedRaster> {
                 match self {
                     $(Self::$variant(s) => s.raster_request(desc),)*
@@ -232,8 +246,13 @@ macro_rules! registry {
 
             /// The technique's name.
             pub fn name(&self) -> &'static str {
+                self.info().name
+            }
+
+            /// The technique's name, summary, paper and how it handles lights.
+            pub fn info(&self) -> &'static TechniqueInfo {
                 match self {
-                    $(Self::$variant(_) => <$module::$settings as Technique>::INFO.name,)*
+                    $(Self::$variant(_) => &<$module::$settings as Technique>::INFO,)*
                 }
             }
 

@@ -1,6 +1,6 @@
 //! What every technique's compute passes share: bind-group layout entries, the frame-pass
-//! layout and its bindings (frame uniforms, pass uniforms, depth, shadow map, spot texture,
-//! output), pipeline creation from a pass shader, and uniform buffers.
+//! layout and its bindings (frame uniforms, pass uniforms, depth, shadow maps, spot textures,
+//! output, lights), pipeline creation from a pass shader, and uniform buffers.
 
 use crate::frame::GpuFrame;
 
@@ -81,17 +81,33 @@ pub fn storage_buffer_entry(binding: u32, read_only: bool, min_size: Option<u64>
     }
 }
 
-/// Bindings 0–5 of every per-pixel pass over the frame: frame uniforms, pass uniforms, depth,
-/// shadow map (array), spot texture, the output in `output`'s format.
-pub fn frame_pass_entries(output: wgpu::TextureFormat) -> [wgpu::BindGroupLayoutEntry; 6] {
+/// The binding of the frame's lights (`lights` in common.wgsl, [`crate::LightsUniforms`]) in
+/// group 0 of every pass that evaluates a light.
+pub const LIGHTS_BINDING: u32 = 15;
+
+/// The lights' uniform buffer entry ([`LIGHTS_BINDING`]).
+pub fn lights_entry() -> wgpu::BindGroupLayoutEntry {
+    uniform_entry(LIGHTS_BINDING)
+}
+
+/// The bind group entry of the lights' uniform buffer.
+pub fn lights_binding(lights: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry { binding: LIGHTS_BINDING, resource: lights.as_entire_binding() }
+}
+
+/// Bindings 0–5 and the lights of every per-pixel pass over the frame: frame uniforms, pass
+/// uniforms, depth, shadow maps (array), spot textures (array), the output in `output`'s
+/// format, the lights ([`LIGHTS_BINDING`]).
+pub fn frame_pass_entries(output: wgpu::TextureFormat) -> [wgpu::BindGroupLayoutEntry; 7] {
     use wgpu::TextureViewDimension as D;
     [
         uniform_entry(0),
         uniform_entry(1),
         texture_entry(2, D::D2),
         texture_entry(3, D::D2Array),
-        texture_entry(4, D::D2),
+        texture_entry(4, D::D2Array),
         storage_texture_entry_of(5, output),
+        lights_entry(),
     ]
 }
 
@@ -117,23 +133,64 @@ pub fn frame_pass_layout_to(
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
 }
 
-/// The resources of [`frame_pass_entries`]: `white` stands in for a missing spot texture.
+/// The resources of [`frame_pass_entries`]: `white` (a one-layer array) stands in for missing
+/// spot textures.
 pub fn frame_pass_bindings<'a>(
-    frame_uniforms: &'a wgpu::Buffer,
+    buffers: &'a FrameBuffers,
     params: &'a wgpu::Buffer,
     frame: &GpuFrame<'a>,
     white: &'a wgpu::TextureView,
     output: &'a wgpu::TextureView,
-) -> [wgpu::BindGroupEntry<'a>; 6] {
+) -> [wgpu::BindGroupEntry<'a>; 7] {
     let view = wgpu::BindingResource::TextureView;
     [
-        wgpu::BindGroupEntry { binding: 0, resource: frame_uniforms.as_entire_binding() },
+        wgpu::BindGroupEntry { binding: 0, resource: buffers.frame.as_entire_binding() },
         wgpu::BindGroupEntry { binding: 1, resource: params.as_entire_binding() },
         wgpu::BindGroupEntry { binding: 2, resource: view(frame.depth) },
-        wgpu::BindGroupEntry { binding: 3, resource: view(frame.shadow_map) },
-        wgpu::BindGroupEntry { binding: 4, resource: view(frame.spot_texture.unwrap_or(white)) },
+        wgpu::BindGroupEntry { binding: 3, resource: view(frame.shadow_maps) },
+        wgpu::BindGroupEntry { binding: 4, resource: view(frame.spot_textures.unwrap_or(white)) },
         wgpu::BindGroupEntry { binding: 5, resource: view(output) },
+        lights_binding(&buffers.lights),
     ]
+}
+
+/// A technique's frame uniforms and lights uniforms, written once per frame.
+pub struct FrameBuffers {
+    /// [`crate::FrameUniforms`].
+    pub frame: wgpu::Buffer,
+    /// [`crate::LightsUniforms`].
+    pub lights: wgpu::Buffer,
+}
+
+impl FrameBuffers {
+    /// Both buffers, uninitialised.
+    pub fn new(device: &wgpu::Device) -> Self {
+        Self {
+            frame: uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64),
+            lights: uniform_buffer(device, "lights uniforms", std::mem::size_of::<crate::LightsUniforms>() as u64),
+        }
+    }
+
+    /// Writes `desc`'s camera, medium and the lights that reach the view, in order before the
+    /// passes recorded next.
+    pub fn write(&self, rec: &mut crate::gpu::Recorder, desc: &crate::FrameDesc) {
+        rec.write_buffer(&self.frame, bytemuck::bytes_of(&desc.uniforms()));
+        rec.write_buffer(&self.lights, bytemuck::bytes_of(&desc.lights_uniforms()));
+    }
+
+    /// Bytes of GPU memory.
+    pub fn size(&self) -> u64 {
+        self.frame.size() + self.lights.size()
+    }
+}
+
+/// A 1×1 white one-layer texture array: what a pass binds for the spot textures when no light
+/// has one.
+pub fn white_array(gpu: &crate::GpuContext) -> wgpu::TextureView {
+    gpu.upload_spot_textures(&[]).create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    })
 }
 
 /// A compute pipeline from a pass shader (composed with common.wgsl), with one bind group.
@@ -188,9 +245,9 @@ pub enum Bound {
 /// (depth, shadow map, spot texture, host raster) and the output. A technique adds its own
 /// size- or settings-dependent resources.
 pub fn frame_key(frame: &GpuFrame, output: &wgpu::TextureView) -> Vec<Bound> {
-    let mut key = vec![Bound::View(frame.depth.clone()), Bound::View(frame.shadow_map.clone())];
-    key.push(frame.spot_texture.map_or(Bound::Choice(0), |v| Bound::View(v.clone())));
-    key.push(frame.rectified_shadow_map.map_or(Bound::Choice(0), |v| Bound::View(v.clone())));
+    let mut key = vec![Bound::View(frame.depth.clone()), Bound::View(frame.shadow_maps.clone())];
+    key.push(frame.spot_textures.map_or(Bound::Choice(0), |v| Bound::View(v.clone())));
+    key.push(frame.rectified_shadow_map().map_or(Bound::Choice(0), |v| Bound::View(v.clone())));
     key.push(Bound::View(output.clone()));
     key
 }

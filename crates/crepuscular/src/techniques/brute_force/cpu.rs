@@ -5,22 +5,22 @@ use super::BruteForceSettings;
 use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
-use crate::march::{PixelMarch, SpotCone, frame_cone, march_pixel};
+use crate::march::{MarchLights, PixelMarch, march_pixel};
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
 use rayon::prelude::*;
 
-/// Mirrors `march_ray` in march.wgsl. `cone` is [`crate::march::frame_cone`] of the frame.
+/// Mirrors `march_ray` in march.wgsl. `lights` is [`MarchLights::of`] the frame.
 pub fn march_ray(
     frame: &CpuFrame,
     settings: &BruteForceSettings,
-    cone: Option<&SpotCone>,
+    lights: &MarchLights,
     x: u32,
     y: u32,
     dir: Vec3,
     s: f32,
 ) -> Vec3 {
-    march_pixel(frame, cone, &PixelMarch::from(settings), x, y, dir, s)
+    march_pixel(frame, lights, &PixelMarch::from(settings), x, y, dir, s)
 }
 
 /// Mirrors the `march` entry point over the whole image.
@@ -28,14 +28,14 @@ pub fn march(frame: &CpuFrame, settings: &BruteForceSettings) -> Result<(Image, 
     settings.validate()?;
     let desc = frame.desc;
     let start = std::time::Instant::now();
-    let cone = frame_cone(desc);
+    let lights = MarchLights::of(desc);
     let mut img = Image::new(desc.width, desc.height);
     img.pixels.par_chunks_mut(desc.width as usize).enumerate().for_each(|(y, row)| {
         for (x, px) in row.iter_mut().enumerate() {
             let (x, y) = (x as u32, y as u32);
             let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
-            let l = march_ray(frame, settings, cone.as_ref(), x, y, dir, s);
+            let l = march_ray(frame, settings, &lights, x, y, dir, s);
             *px = [l.x, l.y, l.z, 1.0];
         }
     });

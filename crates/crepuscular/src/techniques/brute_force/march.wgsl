@@ -16,7 +16,7 @@ struct Params {
 @group(0) @binding(1) var<uniform> params: Params;
 @group(0) @binding(2) var depth_tex: texture_2d<f32>;
 @group(0) @binding(3) var shadow_map: texture_2d_array<f32>;
-@group(0) @binding(4) var spot_tex: texture_2d<f32>;
+@group(0) @binding(4) var spot_tex: texture_2d_array<f32>;
 @group(0) @binding(5) var out_tex: texture_storage_2d<rgba32float, write>;
 
 // Eq. 1 over the interval the spot-step policy picks ([0, s] for any light under "fixed"),

@@ -115,7 +115,7 @@ pub struct BruteForce {
     pub settings: BruteForceSettings,
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    frame_buffer: wgpu::Buffer,
+    buffers: pass::FrameBuffers,
     params_buffer: wgpu::Buffer,
     white: wgpu::TextureView,
     binds: pass::BindCache<wgpu::BindGroup>,
@@ -130,17 +130,16 @@ impl BruteForce {
             let layout = pass::frame_pass_layout_to(device, "brute-force", &[], output);
             let src = pass::with_output(MARCH_WGSL, output);
             let pipeline = pass::compute_pipeline(device, "brute_force/march.wgsl", &src, "march", &layout);
-            let frame_buffer =
-                pass::uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64);
+            let buffers = pass::FrameBuffers::new(device);
             let params_buffer = pass::uniform_buffer(device, "march params", std::mem::size_of::<MarchParams>() as u64);
-            let white = gpu.upload_rgb_texture(None).create_view(&Default::default());
-            Self { settings, pipeline, layout, frame_buffer, params_buffer, white, binds: Default::default() }
+            let white = pass::white_array(gpu);
+            Self { settings, pipeline, layout, buffers, params_buffer, white, binds: Default::default() }
         })
     }
 
     /// Bytes of GPU memory this technique holds.
     pub fn gpu_memory_bytes(&self) -> u64 {
-        self.frame_buffer.size() + self.params_buffer.size() + 16
+        self.buffers.size() + self.params_buffer.size() + 16
     }
 
     /// Records the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
@@ -154,7 +153,7 @@ impl BruteForce {
     ) -> Result<TechniqueStats, Error> {
         self.settings.validate()?;
         let desc = frame.desc;
-        rec.write_buffer(&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()));
+        self.buffers.write(rec, desc);
         rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&MarchParams::from(&self.settings)));
         let key = pass::frame_key(frame, output);
         if !self.binds.is_current(&key) {
@@ -163,7 +162,7 @@ impl BruteForce {
                     label: Some("brute-force"),
                     layout: &self.layout,
                     entries: &pass::frame_pass_bindings(
-                        &self.frame_buffer,
+                        &self.buffers,
                         &self.params_buffer,
                         frame,
                         &self.white,
@@ -195,6 +194,7 @@ impl crate::techniques::Technique for BruteForceSettings {
         paper: "Tóth & Umenhoffer 2009, §3–4, eq. 1",
         gpu: true,
         cpu: true,
+        per_light: false,
     };
     fn validate(&self) -> Result<(), Error> {
         BruteForceSettings::validate(self)

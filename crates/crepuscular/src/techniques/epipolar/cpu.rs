@@ -8,7 +8,7 @@ use super::{EpipolarDebug, EpipolarLine, EpipolarParams, EpipolarSettings, MIN_L
 use crate::error::Error;
 use crate::frame::{CpuFrame, FrameDesc};
 use crate::image::Image;
-use crate::march::{PixelMarch, SpotCone, SpotSteps, cone_interval, frame_cone, march_pixel};
+use crate::march::{MarchLights, PixelMarch, SpotCone, SpotSteps, cone_interval, march_pixel};
 use crate::model::{Light, RgbTexture};
 use crate::stats::{PassTime, TechniqueStats};
 use glam::{Vec2, Vec3, Vec4};
@@ -34,7 +34,7 @@ use std::sync::Arc;
 pub fn epipole(desc: &FrameDesc) -> ([f32; 4], bool) {
     const DEGENERATE: ([f32; 4], bool) = ([-1.0, 0.0, 0.0, 0.0], true);
     let cam = desc.camera.position;
-    let (v, scale) = match &desc.light {
+    let (v, scale) = match &desc.lights[0].light {
         Light::Directional { direction, .. } => (-direction.normalize(), 1.0f32),
         Light::Spot { position, .. } | Light::Point { position, .. } => {
             (*position - cam, 1.0f32.max(cam.abs().max_element()).max(position.abs().max_element()))
@@ -341,7 +341,7 @@ pub fn setup_line(desc: &FrameDesc, cone: Option<&SpotCone>, p: &EpipolarParams,
 
 /// Mirrors the `lines` entry point: every line.
 pub fn lines(desc: &FrameDesc, p: &EpipolarParams) -> Vec<EpipolarLine> {
-    let cone = frame_cone(desc);
+    let cone = SpotCone::of(&desc.lights[0].light);
     (0..p.slices).into_par_iter().map(|k| setup_line(desc, cone.as_ref(), p, k)).collect()
 }
 
@@ -474,7 +474,7 @@ pub fn pixel_march(p: &EpipolarParams) -> PixelMarch {
 /// [`prefiltered_desc`]).
 pub fn march(frame: &CpuFrame, p: &EpipolarParams, list: &[u32]) -> Image {
     let desc = frame.desc;
-    let cone = frame_cone(desc);
+    let lights = MarchLights::of(desc);
     let m = pixel_march(p);
     let values: Vec<(usize, [f32; 4])> = list
         .par_iter()
@@ -482,7 +482,7 @@ pub fn march(frame: &CpuFrame, p: &EpipolarParams, list: &[u32]) -> Image {
             let (x, y) = (pixel % desc.width, pixel / desc.width);
             let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(frame.depth[pixel as usize], dir);
-            let l = march_pixel(frame, cone.as_ref(), &m, x, y, dir, s);
+            let l = march_pixel(frame, &lights, &m, x, y, dir, s);
             (pixel as usize, [l.x, l.y, l.z, s])
         })
         .collect();
@@ -661,6 +661,7 @@ struct Ctx<'a> {
     frame: &'a CpuFrame<'a>,
     p: &'a EpipolarParams,
     cone: Option<SpotCone>,
+    lights: MarchLights,
     lines: &'a [EpipolarLine],
     radiance: &'a [[f32; 4]],
 }
@@ -678,7 +679,7 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
     }
     let q = Vec2::new(x as f32, y as f32) + 0.5;
     if near_epipole(p, q) {
-        return (march_pixel(c.frame, c.cone.as_ref(), &pixel_march(p), x, y, dir, s), true);
+        return (march_pixel(c.frame, &c.lights, &pixel_march(p), x, y, dir, s), true);
     }
     let k0 = line_position(desc, p, q).floor() as i32;
     let l = if p.degenerate == 1 {
@@ -701,7 +702,7 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
         (Some((_, a)), None) => (a.sum / a.w, false),
         (None, Some((_, b))) => (b.sum / b.w, false),
         (None, None) if p.fallback_remarch == 1 => {
-            (march_pixel(c.frame, c.cone.as_ref(), &pixel_march(p), x, y, dir, s), true)
+            (march_pixel(c.frame, &c.lights, &pixel_march(p), x, y, dir, s), true)
         }
         (None, None) => (ch.nearest, false),
     }
@@ -712,7 +713,7 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
 /// original spot texture (re-marched pixels are full-resolution samples).
 pub fn upsample(frame: &CpuFrame, p: &EpipolarParams, lines: &[EpipolarLine], radiance: &[[f32; 4]]) -> (Image, u64) {
     let desc = frame.desc;
-    let c = Ctx { frame, p, cone: frame_cone(desc), lines, radiance };
+    let c = Ctx { frame, p, cone: SpotCone::of(&desc.lights[0].light), lights: MarchLights::of(desc), lines, radiance };
     let mut img = Image::new(desc.width, desc.height);
     let remarched = img
         .pixels
@@ -762,10 +763,10 @@ pub fn prefilter_spot_texture(tex: &RgbTexture, level: u32) -> RgbTexture {
 /// The frame description whose spot light carries the texture prefiltered at `level`; None
 /// when there is nothing to prefilter (level 0, or no textured spot light).
 pub fn prefiltered_desc(desc: &FrameDesc, level: u32) -> Option<FrameDesc> {
-    match &desc.light {
+    match &desc.lights[0].light {
         Light::Spot { texture: Some(t), .. } if level > 0 => {
             let mut d = desc.clone();
-            if let Light::Spot { texture, .. } = &mut d.light {
+            if let Light::Spot { texture, .. } = &mut d.lights[0].light {
                 *texture = Some(Arc::new(prefilter_spot_texture(t, level)));
             }
             Some(d)
@@ -787,6 +788,7 @@ pub fn render_with_debug(
     settings: &EpipolarSettings,
 ) -> Result<(Image, TechniqueStats, EpipolarDebug), Error> {
     settings.validate()?;
+    frame.desc.single_light()?;
     let desc = frame.desc;
     let p = EpipolarParams::new(settings, desc, 65535);
     let mut passes = Vec::new();

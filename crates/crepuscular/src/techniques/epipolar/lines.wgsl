@@ -26,7 +26,7 @@ fn spot_clip(line_in: Line) -> Line {
     var last = 0u;
     for (var i = 0u; i < n; i++) {
         let dir = point_ray(frame, texel_point(line, i));
-        let iv = cone_interval(frame, frame.camera_pos.xyz, dir, far_distance(frame, dir));
+        let iv = cone_interval(lights.items[0], frame.camera_pos.xyz, dir, far_distance(frame, dir));
         if iv.y > iv.x {
             if first == n {
                 first = i;
@@ -70,7 +70,7 @@ fn setup_line(k: u32) -> Line {
     line.end = b + te.xy * u0;
     line.length = c.y - u0;
     line.valid = 1u;
-    if frame.light_kind == LIGHT_SPOT {
+    if lights.items[0].kind == LIGHT_SPOT {
         line = spot_clip(line);
     }
     if line.valid == 1u {

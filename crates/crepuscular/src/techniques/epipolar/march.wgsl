@@ -11,7 +11,7 @@
 @group(0) @binding(1) var<uniform> params: Params;
 @group(0) @binding(2) var depth_tex: texture_2d<f32>;
 @group(0) @binding(3) var shadow_map: texture_2d_array<f32>;
-@group(0) @binding(4) var spot_tex: texture_2d<f32>;
+@group(0) @binding(4) var spot_tex: texture_2d_array<f32>;
 @group(0) @binding(5) var marched_tex: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(7) var<storage, read> list: array<u32>;
 @group(0) @binding(8) var<storage, read> counters: array<u32, 4>;

@@ -502,8 +502,8 @@ impl EpipolarSettings {
 
     /// The spot-texture prefilter level for `desc`'s light (0 without a textured spot light).
     pub fn prefilter_level(&self, desc: &FrameDesc) -> u32 {
-        match &desc.light {
-            Light::Spot { texture: Some(t), .. } => {
+        match desc.lights.first().map(|l| &l.light) {
+            Some(Light::Spot { texture: Some(t), .. }) => {
                 self.spot_prefilter.level(t.width.max(t.height), self.sizes(desc.width, desc.height).0)
             }
             _ => 0,
@@ -695,6 +695,8 @@ impl Sized {
 struct Prefiltered {
     texture: wgpu::Texture,
     view: wgpu::TextureView,
+    /// The same texture as the one-layer array the march binds.
+    array: wgpu::TextureView,
 }
 
 /// The GPU side of `epipolar`: pipelines, uniform and counter buffers, and the line textures,
@@ -705,7 +707,9 @@ pub struct Epipolar {
     pub settings: EpipolarSettings,
     layouts: Layouts,
     pipelines: Pipelines,
-    frame_buffer: wgpu::Buffer,
+    buffers: pass::FrameBuffers,
+    /// The lights as the march reads them (the prefiltered spot texture's layer and size).
+    march_lights: wgpu::Buffer,
     params_buffer: wgpu::Buffer,
     counters: wgpu::Buffer,
     indirect: wgpu::Buffer,
@@ -778,12 +782,15 @@ impl Layouts {
     fn new(device: &wgpu::Device, output: wgpu::TextureFormat) -> Self {
         use pass::{storage_buffer_entry as buf, texture_entry as tex, uniform_entry as uni};
         use wgpu::TextureFormat as F;
-        use wgpu::TextureViewDimension::D2;
+        use wgpu::TextureViewDimension::{D2, D2Array};
         let layout = |label: &str, entries: &[wgpu::BindGroupLayoutEntry]| {
             device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries })
         };
         Self {
-            prefilter: layout("epipolar prefilter", &[uni(0), tex(1, D2), storage_entry(2, F::Rgba32Float)]),
+            prefilter: layout(
+                "epipolar prefilter",
+                &[uni(0), tex(1, D2Array), storage_entry(2, F::Rgba32Float), pass::lights_entry()],
+            ),
             lines: layout(
                 "epipolar lines",
                 &[
@@ -793,6 +800,7 @@ impl Layouts {
                     buf(3, false, Some(32)),
                     storage_entry(4, F::Rgba32Float),
                     buf(5, false, Some(16)),
+                    pass::lights_entry(),
                 ],
             ),
             refine: layout(
@@ -862,10 +870,11 @@ impl Epipolar {
                 settings,
                 layouts,
                 pipelines,
-                frame_buffer: pass::uniform_buffer(
+                buffers: pass::FrameBuffers::new(device),
+                march_lights: pass::uniform_buffer(
                     device,
-                    "frame uniforms",
-                    std::mem::size_of::<crate::FrameUniforms>() as u64,
+                    "epipolar march lights",
+                    std::mem::size_of::<crate::LightsUniforms>() as u64,
                 ),
                 params_buffer: pass::uniform_buffer(
                     device,
@@ -874,7 +883,7 @@ impl Epipolar {
                 ),
                 counters: buf("epipolar counters", 16, U::STORAGE | U::COPY_DST | U::COPY_SRC),
                 indirect: buf("epipolar march dispatch", 12, U::STORAGE | U::INDIRECT),
-                white: gpu.upload_rgb_texture(None).create_view(&Default::default()),
+                white: pass::white_array(gpu),
                 sized: None,
                 prefiltered: None,
                 last_params: None,
@@ -889,7 +898,7 @@ impl Epipolar {
     /// texel), the marched texture (16 B per pixel) and the prefiltered spot texture.
     pub fn gpu_memory_bytes(&self) -> u64 {
         let pre = self.prefiltered.as_ref().map_or(0, |p| p.texture.width() as u64 * p.texture.height() as u64 * 16);
-        self.frame_buffer.size()
+        self.buffers.size()
             + self.params_buffer.size()
             + self.counters.size()
             + self.indirect.size()
@@ -1012,19 +1021,19 @@ impl Epipolar {
     ) -> Result<TechniqueStats, Error> {
         self.settings.validate()?;
         let desc = frame.desc;
+        let light = desc.single_light()?;
         let s = self.settings.clone();
         let max_wg = gpu.device.limits().max_compute_workgroups_per_dimension.max(1);
         let mut params = EpipolarParams::new(&s, desc, max_wg);
         self.ensure_sized(gpu, params.samples, params.slices, desc.width, desc.height)?;
-        let spot = frame.spot_texture.filter(|_| matches!(desc.light, Light::Spot { texture: Some(_), .. }));
+        let spot = frame.spot_textures.filter(|_| light.spot_texture().is_some());
         if spot.is_none() {
             params.prefilter_level = 0;
         }
-        // The prefiltered spot texture: ⌈w/2^L⌉ × ⌈h/2^L⌉.
-        let pre_size = spot.filter(|_| params.prefilter_level > 0).map(|v| {
-            let t = v.texture();
+        // The prefiltered spot texture: ⌈w/2^L⌉ × ⌈h/2^L⌉ of the light's own texture.
+        let pre_size = light.spot_texture().filter(|_| spot.is_some() && params.prefilter_level > 0).map(|t| {
             let n = 1u32 << params.prefilter_level;
-            (t.width().div_ceil(n), t.height().div_ceil(n))
+            (t.width.div_ceil(n), t.height.div_ceil(n))
         });
         match pre_size {
             Some((w, h)) => {
@@ -1038,18 +1047,29 @@ impl Epipolar {
                             h,
                         );
                         let view = texture.create_view(&Default::default());
-                        Prefiltered { texture, view }
+                        let array = texture.create_view(&wgpu::TextureViewDescriptor {
+                            dimension: Some(wgpu::TextureViewDimension::D2Array),
+                            ..Default::default()
+                        });
+                        Prefiltered { texture, view, array }
                     })?);
                 }
             }
             None => self.prefiltered = None,
         }
-        rec.write_buffer(&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()));
+        self.buffers.write(rec, desc);
+        // The march reads the prefiltered texture: layer 0 of its own array, at its size.
+        let mut march_lights = desc.lights_uniforms();
+        if let Some((w, h)) = pre_size {
+            march_lights.items[0].texture_layer = 0;
+            march_lights.items[0].texture_size = [w, h];
+        }
+        rec.write_buffer(&self.march_lights, bytemuck::bytes_of(&march_lights));
         rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&params));
         let sized = self.sized.as_ref().expect("allocated above");
         let [coords, interp, marched, radiance] = &sized.views;
-        let frame_spot = frame.spot_texture.unwrap_or(&self.white);
-        let march_spot = self.prefiltered.as_ref().map_or(frame_spot, |p| &p.view);
+        let frame_spot = frame.spot_textures.unwrap_or(&self.white);
+        let march_spot = self.prefiltered.as_ref().map_or(frame_spot, |p| &p.array);
         let mut key = pass::frame_key(frame, output);
         key.extend([Bound::View(coords.clone()), Bound::View(march_spot.clone())]);
         key.push(match (&self.prefiltered, spot) {
@@ -1064,13 +1084,13 @@ impl Epipolar {
                     device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries })
                 };
                 let e = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-                let fb = || self.frame_buffer.as_entire_binding();
+                let fb = || self.buffers.frame.as_entire_binding();
                 let pb = || self.params_buffer.as_entire_binding();
                 let prefilter = match (&self.prefiltered, spot) {
                     (Some(p), Some(src)) => Some(group(
                         "epipolar prefilter",
                         &self.layouts.prefilter,
-                        &[e(0, pb()), e(1, R::TextureView(src)), e(2, R::TextureView(&p.view))],
+                        &[e(0, pb()), e(1, R::TextureView(src)), e(2, R::TextureView(&p.view)), pass::lights_binding(&self.buffers.lights)],
                     )),
                     _ => None,
                 };
@@ -1084,6 +1104,7 @@ impl Epipolar {
                         e(3, sized.lines.as_entire_binding()),
                         e(4, R::TextureView(coords)),
                         e(5, self.counters.as_entire_binding()),
+                        pass::lights_binding(&self.buffers.lights),
                     ],
                 );
                 let refine = group(
@@ -1102,9 +1123,10 @@ impl Epipolar {
                     ],
                 );
                 let mut me =
-                    pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, marched)
+                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, marched)
                         .to_vec();
                 me[4] = e(4, R::TextureView(march_spot));
+                me[6] = pass::lights_binding(&self.march_lights);
                 me.extend([e(7, sized.list.as_entire_binding()), e(8, self.counters.as_entire_binding())]);
                 let march = group("epipolar march", &self.layouts.march, &me);
                 let interpolate = group(
@@ -1120,7 +1142,7 @@ impl Epipolar {
                     ],
                 );
                 let mut ue =
-                    pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, output)
+                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, output)
                         .to_vec();
                 ue.extend([
                     e(6, R::TextureView(radiance)),
@@ -1212,6 +1234,7 @@ impl crate::techniques::Technique for EpipolarSettings {
         paper: "Engelhardt & Dachsbacher 2010, §4–5",
         gpu: true,
         cpu: true,
+        per_light: true,
     };
     fn validate(&self) -> Result<(), Error> {
         EpipolarSettings::validate(self)

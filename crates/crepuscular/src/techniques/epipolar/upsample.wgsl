@@ -25,7 +25,7 @@
 @group(0) @binding(1) var<uniform> params: Params;
 @group(0) @binding(2) var depth_tex: texture_2d<f32>;
 @group(0) @binding(3) var shadow_map: texture_2d_array<f32>;
-@group(0) @binding(4) var spot_tex: texture_2d<f32>;
+@group(0) @binding(4) var spot_tex: texture_2d_array<f32>;
 @group(0) @binding(5) var out_tex: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(6) var radiance_tex: texture_2d<f32>;
 @group(0) @binding(7) var<storage, read> lines_buf: array<Line>;
@@ -113,8 +113,8 @@ fn upsample_pixel(px: vec2<u32>) -> Upsampled {
     out.remarched = false;
     let dir = pixel_ray(frame, px);
     let s = view_distance(frame, textureLoad(depth_tex, vec2<i32>(px), 0).r, dir);
-    if frame.light_kind == LIGHT_SPOT {
-        let iv = cone_interval(frame, frame.camera_pos.xyz, dir, s);
+    if lights.items[0].kind == LIGHT_SPOT {
+        let iv = cone_interval(lights.items[0], frame.camera_pos.xyz, dir, s);
         if iv.y <= iv.x {
             return out;
         }

@@ -6,7 +6,7 @@ use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
 use crate::integrand::lit_incident;
-use crate::march::{SpotCone, frame_cone, light_reach, march_interval, march_steps, mean_extinction, step_offset};
+use crate::march::{MarchLights, march_steps, mean_extinction, step_offset};
 use crate::shaders::pixel_jitter;
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
@@ -37,6 +37,7 @@ pub fn phase_lut(lut: &PhaseLut, c: f32) -> Vec3 {
 #[allow(clippy::too_many_arguments)]
 pub fn march_steps_lut(
     frame: &CpuFrame,
+    lights: &MarchLights,
     lut: &PhaseLut,
     dir: Vec3,
     iv: (f32, f32),
@@ -61,10 +62,13 @@ pub fn march_steps_lut(
         let t0 = a + i as f32 * delta;
         let t = t0 + off;
         let p = o + dir * t;
-        let (l_in, wl) = lit_incident(&desc.light, &desc.medium, frame.shadow_map, desc.shadow_bias, p);
-        if l_in != Vec3::ZERO {
-            let cos_theta = -wl.dot(dir);
-            sum += desc.medium.scattering * phase_lut(lut, cos_theta) * l_in * (-st * t0).exp() * seg;
+        let tr = (-st * t0).exp() * seg;
+        for &k in &lights.indices {
+            let (l_in, wl) = lit_incident(&desc.lights[k], &desc.medium, &frame.shadow_maps[k], p);
+            if l_in != Vec3::ZERO {
+                let cos_theta = -wl.dot(dir);
+                sum += desc.medium.scattering * phase_lut(lut, cos_theta) * l_in * tr;
+            }
         }
         i += stride;
     }
@@ -72,47 +76,39 @@ pub fn march_steps_lut(
 }
 
 /// Mirrors `march_ray` in march.wgsl: the terms k, k + M², … of eq. 1 on this pixel's own ray
-/// (§4.1: "in a particular pixel we evaluate just N/M² terms"). `cone` is
-/// [`crate::march::frame_cone`] of the frame; `lut` the phase table when `phase_lut` is on.
+/// (§4.1: "in a particular pixel we evaluate just N/M² terms"). `lights` is
+/// [`MarchLights::of`] the frame; `lut` the phase table when `phase_lut` is on.
 #[allow(clippy::too_many_arguments)]
 pub fn march_ray(
     frame: &CpuFrame,
     s: &InterleavedSettings,
-    cone: Option<&SpotCone>,
+    lights: &MarchLights,
     lut: Option<&PhaseLut>,
     x: u32,
     y: u32,
     dir: Vec3,
     dist: f32,
 ) -> Vec3 {
-    let iv = march_interval(
-        cone,
-        light_reach(frame.desc),
-        frame.desc.camera.position,
-        dir,
-        dist,
-        s.spot_steps,
-        s.spot_denominator,
-    );
+    let iv = lights.interval(frame.desc.camera.position, dir, dist, s.spot_steps, s.spot_denominator);
     let j = if s.jitter { pixel_jitter(x / s.block, y / s.block, s.frame_index) } else { 0.5 };
     let stride = s.block * s.block;
     let k = block_offset(s, x, y);
     match lut {
-        Some(lut) => march_steps_lut(frame, lut, dir, iv, s.steps, k, stride, j),
-        None => march_steps(frame, dir, iv, s.steps, k, stride, j),
+        Some(lut) => march_steps_lut(frame, lights, lut, dir, iv, s.steps, k, stride, j),
+        None => march_steps(frame, lights, dir, iv, s.steps, k, stride, j),
     }
 }
 
 fn march_with(frame: &CpuFrame, s: &InterleavedSettings, lut: Option<&PhaseLut>) -> Image {
     let desc = frame.desc;
-    let cone = frame_cone(desc);
+    let lights = MarchLights::of(desc);
     let mut img = Image::new(desc.width, desc.height);
     img.pixels.par_chunks_mut(desc.width as usize).enumerate().for_each(|(y, row)| {
         for (x, px) in row.iter_mut().enumerate() {
             let (x, y) = (x as u32, y as u32);
             let dir = desc.pixel_ray(x, y);
             let dist = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
-            let l = march_ray(frame, s, cone.as_ref(), lut, x, y, dir, dist);
+            let l = march_ray(frame, s, &lights, lut, x, y, dir, dist);
             *px = [l.x, l.y, l.z, dist];
         }
     });

@@ -22,7 +22,7 @@ struct Params {
 @group(0) @binding(1) var<uniform> params: Params;
 @group(0) @binding(2) var depth_tex: texture_2d<f32>;
 @group(0) @binding(3) var shadow_map: texture_2d_array<f32>;
-@group(0) @binding(4) var spot_tex: texture_2d<f32>;
+@group(0) @binding(4) var spot_tex: texture_2d_array<f32>;
 @group(0) @binding(5) var out_tex: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(6) var<storage, read> lut: array<vec4<f32>>;
 
@@ -61,10 +61,13 @@ fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u3
         let t0 = iv.x + f32(i) * delta;
         let t = t0 + off;
         let p = frame.camera_pos.xyz + dir * t;
-        let li = lit_incident(frame, shadow_map, spot_tex, p);
-        if any(li.radiance != vec3<f32>(0.0)) {
-            let cos_theta = -dot(li.dir, dir);
-            sum += frame.sigma_s.xyz * phase_lut(cos_theta) * li.radiance * exp(-st * t0) * seg;
+        let tr = exp(-st * t0) * seg;
+        for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
+            let li = lit_incident(frame, lights.items[k], shadow_map, spot_tex, p);
+            if any(li.radiance != vec3<f32>(0.0)) {
+                let cos_theta = -dot(li.dir, dir);
+                sum += frame.sigma_s.xyz * phase_lut(cos_theta) * li.radiance * tr;
+            }
         }
     }
     return sum;
@@ -73,7 +76,7 @@ fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u3
 // §4.1: "in a particular pixel we evaluate just N/M² terms" — the terms k, k + M², … of eq. 1
 // over the interval the spot-step policy picks, on this pixel's own ray.
 fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec3<f32> {
-    let iv = march_interval(frame, frame.camera_pos.xyz, dir, s, params.spot_steps, params.spot_denominator);
+    let iv = lights_interval(frame, frame.camera_pos.xyz, dir, s, params.spot_steps, params.spot_denominator);
     var j = 0.5;
     if params.jitter == 1u {
         j = pixel_jitter(px / params.block, params.frame_index);

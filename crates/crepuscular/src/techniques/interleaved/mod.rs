@@ -337,7 +337,7 @@ pub struct Interleaved {
     march_layout: wgpu::BindGroupLayout,
     rows_layout: wgpu::BindGroupLayout,
     columns_layout: wgpu::BindGroupLayout,
-    frame_buffer: wgpu::Buffer,
+    buffers: pass::FrameBuffers,
     params_buffer: wgpu::Buffer,
     white: wgpu::TextureView,
     no_lut: wgpu::Buffer,
@@ -386,8 +386,7 @@ impl Interleaved {
                 "sum_columns",
                 &columns_layout,
             );
-            let frame_buffer =
-                pass::uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64);
+            let buffers = pass::FrameBuffers::new(device);
             let params_buffer =
                 pass::uniform_buffer(device, "interleaved params", std::mem::size_of::<InterleavedParams>() as u64);
             let no_lut = device.create_buffer(&wgpu::BufferDescriptor {
@@ -396,7 +395,7 @@ impl Interleaved {
                 usage: wgpu::BufferUsages::STORAGE,
                 mapped_at_creation: false,
             });
-            let white = gpu.upload_rgb_texture(None).create_view(&Default::default());
+            let white = pass::white_array(gpu);
             Self {
                 settings,
                 march_pipeline,
@@ -405,7 +404,7 @@ impl Interleaved {
                 march_layout,
                 rows_layout,
                 columns_layout,
-                frame_buffer,
+                buffers,
                 params_buffer,
                 white,
                 no_lut,
@@ -421,7 +420,7 @@ impl Interleaved {
     pub fn gpu_memory_bytes(&self) -> u64 {
         let targets = self.targets.as_ref().map_or(0, |t| 2 * 16 * t.width as u64 * t.height as u64);
         let lut = self.lut.as_ref().map_or(0, |l| l.buffer.size());
-        self.frame_buffer.size() + self.params_buffer.size() + 16 + self.no_lut.size() + lut + targets
+        self.buffers.size() + self.params_buffer.size() + 16 + self.no_lut.size() + lut + targets
     }
 
     /// The march pass's output of the last render (rgb: the pixel's own terms; alpha: its view
@@ -493,7 +492,7 @@ impl Interleaved {
         let desc = frame.desc;
         self.ensure_targets(gpu, desc.width, desc.height)?;
         let lut_error = if self.settings.phase_lut { Some(self.ensure_lut(gpu, &desc.medium.phase)?) } else { None };
-        rec.write_buffer(&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()));
+        self.buffers.write(rec, desc);
         rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&InterleavedParams::from(&self.settings)));
         let targets = self.targets.as_ref().expect("allocated above");
         let lut = match (&self.lut, self.settings.phase_lut) {
@@ -506,10 +505,10 @@ impl Interleaved {
         if !self.binds.is_current(&key) {
             let binds = gpu.scoped("binding the interleaved inputs", || {
                 let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-                let frame_entry = || entry(0, self.frame_buffer.as_entire_binding());
+                let frame_entry = || entry(0, self.buffers.frame.as_entire_binding());
                 let params_entry = || entry(1, self.params_buffer.as_entire_binding());
                 let mut march_entries = pass::frame_pass_bindings(
-                    &self.frame_buffer,
+                    &self.buffers,
                     &self.params_buffer,
                     frame,
                     &self.white,
@@ -575,6 +574,7 @@ impl crate::techniques::Technique for InterleavedSettings {
         paper: "Tóth & Umenhoffer 2009, §4.1",
         gpu: true,
         cpu: true,
+        per_light: false,
     };
     fn validate(&self) -> Result<(), Error> {
         InterleavedSettings::validate(self)

@@ -9,7 +9,7 @@ use crate::error::Error;
 use crate::frame::{CpuFrame, FrameDesc};
 use crate::image::Image;
 use crate::integrand::{light_incident, light_position};
-use crate::march::{PixelMarch, frame_cone, light_reach, march_interval, march_pixel, mean_extinction, step_offset};
+use crate::march::{PixelMarch, light_reach, march_interval, march_pixel, mean_extinction, step_offset};
 use crate::model::segment_transmittance;
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
@@ -107,14 +107,14 @@ pub fn fourier_visibility(z_r: f32, z_i: f32, bases: u32) -> f32 {
 /// map, as a normalised depth (1 where the line is unoccluded). Mirrors rectify.wgsl.
 pub fn rectify(frame: &CpuFrame, rect: &Rectification) -> Vec<f32> {
     let (w, h) = (rect.width as usize, rect.height as usize);
-    let light = light_position(&frame.desc.light);
-    let bias = frame.desc.shadow_bias;
+    let light = light_position(&frame.desc.lights[0].light);
+    let bias = frame.desc.lights[0].shadow_bias;
     let mut out = vec![1.0f32; w * h];
     out.par_chunks_mut(w).enumerate().for_each(|(row, line)| {
         for (col, z) in line.iter_mut().enumerate() {
             let (c, r) = (col as f32 + 0.5, row as f32 + 0.5);
             let (p, dir) = rect.texel_line(c, r);
-            *z = match line_occluder(frame.shadow_map, light, p, dir, bias) {
+            *z = match line_occluder(&frame.shadow_maps[0], light, p, dir, bias) {
                 Some(o) => rect.occluder_depth(c, o),
                 None => 1.0,
             };
@@ -172,7 +172,7 @@ pub fn texel_weight(
     let tm = 0.5 * (ta + tb);
     let dir = rect.reference_dir(row, band);
     let p = rect.camera + dir * tm;
-    let (l_in, wl) = light_incident(&desc.light, &desc.medium, &desc.shadow.view_proj[0], p);
+    let (l_in, wl) = light_incident(&desc.lights[0], &desc.medium, p);
     let ph = desc.medium.phase.eval(wl.dot(-dir));
     let c = l_in * ph;
     let lum = if channels == 3 { c[channel as usize] } else { c.dot(Vec3::splat(1.0 / 3.0)) };
@@ -194,7 +194,7 @@ pub fn prefilter(
     let layers = settings.layers() as usize;
     let weighted = settings.transmittance_weights;
     let group_layers = settings.bases_per_thread / 4;
-    let channels = settings.channels(&desc.light);
+    let channels = settings.channels(&desc.lights[0].light);
     let sets = (rect.bands * channels) as usize;
     // Per row: (sets × layers × width bases, sets × width weight sums).
     let rows: Vec<(Vec<[f32; 4]>, Vec<f32>)> = (0..h)
@@ -322,14 +322,14 @@ pub fn prefiltered_visibility(p: &Passes, bases: u32, set: u32, row: f32, col: f
 pub fn unoccluded_inscatter(desc: &FrameDesc, settings: &PrefilteredSettings, dir: Vec3, s: f32) -> Vec3 {
     let st = desc.medium.extinction();
     let ss = desc.medium.scattering;
-    let (l_in, wl) = light_incident(&desc.light, &desc.medium, &desc.shadow.view_proj[0], desc.camera.position);
-    if matches!(desc.light, crate::Light::Directional { .. }) {
+    let (l_in, wl) = light_incident(&desc.lights[0], &desc.medium, desc.camera.position);
+    if matches!(desc.lights[0].light, crate::Light::Directional { .. }) {
         return ss * desc.medium.phase.eval(wl.dot(-dir)) * l_in * segment_transmittance(st, s);
     }
-    let cone = frame_cone(desc);
+    let cone = crate::march::SpotCone::of(&desc.lights[0].light);
     let iv = march_interval(
         cone.as_ref(),
-        light_reach(desc),
+        light_reach(&desc.lights[0], &desc.medium),
         desc.camera.position,
         dir,
         s,
@@ -347,7 +347,7 @@ pub fn unoccluded_inscatter(desc: &FrameDesc, settings: &PrefilteredSettings, di
     for i in 0..n {
         let t0 = iv.0 + i as f32 * delta;
         let p = desc.camera.position + dir * (t0 + off);
-        let (l, wl) = light_incident(&desc.light, &desc.medium, &desc.shadow.view_proj[0], p);
+        let (l, wl) = light_incident(&desc.lights[0], &desc.medium, p);
         sum += ss * desc.medium.phase.eval(wl.dot(-dir)) * l * (-st * t0).exp() * seg;
     }
     sum
@@ -399,14 +399,14 @@ pub fn evaluate(frame: &CpuFrame, settings: &PrefilteredSettings, p: &Passes, ep
 /// visible light, ray-marched with `epipole_steps` as `brute-force` marches them (§5).
 pub fn march_epipole(frame: &CpuFrame, settings: &PrefilteredSettings, epipole: Option<[f32; 2]>, image: &mut Image) {
     let desc = frame.desc;
-    let cone = frame_cone(desc);
+    let lights = crate::march::MarchLights::of(desc);
     let march = PixelMarch::from(settings);
     for y in 0..desc.height {
         for x in 0..desc.width {
             if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
                 let dir = desc.pixel_ray(x, y);
                 let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
-                let l = march_pixel(frame, cone.as_ref(), &march, x, y, dir, s);
+                let l = march_pixel(frame, &lights, &march, x, y, dir, s);
                 image.pixels[(y * desc.width + x) as usize] = [l.x, l.y, l.z, 1.0];
             }
         }
@@ -447,10 +447,10 @@ pub fn passes(
     };
     timed("rectify", t);
     let t = std::time::Instant::now();
-    let (basis, cumw) = prefilter(desc, &rect, settings, &depth, host.map(|_| desc.shadow_bias));
+    let (basis, cumw) = prefilter(desc, &rect, settings, &depth, host.map(|_| desc.lights[0].shadow_bias));
     timed("prefilter", t);
     let t = std::time::Instant::now();
-    let channels = settings.channels(&desc.light);
+    let channels = settings.channels(&desc.lights[0].light);
     let mut p = Passes { rect, depth, basis, cumw, channels, image: Image::new(1, 1) };
     let epipole = epipole_pixel(desc, settings.epipole_radius);
     p.image = evaluate(frame, settings, &p, None);
@@ -475,6 +475,7 @@ pub fn render_with(
     settings: &PrefilteredSettings,
     host_depth: Option<&[f32]>,
 ) -> Result<(Image, TechniqueStats), Error> {
+    frame.desc.single_light()?;
     let (p, times) = passes(frame, settings, host_depth)?;
     let epipole = epipole_pixel(frame.desc, settings.epipole_radius);
     let stats = TechniqueStats {

@@ -8,7 +8,7 @@
 @group(0) @binding(1) var<uniform> params: Params;
 @group(0) @binding(2) var depth_tex: texture_2d<f32>;
 @group(0) @binding(3) var shadow_map: texture_2d_array<f32>;
-@group(0) @binding(4) var spot_tex: texture_2d<f32>;
+@group(0) @binding(4) var spot_tex: texture_2d_array<f32>;
 @group(0) @binding(5) var out_tex: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(6) var<storage, read> rows: array<f32>;
 @group(0) @binding(7) var basis_tex: texture_2d_array<f32>;
@@ -106,11 +106,12 @@ fn ray_visibility(p: Params, pt: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
 
 fn unoccluded_inscatter(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> vec3<f32> {
     let st = extinction(f);
-    if f.light_kind == LIGHT_DIRECTIONAL {
-        let inc = light_incident(f, spot_tex, f.camera_pos.xyz);
+    let light = lights.items[0];
+    if light.kind == LIGHT_DIRECTIONAL {
+        let inc = light_incident(f, light, spot_tex, f.camera_pos.xyz);
         return f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance * segment_transmittance(st, s);
     }
-    let iv = march_interval(f, f.camera_pos.xyz, dir, s, p.ints3.w, p.epipole.w);
+    let iv = march_interval(f, light, f.camera_pos.xyz, dir, s, p.ints3.w, p.epipole.w);
     if iv.y <= iv.x {
         return vec3<f32>(0.0);
     }
@@ -121,7 +122,7 @@ fn unoccluded_inscatter(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> vec3<f32
     var sum = vec3<f32>(0.0);
     for (var i = 0u; i < n; i++) {
         let t0 = iv.x + f32(i) * delta;
-        let inc = light_incident(f, spot_tex, f.camera_pos.xyz + dir * (t0 + off));
+        let inc = light_incident(f, light, spot_tex, f.camera_pos.xyz + dir * (t0 + off));
         sum += f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance * exp(-st * t0) * seg;
     }
     return sum;

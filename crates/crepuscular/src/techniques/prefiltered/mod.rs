@@ -69,7 +69,7 @@ pub fn epipole_pixel(desc: &FrameDesc, radius: u32) -> Option<[f32; 2]> {
         return None;
     }
     let vp = desc.camera.view_proj();
-    let p = match &desc.light {
+    let p = match &desc.lights[0].light {
         crate::Light::Directional { direction, .. } => desc.camera.position - direction.normalize(),
         crate::Light::Spot { position, .. } | crate::Light::Point { position, .. } => *position,
     };
@@ -150,7 +150,7 @@ pub struct Prefiltered {
     prefilter_layout: wgpu::BindGroupLayout,
     evaluate_layout: wgpu::BindGroupLayout,
     pipeline_precision: BasisPrecision,
-    frame_buffer: wgpu::Buffer,
+    buffers: pass::FrameBuffers,
     params_buffer: wgpu::Buffer,
     rows_buffer: Option<wgpu::Buffer>,
     clamp_sampler: wgpu::Sampler,
@@ -187,11 +187,12 @@ fn prefilter_layout(device: &wgpu::Device, precision: BasisPrecision) -> wgpu::B
         entries: &[
             pass::uniform_entry(0),
             pass::uniform_entry(1),
-            pass::texture_entry(2, D::D2),
+            pass::texture_entry(2, D::D2Array),
             pass::storage_buffer_entry(3, true, None),
             pass::texture_entry(4, D::D2),
             storage_entry(5, precision.format(), D::D2Array),
             storage_entry(6, wgpu::TextureFormat::R32Float, D::D2Array),
+            pass::lights_entry(),
         ],
     })
 }
@@ -208,19 +209,11 @@ impl Prefiltered {
                 entries: &[
                     pass::uniform_entry(0),
                     pass::uniform_entry(1),
-                    pass::texture_entry(3, D::D2Array),
-                    pass::storage_buffer_entry(4, true, None),
-                    storage_entry(5, wgpu::TextureFormat::R32Float, D::D2),
-                ]
-                .map(|mut e| {
-                    e.binding = match e.binding {
-                        3 => 2,
-                        4 => 3,
-                        5 => 4,
-                        b => b,
-                    };
-                    e
-                }),
+                    pass::texture_entry(2, D::D2Array),
+                    pass::storage_buffer_entry(3, true, None),
+                    storage_entry(4, wgpu::TextureFormat::R32Float, D::D2),
+                    pass::lights_entry(),
+                ],
             });
             let prefilter_layout = prefilter_layout(device, settings.precision);
             let evaluate_layout = pass::frame_pass_layout_to(
@@ -276,11 +269,7 @@ impl Prefiltered {
                 rectify_layout,
                 prefilter_layout,
                 evaluate_layout,
-                frame_buffer: pass::uniform_buffer(
-                    device,
-                    "frame uniforms",
-                    std::mem::size_of::<crate::FrameUniforms>() as u64,
-                ),
+                buffers: pass::FrameBuffers::new(device),
                 params_buffer: pass::uniform_buffer(
                     device,
                     "prefiltered params",
@@ -289,7 +278,7 @@ impl Prefiltered {
                 rows_buffer: None,
                 clamp_sampler: sampler(wgpu::AddressMode::ClampToEdge),
                 wrap_sampler: sampler(wgpu::AddressMode::Repeat),
-                white: gpu.upload_rgb_texture(None).create_view(&Default::default()),
+                white: pass::white_array(gpu),
                 maps: None,
                 last: None,
                 binds: Default::default(),
@@ -300,7 +289,7 @@ impl Prefiltered {
 
     /// The rectification this frame would use, and the host raster request when it is the
     /// projective one (§4.2): a host that rasterizes it (depth-clamped, see [`RectifiedRaster`])
-    /// passes the result as [`crate::GpuFrame::rectified_shadow_map`] and the `rectify` pass is
+    /// passes the result as [`crate::GpuFrame::rectified_shadow_maps`] and the `rectify` pass is
     /// skipped.
     pub fn raster_request(&self, desc: &FrameDesc) -> Option<RectifiedRaster> {
         Rectification::new(desc, &self.settings.rectify_options()).raster()
@@ -319,7 +308,7 @@ impl Prefiltered {
             w as u64 * h as u64 * (layers as u64 * 4 * p.bytes() + 4 + 4 * m.sets as u64)
         });
         maps + self.rows_buffer.as_ref().map_or(0, |b| b.size())
-            + self.frame_buffer.size()
+            + self.buffers.size()
             + self.params_buffer.size()
             + 16
     }
@@ -344,7 +333,7 @@ impl Prefiltered {
 
     /// Records the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of the
     /// frame's size) through `rec`. Passes: `rectify` (skipped when the frame carries the
-    /// host's rectified raster, [`crate::GpuFrame::rectified_shadow_map`], and this frame's
+    /// host's rectified raster, [`crate::GpuFrame::rectified_shadow_maps`], and this frame's
     /// rectification is projective), `prefilter`, `evaluate`, `epipole` (when the sun's disc
     /// is on screen).
     pub fn encode(
@@ -354,8 +343,9 @@ impl Prefiltered {
         frame: &GpuFrame,
         output: &wgpu::TextureView,
     ) -> Result<TechniqueStats, Error> {
-        let host_depth = frame.rectified_shadow_map;
+        let host_depth = frame.rectified_shadow_map();
         self.settings.validate()?;
+        frame.desc.single_light()?;
         let s = self.settings.clone();
         let desc = frame.desc;
         let [w, h] = s.map_size;
@@ -366,7 +356,7 @@ impl Prefiltered {
         }
         let rect = Rectification::new(desc, &s.rectify_options());
         let host = host_depth.filter(|_| rect.mode == Mode::Projective);
-        let sets = s.sets(&desc.light);
+        let sets = s.sets(&desc.lights[0].light);
         let key = (w, h, s.layers() * sets, s.precision);
         if self.maps.as_ref().is_none_or(|m| m.key != key || m.sets != sets) {
             self.maps = Some(gpu.scoped("allocating the prefiltered maps", || allocate_maps(&gpu.device, key, sets))?);
@@ -383,17 +373,17 @@ impl Prefiltered {
         let rows = self.rows_buffer.as_ref().expect("allocated above");
         rec.write_buffer(rows, bytemuck::cast_slice(&rect.rows));
         let epipole = epipole_pixel(desc, s.epipole_radius);
-        let channels = s.channels(&desc.light);
+        let channels = s.channels(&desc.lights[0].light);
         let params = PrefilteredParams::new(
             &s,
             &rect,
             mean_extinction(desc),
-            desc.shadow_bias,
+            desc.lights[0].shadow_bias,
             epipole,
             host.is_some(),
             channels,
         );
-        rec.write_buffer(&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()));
+        self.buffers.write(rec, desc);
         rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&params));
         let maps = self.maps.as_ref().expect("allocated above");
         let view = wgpu::BindingResource::TextureView;
@@ -412,28 +402,30 @@ impl Prefiltered {
                     "prefiltered rectify",
                     &self.rectify_layout,
                     &[
-                        wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 0, resource: self.buffers.frame.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 2, resource: view(frame.shadow_map) },
+                        wgpu::BindGroupEntry { binding: 2, resource: view(frame.shadow_maps) },
                         wgpu::BindGroupEntry { binding: 3, resource: rows.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 4, resource: view(&maps.depth_view) },
+                        pass::lights_binding(&self.buffers.lights),
                     ],
                 );
                 let prefilter = bind(
                     "prefiltered prefilter",
                     &self.prefilter_layout,
                     &[
-                        wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 0, resource: self.buffers.frame.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 2, resource: view(frame.spot_texture.unwrap_or(&self.white)) },
+                        wgpu::BindGroupEntry { binding: 2, resource: view(frame.spot_textures.unwrap_or(&self.white)) },
                         wgpu::BindGroupEntry { binding: 3, resource: rows.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 4, resource: view(host.unwrap_or(&maps.depth_view)) },
                         wgpu::BindGroupEntry { binding: 5, resource: view(&maps.basis_store) },
                         wgpu::BindGroupEntry { binding: 6, resource: view(&maps.cumw_view) },
+                        pass::lights_binding(&self.buffers.lights),
                     ],
                 );
                 let mut entries =
-                    pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, output)
+                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, output)
                         .to_vec();
                 let sampler = if rect.full_circle { &self.wrap_sampler } else { &self.clamp_sampler };
                 entries.extend([
@@ -547,6 +539,7 @@ impl crate::techniques::Technique for PrefilteredSettings {
         paper: "Klehm, Seidel & Eisemann 2014, §3–5",
         gpu: true,
         cpu: true,
+        per_light: true,
     };
     fn validate(&self) -> Result<(), Error> {
         PrefilteredSettings::validate(self)

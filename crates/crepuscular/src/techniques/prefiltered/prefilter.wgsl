@@ -5,7 +5,7 @@
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<uniform> params: Params;
-@group(0) @binding(2) var spot_tex: texture_2d<f32>;
+@group(0) @binding(2) var spot_tex: texture_2d_array<f32>;
 @group(0) @binding(3) var<storage, read> rows: array<f32>;
 @group(0) @binding(4) var depth_map: texture_2d<f32>;
 @group(0) @binding(5) var out_basis: texture_storage_2d_array<BASIS_FORMAT, write>;
@@ -45,7 +45,7 @@ fn texel_weight(f: Frame, p: Params, row: u32, band: u32, channel: u32, col: u32
     }
     let tm = 0.5 * (ta + tb);
     let dir = reference_dir(p, rr, row);
-    let inc = light_incident(f, spot_tex, p.camera.xyz + dir * tm);
+    let inc = light_incident(f, lights.items[0], spot_tex, p.camera.xyz + dir * tm);
     let ph = phase(f, dot(inc.dir, -dir));
     let c = inc.radiance * ph;
     var lum = dot(c, vec3<f32>(1.0 / 3.0));

@@ -197,7 +197,7 @@ fn direction_on_screen(desc: &FrameDesc, d: Vec3, margin: f32) -> bool {
 impl Rectification {
     /// The rectification of `desc`'s camera and light under `opt`.
     pub fn new(desc: &FrameDesc, opt: &RectifyOptions) -> Self {
-        let local = !matches!(desc.light, Light::Directional { .. });
+        let local = !matches!(desc.lights[0].light, Light::Directional { .. });
         let projective = if local || opt.choice == RectificationChoice::Epipolar {
             None
         } else {
@@ -211,7 +211,7 @@ impl Rectification {
     }
 
     fn base(desc: &FrameDesc, opt: &RectifyOptions, mode: Mode) -> Self {
-        let light = crate::integrand::light_position(&desc.light);
+        let light = crate::integrand::light_position(&desc.lights[0].light);
         Self {
             mode,
             width: opt.width,
@@ -219,7 +219,7 @@ impl Rectification {
             regions: opt.regions.clamp(1, MAX_REGIONS),
             camera: desc.camera.position,
             light,
-            local: !matches!(desc.light, Light::Directional { .. }),
+            local: !matches!(desc.lights[0].light, Light::Directional { .. }),
             axes: [Vec3::X, Vec3::Y, Vec3::Z],
             ranges: Vec4::ZERO,
             region_x: vec![],
@@ -234,7 +234,7 @@ impl Rectification {
     /// §4.2, Fig. 4. None when a view ray is parallel to the light (the projected frustum spans
     /// 180° or more: the epipole is on screen).
     fn projective(desc: &FrameDesc, opt: &RectifyOptions) -> Option<Self> {
-        let Light::Directional { direction, .. } = &desc.light else { return None };
+        let Light::Directional { direction, .. } = &desc.lights[0].light else { return None };
         let wl = direction.normalize();
         // The epipole (or its opposite) on or near the screen: view rays (nearly) parallel to
         // the light, the construction is impossible or degenerate (§4.2). A margin of 0.1 in NDC:
@@ -352,7 +352,7 @@ impl Rectification {
     fn epipolar(desc: &FrameDesc, opt: &RectifyOptions) -> Self {
         let mut r = Self::base(desc, opt, Mode::Epipolar);
         let c = desc.camera.position;
-        let a = match &desc.light {
+        let a = match &desc.lights[0].light {
             Light::Directional { direction, .. } => -direction.normalize(),
             _ => (r.light - c).try_normalize().unwrap_or(desc.camera.forward()),
         };
@@ -405,7 +405,7 @@ impl Rectification {
         // the shafts are, instead of spreading evenly to the far plane (linear columns put the
         // colonnade's whole shadow structure in its first 5 % of columns at far = 200 m). Our
         // choice; §4.1 leaves the x parameterisation open. Local lights: ψ linear.
-        let knee = if r.local { 0.0 } else { (desc.shadow.texel_world * desc.shadow.size as f32).max(1e-3) };
+        let knee = if r.local { 0.0 } else { (desc.lights[0].shadow.texel_world * desc.lights[0].shadow.size as f32).max(1e-3) };
         r.region_x = vec![0.0, c_max, knee];
         // Per row: the θ interval of the slice inside the frustum, and its reference ray.
         let planes = frustum_side_normals(&corners);
@@ -766,12 +766,12 @@ mod tests {
     fn desc(light: Light, camera: Camera) -> FrameDesc {
         let bounds = crate::shadow::Bounds { min: Vec3::splat(-10.0), max: Vec3::splat(10.0) };
         let shadow = ShadowProjection::fit(&light, &camera, 16.0 / 9.0, bounds, 256);
+        let mut light = crate::FrameLight::new(light, shadow);
+        light.shadow_bias = 0.0;
         FrameDesc {
             camera: crate::FrameCamera::look_at(&camera, 16.0 / 9.0),
-            light,
+            lights: vec![light],
             medium: Medium::default(),
-            shadow,
-            shadow_bias: 0.0,
             width: 160,
             height: 90,
         }

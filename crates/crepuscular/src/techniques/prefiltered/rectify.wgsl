@@ -45,19 +45,19 @@ struct Occluder {
     o: vec3<f32>,
 }
 
-fn line_occluder(f: Frame, pt: vec3<f32>, dir: vec3<f32>, bias: f32) -> Occluder {
+fn line_occluder(l: Light, pt: vec3<f32>, dir: vec3<f32>, bias: f32) -> Occluder {
     var r: Occluder;
     r.found = false;
-    let ortho = f.shadow_orthographic == 1u;
+    let ortho = l.shadow_orthographic == 1u;
     var q = pt;
     if !ortho {
-        q = f.light_pos.xyz + dir;
+        q = l.position.xyz + dir;
     }
     var layer = 0u;
-    if f.shadow_layers == 6u {
+    if l.shadow_layers == 6u {
         layer = cube_face(dir);
     }
-    let c = f.shadow_view_proj[layer] * vec4<f32>(q, 1.0);
+    let c = l.shadow_view_proj[layer] * vec4<f32>(q, 1.0);
     if c.w <= 0.0 {
         return r;
     }
@@ -65,19 +65,19 @@ fn line_occluder(f: Frame, pt: vec3<f32>, dir: vec3<f32>, bias: f32) -> Occluder
     if abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 {
         return r;
     }
-    let n = f32(f.shadow_size);
+    let n = f32(l.shadow_size);
     let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
     let texel = vec2<u32>(min(floor(uv * n), vec2<f32>(n - 1.0)));
-    let d = textureLoad(shadow_map, vec2<i32>(texel), i32(layer), 0).r;
+    let d = textureLoad(shadow_map, vec2<i32>(texel), i32(l.shadow_first_layer + layer), 0).r;
     // The shadow map's clear value (1, or 0 for a reversed-Z map): no occluder.
-    if (f.depth_params.w == 1.0 && d >= 1.0) || (f.depth_params.w == 0.0 && d <= 0.0) {
+    if (l.shadow_clear == 1.0 && d >= 1.0) || (l.shadow_clear == 0.0 && d <= 0.0) {
         return r;
     }
-    let stored = shadow_linear_depth(f, d);
+    let stored = shadow_linear_depth(l, d);
     if ortho {
-        r.o = q + dir * (stored - shadow_linear_depth(f, ndc.z));
+        r.o = q + dir * (stored - shadow_linear_depth(l, ndc.z));
     } else {
-        r.o = f.light_pos.xyz + dir * (stored / c.w);
+        r.o = l.position.xyz + dir * (stored / c.w);
     }
     r.o += dir * bias;
     r.found = true;
@@ -106,7 +106,8 @@ fn rectify(@builtin(global_invocation_id) id: vec3<u32>) {
     let c = f32(id.x) + 0.5;
     let r = f32(id.y) + 0.5;
     let line = texel_line(params, c, r);
-    let occ = line_occluder(frame, line.p, line.dir, frame.shadow_bias);
+    let light = lights.items[0];
+    let occ = line_occluder(light, line.p, line.dir, light.shadow_bias);
     var z = 1.0;
     if occ.found {
         z = occluder_depth(params, c, occ.o);

@@ -37,9 +37,12 @@ impl Default for ReferenceSettings {
     }
 }
 
-/// f64 evaluation of σs·p·L_in·V at `p` (see `integrand::inscatter_density` for the f32 twin).
+/// f64 evaluation of σs·p·L_in·V of one light at `p` (see `integrand::inscatter_density` for
+/// the f32 twin).
 struct Integrand<'a> {
     frame: &'a CpuFrame<'a>,
+    light: &'a crate::FrameLight,
+    shadow: &'a crate::ShadowMap,
     sigma_s: DVec3,
     sigma_t: DVec3,
     light_pos: DVec3,
@@ -51,10 +54,11 @@ struct Integrand<'a> {
 }
 
 impl<'a> Integrand<'a> {
-    fn new(frame: &'a CpuFrame<'a>) -> Self {
+    fn new(frame: &'a CpuFrame<'a>, k: usize) -> Self {
         let d = frame.desc;
+        let fl = &d.lights[k];
         let dv = |v: glam::Vec3| v.as_dvec3();
-        let (color, axis, co, ci) = match &d.light {
+        let (color, axis, co, ci) = match &fl.light {
             Light::Directional { direction, color, intensity } => {
                 (dv(*color) * *intensity as f64, dv(direction.normalize()), 0.0, 0.0)
             }
@@ -68,11 +72,13 @@ impl<'a> Integrand<'a> {
         };
         Self {
             frame,
+            light: fl,
+            shadow: &frame.shadow_maps[k],
             sigma_s: dv(d.medium.scattering),
             sigma_t: dv(d.medium.extinction()),
-            light_pos: dv(light_position(&d.light)),
-            color,
-            shadow_vp: d.shadow.view_proj.iter().map(|m| m.as_dmat4()).collect(),
+            light_pos: dv(light_position(&fl.light)),
+            color: color * fl.scattering as f64,
+            shadow_vp: fl.shadow.view_proj.iter().map(|m| m.as_dmat4()).collect(),
             spot_axis: axis,
             cos_outer: co,
             cos_inner: ci,
@@ -80,7 +86,7 @@ impl<'a> Integrand<'a> {
     }
 
     fn visibility(&self, p: DVec3) -> f64 {
-        let sm = self.frame.shadow_map;
+        let sm = self.shadow;
         let pr = &sm.projection;
         let layer = if pr.layers == 6 { crate::shadow::cube_face((p - self.light_pos).as_vec3()) } else { 0 };
         let c = self.shadow_vp[layer as usize] * DVec4::new(p.x, p.y, p.z, 1.0);
@@ -95,12 +101,12 @@ impl<'a> Integrand<'a> {
         let tx = ((ndc.x * 0.5 + 0.5) * n).floor().min(n - 1.0) as u32;
         let ty = ((0.5 - ndc.y * 0.5) * n).floor().min(n - 1.0) as u32;
         let stored = pr.linear_f64(sm.texel(layer, tx, ty) as f64);
-        if pr.linear_f64(ndc.z) <= stored + self.frame.desc.shadow_bias as f64 { 1.0 } else { 0.0 }
+        if pr.linear_f64(ndc.z) <= stored + self.light.shadow_bias as f64 { 1.0 } else { 0.0 }
     }
 
     fn density(&self, view_dir: DVec3, p: DVec3) -> DVec3 {
         let d = self.frame.desc;
-        let (l_in, wl) = match &d.light {
+        let (l_in, wl) = match &self.light.light {
             Light::Directional { .. } => (self.color, self.spot_axis),
             Light::Point { .. } | Light::Spot { .. } => {
                 let v = p - self.light_pos;
@@ -109,7 +115,7 @@ impl<'a> Integrand<'a> {
                 let wl = v / dist;
                 let att = (-self.sigma_t * dist).exp() / d2;
                 let mut l = self.color * att;
-                if let Light::Spot { texture, .. } = &d.light {
+                if let Light::Spot { texture, .. } = &self.light.light {
                     let c = wl.dot(self.spot_axis);
                     let t = ((c - self.cos_outer) / (self.cos_inner - self.cos_outer).max(1e-12)).clamp(0.0, 1.0);
                     l *= t * t * (3.0 - 2.0 * t);
@@ -155,12 +161,13 @@ pub fn render(
     settings.validate()?;
     let desc = frame.desc;
     let start = std::time::Instant::now();
-    let integrand = Integrand::new(frame);
+    // Every light that reaches the view, each integrated over its own interval of the ray
+    // (docs/MODEL.md §6): L_scatt = Σ_k ∫ T·σs·p_k·L_in,k·V_k dt.
+    let lights = crate::march::MarchLights::of(desc);
+    let integrands: Vec<Integrand> = lights.indices.iter().map(|&k| Integrand::new(frame, k)).collect();
     let eye = desc.camera.position.as_dvec3();
     let fwd = desc.camera.forward().as_dvec3();
     let n = settings.steps;
-    let cone = crate::march::frame_cone(desc);
-    let reach = crate::march::light_reach(desc).map(|(c, r)| (c.as_dvec3(), r as f64));
     let sigma_mean = {
         let st = desc.medium.extinction().as_dvec3();
         (st.x + st.y + st.z) / 3.0
@@ -179,55 +186,58 @@ pub fn render(
                 let dir = desc.camera.ndc_ray_f64(glam::DVec2::new(ndc_x, ndc_y));
                 let lin = desc.camera.view_depth_f64(frame.depth[y as usize * w + x as usize] as f64);
                 let s = lin / dir.dot(fwd).max(1e-4);
-                // The light is zero outside a spot's cone: integrate only the ray's chord inside
-                // it (march.rs, exact-cone), widened by a margin against f32 rounding.
-                let (t_lo, t_hi) = match &cone {
-                    None => (0.0, s),
-                    Some(c) => match cone_interval(c, eye.as_vec3(), dir.as_vec3(), s as f32) {
-                        None => (0.0, 0.0),
-                        Some((a, b)) => {
-                            let m = 1e-3 * (b - a) as f64 + 1e-4;
-                            ((a as f64 - m).max(0.0), (b as f64 + m).min(s))
-                        }
-                    },
-                };
-                // A local light's reach (march.rs light_reach): beyond it the light has crossed
-                // more than 13.8 optical depths in every channel.
-                let (t_lo, t_hi) = match reach {
-                    Some((c, r)) if t_hi > t_lo => {
-                        let v = eye - c;
-                        let b = dir.dot(v);
-                        let disc = b * b - (v.dot(v) - r * r);
-                        if disc < 0.0 { (0.0, 0.0) } else { (t_lo.max(-b - disc.sqrt()), t_hi.min(-b + disc.sqrt())) }
-                    }
-                    _ => (t_lo, t_hi),
-                };
-                let len = (t_hi - t_lo).max(0.0);
-                // Strata in transmittance: t = t_lo − ln(1 − ξ·(1 − e^(−σ̄·len)))/σ̄ with pdf
-                // σ̄·e^(−σ̄(t − t_lo))/(1 − e^(−σ̄·len)) (σ̄ the mean extinction of the three
-                // channels), so a dense medium's first few centimetres get the samples they
-                // need; uniform strata where σ̄·len is tiny.
-                let importance = sigma_mean * len > 1e-3;
-                let norm = if importance { -(-sigma_mean * len).exp_m1() } else { 0.0 };
                 let (mut full, mut even) = (DVec3::ZERO, DVec3::ZERO);
                 let mut rng = pcg_hash(x ^ pcg_hash(y ^ pcg_hash(settings.seed)));
-                for k in 0..n {
-                    rng = pcg_hash(rng);
-                    let u = (rng >> 8) as f64 / 16777216.0;
-                    let xi = (k as f64 + u) / n as f64;
-                    let (t, w) = if importance {
-                        let dt = -(-xi * norm).ln_1p() / sigma_mean;
-                        (t_lo + dt, norm / (sigma_mean * (-sigma_mean * dt).exp() * n as f64))
-                    } else {
-                        (t_lo + xi * len, len / n as f64)
+                for (integrand, (cone, reach)) in integrands.iter().zip(lights.cones.iter().zip(&lights.reaches)) {
+                    let reach = reach.map(|(c, r)| (c.as_dvec3(), r as f64));
+                    // The light is zero outside a spot's cone: integrate only the ray's chord inside
+                    // it (march.rs, exact-cone), widened by a margin against f32 rounding.
+                    let (t_lo, t_hi) = match cone {
+                        None => (0.0, s),
+                        Some(c) => match cone_interval(c, eye.as_vec3(), dir.as_vec3(), s as f32) {
+                            None => (0.0, 0.0),
+                            Some((a, b)) => {
+                                let m = 1e-3 * (b - a) as f64 + 1e-4;
+                                ((a as f64 - m).max(0.0), (b as f64 + m).min(s))
+                            }
+                        },
                     };
-                    if len <= 0.0 {
-                        break;
-                    }
-                    let f = integrand.density(dir, eye + dir * t) * (-integrand.sigma_t * t).exp();
-                    full += f * w;
-                    if k % 2 == 0 {
-                        even += f * 2.0 * w;
+                    // A local light's reach (march.rs light_reach): beyond it the light has crossed
+                    // more than 13.8 optical depths in every channel.
+                    let (t_lo, t_hi) = match reach {
+                        Some((c, r)) if t_hi > t_lo => {
+                            let v = eye - c;
+                            let b = dir.dot(v);
+                            let disc = b * b - (v.dot(v) - r * r);
+                            if disc < 0.0 { (0.0, 0.0) } else { (t_lo.max(-b - disc.sqrt()), t_hi.min(-b + disc.sqrt())) }
+                        }
+                        _ => (t_lo, t_hi),
+                    };
+                    let len = (t_hi - t_lo).max(0.0);
+                    // Strata in transmittance: t = t_lo − ln(1 − ξ·(1 − e^(−σ̄·len)))/σ̄ with pdf
+                    // σ̄·e^(−σ̄(t − t_lo))/(1 − e^(−σ̄·len)) (σ̄ the mean extinction of the three
+                    // channels), so a dense medium's first few centimetres get the samples they
+                    // need; uniform strata where σ̄·len is tiny.
+                    let importance = sigma_mean * len > 1e-3;
+                    let norm = if importance { -(-sigma_mean * len).exp_m1() } else { 0.0 };
+                    for k in 0..n {
+                        rng = pcg_hash(rng);
+                        let u = (rng >> 8) as f64 / 16777216.0;
+                        let xi = (k as f64 + u) / n as f64;
+                        let (t, w) = if importance {
+                            let dt = -(-xi * norm).ln_1p() / sigma_mean;
+                            (t_lo + dt, norm / (sigma_mean * (-sigma_mean * dt).exp() * n as f64))
+                        } else {
+                            (t_lo + xi * len, len / n as f64)
+                        };
+                        if len <= 0.0 {
+                            break;
+                        }
+                        let f = integrand.density(dir, eye + dir * t) * (-integrand.sigma_t * t).exp();
+                        full += f * w;
+                        if k % 2 == 0 {
+                            even += f * 2.0 * w;
+                        }
                     }
                 }
                 let mag = full.max_element();
@@ -278,6 +288,7 @@ impl crate::techniques::Technique for ReferenceSettings {
         paper: "the integral itself (docs/MODEL.md)",
         gpu: false,
         cpu: true,
+        per_light: false,
     };
     fn validate(&self) -> Result<(), Error> {
         ReferenceSettings::validate(self)

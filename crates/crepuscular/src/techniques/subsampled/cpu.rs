@@ -5,7 +5,7 @@ use super::{MIN_WEIGHT, SubsampledSettings, stats_extra};
 use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
-use crate::march::{PixelMarch, SpotCone, frame_cone, march_pixel};
+use crate::march::{MarchLights, PixelMarch, march_pixel};
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -22,13 +22,13 @@ pub fn source_pixel(i: u32, full: u32, grid: u32) -> u32 {
 pub fn march_ray(
     frame: &CpuFrame,
     settings: &SubsampledSettings,
-    cone: Option<&SpotCone>,
+    lights: &MarchLights,
     x: u32,
     y: u32,
     dir: Vec3,
     s: f32,
 ) -> Vec3 {
-    march_pixel(frame, cone, &PixelMarch::from(settings), x, y, dir, s)
+    march_pixel(frame, lights, &PixelMarch::from(settings), x, y, dir, s)
 }
 
 /// Mirrors `struct Bracket` in upsample.wgsl: the grid samples i0 ≤ i1 whose source pixels
@@ -72,7 +72,7 @@ pub fn depth_weight(r: f32, tol: f32) -> f32 {
 struct Ctx<'a> {
     frame: &'a CpuFrame<'a>,
     settings: &'a SubsampledSettings,
-    cone: Option<SpotCone>,
+    lights: MarchLights,
     grid: &'a Image,
 }
 
@@ -105,7 +105,7 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
         (sum / wsum, false)
     } else if c.settings.edge_remarch {
         // No depth-compatible neighbour: march this pixel at full resolution.
-        (march_ray(c.frame, c.settings, c.cone.as_ref(), x, y, dir, s), true)
+        (march_ray(c.frame, c.settings, &c.lights, x, y, dir, s), true)
     } else {
         let t = taps[nearest];
         (Vec3::new(t[0], t[1], t[2]), false)
@@ -119,7 +119,7 @@ pub fn march(frame: &CpuFrame, settings: &SubsampledSettings) -> Result<Image, E
     settings.validate()?;
     let desc = frame.desc;
     let (gw, gh) = settings.grid_size(desc.width, desc.height);
-    let cone = frame_cone(desc);
+    let lights = MarchLights::of(desc);
     let mut img = Image::new(gw, gh);
     img.pixels.par_chunks_mut(gw as usize).enumerate().for_each(|(j, row)| {
         let y = source_pixel(j as u32, desc.height, gh);
@@ -127,7 +127,7 @@ pub fn march(frame: &CpuFrame, settings: &SubsampledSettings) -> Result<Image, E
             let x = source_pixel(i as u32, desc.width, gw);
             let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
-            let l = march_ray(frame, settings, cone.as_ref(), x, y, dir, s);
+            let l = march_ray(frame, settings, &lights, x, y, dir, s);
             *px = [l.x, l.y, l.z, s];
         }
     });
@@ -139,7 +139,7 @@ pub fn march(frame: &CpuFrame, settings: &SubsampledSettings) -> Result<Image, E
 /// pixels re-marched at full resolution.
 pub fn upsample(frame: &CpuFrame, settings: &SubsampledSettings, grid: &Image) -> (Image, u64) {
     let desc = frame.desc;
-    let c = Ctx { frame, settings, cone: frame_cone(desc), grid };
+    let c = Ctx { frame, settings, lights: MarchLights::of(desc), grid };
     let mut img = Image::new(desc.width, desc.height);
     let remarched: u64 = img
         .pixels

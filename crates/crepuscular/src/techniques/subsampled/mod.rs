@@ -214,7 +214,7 @@ pub struct Subsampled {
     upsample_pipeline: wgpu::ComputePipeline,
     march_layout: wgpu::BindGroupLayout,
     upsample_layout: wgpu::BindGroupLayout,
-    frame_buffer: wgpu::Buffer,
+    buffers: pass::FrameBuffers,
     params_buffer: wgpu::Buffer,
     counter: wgpu::Buffer,
     white: wgpu::TextureView,
@@ -258,8 +258,7 @@ impl Subsampled {
                     mapped_at_creation: false,
                 })
             };
-            let frame_buffer =
-                pass::uniform_buffer(device, "frame uniforms", std::mem::size_of::<crate::FrameUniforms>() as u64);
+            let buffers = pass::FrameBuffers::new(device);
             let params_buffer =
                 pass::uniform_buffer(device, "subsampled params", std::mem::size_of::<SubsampledParams>() as u64);
             let counter = buf(
@@ -267,14 +266,14 @@ impl Subsampled {
                 4,
                 wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
             );
-            let white = gpu.upload_rgb_texture(None).create_view(&Default::default());
+            let white = pass::white_array(gpu);
             Self {
                 settings,
                 march_pipeline,
                 upsample_pipeline,
                 march_layout,
                 upsample_layout,
-                frame_buffer,
+                buffers,
                 params_buffer,
                 counter,
                 white,
@@ -287,7 +286,7 @@ impl Subsampled {
     /// Bytes of GPU memory this technique holds (buffers, the 1×1 white texture and the grid).
     pub fn gpu_memory_bytes(&self) -> u64 {
         let grid = self.grid.as_ref().map_or(0, |g| g.texture.width() as u64 * g.texture.height() as u64 * 16);
-        self.frame_buffer.size() + self.params_buffer.size() + self.counter.size() + 16 + grid
+        self.buffers.size() + self.params_buffer.size() + self.counter.size() + 16 + grid
     }
 
     /// The low-resolution grid of the last frame (`Rgba32Float`, w×h: in-scattering in rgb,
@@ -326,14 +325,14 @@ impl Subsampled {
         }
         let grid_view = &self.grid.as_ref().expect("allocated above").view;
         let params = SubsampledParams::new(&self.settings, (gw, gh));
-        rec.write_buffer(&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()));
+        self.buffers.write(rec, desc);
         rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&params));
         let mut key = pass::frame_key(frame, output);
         key.push(pass::Bound::View(grid_view.clone()));
         if !self.binds.is_current(&key) {
             let binds = gpu.scoped("binding the subsampled inputs", || {
                 let common =
-                    |out| pass::frame_pass_bindings(&self.frame_buffer, &self.params_buffer, frame, &self.white, out);
+                    |out| pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, out);
                 let march = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("subsampled march"),
                     layout: &self.march_layout,
@@ -401,6 +400,7 @@ impl crate::techniques::Technique for SubsampledSettings {
         paper: "the baseline of Engelhardt & Dachsbacher 2010 §6 / Fig. 9",
         gpu: true,
         cpu: true,
+        per_light: false,
     };
     fn validate(&self) -> Result<(), Error> {
         SubsampledSettings::validate(self)

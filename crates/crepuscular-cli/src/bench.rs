@@ -147,10 +147,66 @@ pub const PRESETS: &[(&str, &str)] = &[
         "Klehm, Seidel & Eisemann 2014 Table 2: prefiltered's shadow-map size (512–4096 × 1024, 1024 × 512–1536) and bases M (16–128) → prefix-sum and scattering time and memory, 1920×1080",
     ),
     (
+        "lights",
+        "many lights: every GPU technique at 0, 1, 2, 4 and 8 lights of night-street (lamps first) → time per light added and PSNR vs reference, 480×270",
+    ),
+    (
         "klehm-scenes",
         "Klehm, Seidel & Eisemann 2014 §5: scene independence and speed — prefiltered (defaults) on every built-in scene against brute-force at 256 steps, 1920×1080",
     ),
 ];
+
+/// The scene of the `lights` preset and the light counts it sweeps.
+const LIGHTS_SCENE: &str = "night-street";
+const LIGHT_COUNTS: [usize; 5] = [0, 1, 2, 4, 8];
+
+/// The light count of a `NAME:lights=N` scene name.
+fn light_count(scene: &str) -> Option<usize> {
+    scene.rsplit_once(":lights=").and_then(|(_, n)| n.parse().ok())
+}
+
+/// `lights`: per technique, the time at each light count, the first light's cost t1 − t0, each
+/// added light's (tN − t1)/(N − 1), their ratio, and PSNR vs reference at each N.
+fn lights_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "\n## Lights table\n\nms per frame (median); first = t1 − t0 (t0: no light reaches the effect); added = \
+         (tN − t1)/(N − 1), the cost of each light after the first; ratio = added / first (goal for the \
+         march-based techniques: ≤ 0.5); PSNR vs reference (dB) in brackets.\n\n\
+         | technique | t0 | t1 | t2 | t4 | t8 | first | added (2) | added (4) | added (8) | ratio (8) |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut techniques: Vec<&str> = Vec::new();
+    for x in &r.records {
+        if !techniques.contains(&x.technique.as_str()) {
+            techniques.push(&x.technique);
+        }
+    }
+    for t in techniques {
+        let at = |n: usize| r.records.iter().find(|x| x.technique == t && light_count(&x.scene) == Some(n));
+        let time = |n: usize| at(n).map(|x| x.total_ms[0]);
+        let cell = |n: usize| {
+            at(n).map_or("–".into(), |x| format!("{:.1} ({})", x.total_ms[0], fmt_opt(x.psnr_db, 1)))
+        };
+        let first = time(1).zip(time(0)).map(|(a, b)| a - b);
+        let added = |n: usize| time(n).zip(time(1)).map(|(a, b)| (a - b) / (n - 1) as f64);
+        let f = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.1}"));
+        let ratio = added(8).zip(first).map(|(a, b)| if b > 0.0 { a / b } else { f64::NAN });
+        s += &format!(
+            "| {t} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            cell(0),
+            cell(1),
+            cell(2),
+            cell(4),
+            cell(8),
+            f(first),
+            f(added(2)),
+            f(added(4)),
+            f(added(8)),
+            ratio.map_or("–".into(), |v| format!("{v:.2}")),
+        );
+    }
+    s
+}
 
 /// The scene of the Klehm et al. 2014 presets: their San Miguel is a sun through a tree's
 /// leaves (a complex shadow map), which `forest` is.
@@ -386,6 +442,26 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
                 Variant::new("prefiltered", &[], "prefiltered", None),
                 Variant::new("brute-force", &["steps=256"], "brute-force, 256 steps", None),
             ],
+            repeat: 3,
+            warmup: 1,
+            reference_steps: 256,
+        },
+        "lights" => BenchPlan {
+            name: name.into(),
+            description: "Many lights: every GPU technique at its defaults on `night-street` with its first 0, 1, \
+                          2, 4 and 8 lights (`night-street:lights=N`: four street lamps, then the lantern \
+                          (point), the moon and two more lamps; 0 = the first lamp with its scattering off, the \
+                          work that does not depend on the lights). bench.md's `Lights table` gives, per \
+                          technique, the first light's cost (t1 − t0), each added light's (tN − t1)/(N − 1) and \
+                          their ratio (goal for the march-based techniques: ≤ 0.5), and PSNR vs reference at \
+                          each N."
+                .into(),
+            scenes: LIGHT_COUNTS.iter().map(|n| format!("{LIGHTS_SCENE}:lights={n}")).collect(),
+            sizes: vec![(480, 270)],
+            variants: ["brute-force", "interleaved", "subsampled", "epipolar", "prefiltered"]
+                .iter()
+                .map(|t| Variant::new(t, &[], t, None))
+                .collect(),
             repeat: 3,
             warmup: 1,
             reference_steps: 256,
@@ -1017,6 +1093,9 @@ fn paper_table(r: &BenchReport) -> String {
     if r.plan.name == "klehm-scenes" {
         return scenes_table(r);
     }
+    if r.plan.name == "lights" {
+        return lights_table(r);
+    }
     let table1 = r.plan.name == "klehm-table1";
     if !table1 && r.plan.name != "klehm-table2" {
         return String::new();
@@ -1430,6 +1509,29 @@ pub fn write(r: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
                     written.push(p.with_extension("png"));
                     written.push(p);
                 }
+            }
+        }
+    }
+    // Time and quality vs the number of lights (the `lights` preset): one curve per technique.
+    if r.plan.scenes.iter().all(|s| light_count(s).is_some()) && r.plan.scenes.len() > 1 {
+        for (what, file, quality) in
+            [("technique time per frame, ms (median)", "time_vs_lights", false), ("PSNR vs reference, dB", "psnr_vs_lights", true)]
+        {
+            let mut curves: Curves = Vec::new();
+            for x in &r.records {
+                let Some(n) = light_count(&x.scene) else { continue };
+                let y = if quality { x.psnr_db } else { Some(x.total_ms[0]) };
+                let Some(y) = y.filter(|y| y.is_finite()) else { continue };
+                match curves.iter_mut().find(|c| c.0 == x.series) {
+                    Some(c) => c.1.push((n as f64, y)),
+                    None => curves.push((x.series.clone(), vec![(n as f64, y)])),
+                }
+            }
+            let p = dir.join(format!("{file}.svg"));
+            let (w, h) = r.plan.sizes[0];
+            if line_plot(&p, &format!("{what} vs lights — {LIGHTS_SCENE} {w}×{h} — {dev}"), "lights", what, false, &curves)? {
+                written.push(p.with_extension("png"));
+                written.push(p);
             }
         }
     }

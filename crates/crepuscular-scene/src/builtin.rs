@@ -12,6 +12,8 @@
 //! | `stained-glass` | spot with a projected 256² texture | 12 × 8 × 16 m room | a coloured slab of light through a window into a dusty room |
 //! | `cage` | point (cube shadow map) | 3.2 m lantern | beams radiating out of a lattice lantern onto the ground and a wall |
 //! | `terrain` | directional, sun 10° high | 180 × 180 m, 128² grid | shafts fanning from behind a peak of a notched ridge |
+//! | `night-street` | six street lamps (spots), a lantern (point) and a moon: eight lights | 12 × 70 m street | cones of lamplight and moonlit shafts through the alleys in haze |
+//! | `atrium` | a sun through five skylights and two spots | 20 × 12 × 10 m hall | daylight shafts from the roof crossed by two stage spots on a statue |
 
 use crate::mesh::{self, Transform};
 use crate::scene::{Geometry, RenderSettings, Scene, Vertex};
@@ -31,6 +33,11 @@ const SCENES: &[(&str, &str)] = &[
     ("stained-glass", "a dusty room lit by a spot light through a window with a projected stained-glass texture"),
     ("cage", "a point light inside a lattice lantern, beams radiating outward (cube shadow map)"),
     ("terrain", "a procedural 128×128 heightfield; low sun behind a notched ridge, shafts fanning from a peak"),
+    (
+        "night-street",
+        "a street at night in haze: six street lamps (spots), a lantern (point), a low moon through the alleys",
+    ),
+    ("atrium", "a hall by day: sun shafts through five skylights, two stage spots crossing them on a statue"),
 ];
 
 /// Names and one-line descriptions of the built-in scenes, in a stable order.
@@ -47,6 +54,8 @@ pub fn builtin(name: &str) -> Option<Scene> {
         "stained-glass" => stained_glass(),
         "cage" => cage(),
         "terrain" => terrain(),
+        "night-street" => night_street(),
+        "atrium" => atrium(),
         _ => return None,
     };
     scene.name = name.to_string();
@@ -653,6 +662,178 @@ fn terrain() -> Scene {
         }.into()],
         geometry: g,
         render: render(0.15, Vec3::new(0.05, 0.055, 0.07)),
+    }
+}
+
+/// A street between two rows of houses with alleys between them, at night in haze: six street
+/// lamps (spots on posts, aimed down and inwards) light cones on the cobbles, a lantern (a
+/// point light) hangs under an awning on the right, and a low moon behind the left row sends
+/// shafts through the alleys across the street. Eight lights, thirteen shadow-map layers of
+/// 1024². The lights are in the order `bench --preset lights` adds them (`night-street:lights=N`):
+/// the four nearest lamps, the lantern, the moon, the two far lamps.
+fn night_street() -> Scene {
+    let mut g = Geometry::default();
+    ground(&mut g, 160.0, Vec3::new(0.32, 0.3, 0.28));
+    let wall = Vec3::new(0.5, 0.46, 0.42);
+    let dark = Vec3::new(0.3, 0.28, 0.27);
+    let iron = Vec3::new(0.12, 0.12, 0.13);
+    let mut rng = Rng::new(0x5EE7_11A7);
+    // Houses: blocks 6–9 m long with 1.6 m alleys, 7–13 m high, both sides of a 12 m street.
+    for side in [-1.0f32, 1.0] {
+        let mut z = 12.0f32;
+        while z > -70.0 {
+            let len = rng.range(6.0, 9.0);
+            let h = rng.range(7.0, 13.0);
+            let c = Vec3::new(side * 11.0, h * 0.5, z - len * 0.5);
+            boxed(&mut g, c, Vec3::new(10.0, h, len), if rng.f32() < 0.5 { wall } else { dark });
+            // A cornice and a doorstep on the street face.
+            boxed(&mut g, Vec3::new(side * 5.8, h - 0.4, z - len * 0.5), Vec3::new(0.5, 0.3, len), dark);
+            boxed(&mut g, Vec3::new(side * 5.8, 0.1, z - len * 0.5), Vec3::new(0.6, 0.2, 1.4), dark);
+            z -= len + 1.6;
+        }
+    }
+    // Street lamps: posts with an arm and a head; the spot hangs just under the head.
+    let mut lights = Vec::new();
+    for (i, z) in [-6.0f32, -15.0, -24.0, -33.0, -42.0, -51.0].into_iter().enumerate() {
+        let side = if i % 2 == 0 { 1.0f32 } else { -1.0 };
+        let x = side * 4.6;
+        g.append(&mesh::cylinder(&Transform::at_scaled(Vec3::new(x, 2.6, z), Vec3::new(0.16, 5.2, 0.16)), iron));
+        boxed(&mut g, Vec3::new(x - side * 0.45, 5.2, z), Vec3::new(0.9, 0.08, 0.08), iron);
+        boxed(&mut g, Vec3::new(x - side * 0.9, 5.15, z), Vec3::new(0.5, 0.18, 0.5), iron);
+        lights.push(crate::scene::SceneLight::new(Light::Spot {
+            position: Vec3::new(x - side * 0.9, 4.98, z),
+            direction: Vec3::new(-side * 0.35, -1.0, 0.1).normalize(),
+            outer_angle_degrees: 38.0,
+            inner_angle_degrees: 28.0,
+            color: Vec3::new(1.0, 0.74, 0.45),
+            intensity: 140.0,
+            texture: None,
+        }));
+    }
+    let far_lamps = lights.split_off(4);
+    // The lantern under an awning by a door on the right.
+    boxed(&mut g, Vec3::new(5.3, 3.3, -11.5), Vec3::new(1.4, 0.1, 2.4), dark);
+    boxed(&mut g, Vec3::new(5.3, 3.05, -11.5), Vec3::new(0.04, 0.4, 0.04), iron);
+    lights.push(crate::scene::SceneLight::new(Light::Point {
+        position: Vec3::new(5.3, 2.7, -11.5),
+        color: Vec3::new(1.0, 0.58, 0.3),
+        intensity: 30.0,
+    }));
+    // Things in the street: a cart, barrels, benches.
+    boxed_rot(&mut g, Vec3::new(-2.5, 0.7, -21.0), Vec3::new(1.6, 1.0, 3.0), Vec3::new(0.0, 12.0, 0.0), dark);
+    for k in 0..5 {
+        let p = Vec3::new(3.6 + 0.5 * (k % 2) as f32, 0.5, -31.0 - 1.1 * k as f32);
+        g.append(&mesh::cylinder(&Transform::at_scaled(p, Vec3::new(0.8, 1.0, 0.8)), wall));
+    }
+    for z in [-3.0f32, -24.0] {
+        boxed(&mut g, Vec3::new(-4.8, 0.45, z), Vec3::new(0.5, 0.1, 2.0), dark);
+    }
+    // The moon, low behind the left row, travelling towards the camera and across the street.
+    lights.push(crate::scene::SceneLight::new(Light::Directional {
+        direction: Vec3::new(0.62, -0.3, 0.72).normalize(),
+        color: Vec3::new(0.55, 0.66, 1.0),
+        intensity: 1.2,
+    }));
+    lights.extend(far_lamps);
+    let mut r = render(0.03, Vec3::new(0.006, 0.008, 0.014));
+    r.shadow.size = 1024;
+    r.exposure = 1.8;
+    Scene {
+        name: String::new(),
+        description: String::new(),
+        camera: Camera {
+            position: Vec3::new(0.6, 1.7, 8.0),
+            look_at: Vec3::new(-0.8, 3.6, -30.0),
+            up: Vec3::Y,
+            fov_y_degrees: 60.0,
+            near: 0.1,
+            far: 150.0,
+        },
+        medium: Medium {
+            scattering: Vec3::new(0.045, 0.05, 0.055),
+            absorption: Vec3::splat(0.01),
+            phase: Phase::HenyeyGreenstein { g: 0.35 },
+        },
+        lights,
+        geometry: g,
+        render: r,
+    }
+}
+
+/// A hall by day: the sun shines through five skylight slits in the roof, slanting shafts
+/// towards the camera, and two stage spots high on the side walls cross them on a statue in
+/// the middle. Three lights.
+fn atrium() -> Scene {
+    let mut g = Geometry::default();
+    ground(&mut g, 120.0, Vec3::new(0.5, 0.47, 0.42));
+    let stone = Vec3::new(0.62, 0.58, 0.52);
+    let dark = Vec3::new(0.42, 0.4, 0.37);
+    let (hx, hz, top) = (10.0f32, 8.0f32, 10.0f32);
+    // Walls (the front one behind the camera has a door so the hall is not sealed).
+    for s in [-1.0f32, 1.0] {
+        boxed(&mut g, Vec3::new(s * hx, top * 0.5, 0.0), Vec3::new(0.6, top, 2.0 * hz), stone);
+    }
+    boxed(&mut g, Vec3::new(0.0, top * 0.5, -hz), Vec3::new(2.0 * hx, top, 0.6), stone);
+    boxed(&mut g, Vec3::new(-6.0, top * 0.5, hz), Vec3::new(8.0, top, 0.6), stone);
+    boxed(&mut g, Vec3::new(6.0, top * 0.5, hz), Vec3::new(8.0, top, 0.6), stone);
+    boxed(&mut g, Vec3::new(0.0, top - 2.0, hz), Vec3::new(4.0, 4.0, 0.6), stone);
+    // Roof: planks along x with five 1.2 m slits.
+    let mut z = -hz;
+    for k in 0..6 {
+        let len = if k == 5 { hz - z } else { 1.8 };
+        boxed(&mut g, Vec3::new(0.0, top + 0.15, z + len * 0.5), Vec3::new(2.0 * hx + 0.6, 0.3, len), dark);
+        z += len + 1.2;
+    }
+    // A gallery ledge on each side wall, with the spots on it.
+    for s in [-1.0f32, 1.0] {
+        boxed(&mut g, Vec3::new(s * (hx - 1.0), 6.0, -2.0), Vec3::new(1.6, 0.3, 10.0), dark);
+    }
+    // The statue: a pedestal and a figure of a cylinder and a sphere; columns round the hall.
+    boxed(&mut g, Vec3::new(0.0, 0.6, -2.0), Vec3::new(2.0, 1.2, 2.0), stone);
+    g.append(&mesh::cylinder(&Transform::at_scaled(Vec3::new(0.0, 2.3, -2.0), Vec3::new(0.8, 2.2, 0.8)), stone));
+    g.append(&mesh::sphere(&Transform::at_scaled(Vec3::new(0.0, 3.8, -2.0), Vec3::splat(0.9)), stone));
+    for (x, zc) in [(-6.0f32, -5.0f32), (6.0, -5.0), (-6.0, 2.0), (6.0, 2.0)] {
+        g.append(&mesh::cylinder(&Transform::at_scaled(Vec3::new(x, top * 0.5, zc), Vec3::new(0.8, top, 0.8)), stone));
+    }
+    let target = Vec3::new(0.0, 2.5, -2.0);
+    let spot = |p: Vec3| {
+        crate::scene::SceneLight::new(Light::Spot {
+            position: p,
+            direction: (target - p).normalize(),
+            outer_angle_degrees: 14.0,
+            inner_angle_degrees: 10.0,
+            color: Vec3::new(1.0, 0.92, 0.82),
+            intensity: 700.0,
+            texture: None,
+        })
+    };
+    Scene {
+        name: String::new(),
+        description: String::new(),
+        camera: Camera {
+            position: Vec3::new(2.5, 1.7, 7.0),
+            look_at: Vec3::new(-0.5, 5.0, -6.0),
+            up: Vec3::Y,
+            fov_y_degrees: 65.0,
+            near: 0.1,
+            far: 120.0,
+        },
+        medium: Medium {
+            scattering: Vec3::splat(0.035),
+            absorption: Vec3::splat(0.01),
+            phase: Phase::HenyeyGreenstein { g: 0.5 },
+        },
+        lights: vec![
+            crate::scene::SceneLight::new(Light::Directional {
+                direction: Vec3::new(0.2, -0.72, 0.66).normalize(),
+                color: Vec3::new(1.0, 0.9, 0.75),
+                intensity: 4.0,
+            }),
+            spot(Vec3::new(-8.6, 6.6, 1.0)),
+            spot(Vec3::new(8.6, 6.6, 1.0)),
+        ],
+        geometry: g,
+        render: render(0.03, Vec3::new(0.03, 0.032, 0.038)),
     }
 }
 

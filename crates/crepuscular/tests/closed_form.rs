@@ -8,7 +8,7 @@ use crepuscular::frame::FrameDesc;
 use crepuscular::gpu::test_gpu;
 use crepuscular::techniques::brute_force::{self, BruteForceSettings};
 use crepuscular::techniques::reference::{self, ReferenceSettings};
-use crepuscular::testing::{WALL_DISTANCE, wall_closed_form, wall_frame};
+use crepuscular::testing::{WALL_DISTANCE, wall_closed_form, wall_frame, wall_frame_lights};
 use crepuscular::{CpuFrame, Image, Light, Medium, ShadowMap};
 use glam::{DVec3, Vec3};
 
@@ -42,7 +42,12 @@ fn directional_closed_form(desc: &FrameDesc) -> Image {
 
 /// Composite Gauss–Legendre (5 points × 4096 panels) of the point-light integral, f64.
 fn point_quadrature(desc: &FrameDesc) -> Image {
-    let Light::Point { position, color, intensity } = &desc.lights[0].light else { unreachable!() };
+    point_quadrature_of(desc, 0)
+}
+
+/// [`point_quadrature`] of light `k` of the frame.
+fn point_quadrature_of(desc: &FrameDesc, k: usize) -> Image {
+    let Light::Point { position, color, intensity } = &desc.lights[k].light else { unreachable!() };
     let st = desc.medium.extinction().as_dvec3();
     let ss = desc.medium.scattering.as_dvec3();
     let lp = position.as_dvec3();
@@ -167,5 +172,81 @@ fn point_light_brute_force_is_within_its_step_error() {
             assert!(e < last, "error must fall with more steps");
             last = e;
         }
+    }
+}
+
+// ---- several lights (docs/MODEL.md §6): the in-scattering is the sum over the lights ----
+
+fn second_sun() -> Light {
+    Light::Directional {
+        direction: Vec3::new(-0.45, -0.3, 1.0).normalize(),
+        color: Vec3::new(0.6, 0.7, 1.0),
+        intensity: 2.5,
+    }
+}
+
+fn cpu_frame_of<'a>(d: &'a FrameDesc, depth: &'a [f32], maps: &'a [ShadowMap]) -> CpuFrame<'a> {
+    CpuFrame { desc: d, depth, shadow_maps: maps, surface: None }
+}
+
+#[test]
+fn two_suns_match_the_sum_of_their_closed_forms() {
+    for m in media() {
+        let (d, depth, maps) = wall_frame_lights(vec![sun(), second_sun()], m.clone(), W, H);
+        // wall_closed_form sums the frame's suns; check it is the sum of the two one-sun forms.
+        let exact = directional_closed_form(&d);
+        let (one, two) = (directional_closed_form(&d.with_light(0)), directional_closed_form(&d.with_light(1)));
+        for ((e, a), b) in exact.pixels.iter().zip(&one.pixels).zip(&two.pixels) {
+            for c in 0..3 {
+                assert!((e[c] - (a[c] + b[c])).abs() <= 1e-6 * e[c].abs().max(1e-9));
+            }
+        }
+        let frame = cpu_frame_of(&d, &depth, &maps);
+        let (img, _) = reference::render(&frame, &ReferenceSettings { steps: 1024, seed: 3 }, &|_, _| {}).unwrap();
+        let e = common::max_rel(&img, &exact, 1e-9);
+        assert!(e < 1e-3, "{m:?}: reference off the two suns' closed form by {e}");
+        for steps in [1, 8, 64] {
+            let s = BruteForceSettings { steps, ..Default::default() };
+            let (img, _) = brute_force::cpu::march(&frame, &s).unwrap();
+            let e = common::max_rel(&img, &exact, 1e-9);
+            assert!(e < 1e-4, "{m:?}, {steps} steps: brute-force off the two suns' closed form by {e}");
+        }
+    }
+}
+
+#[test]
+fn two_suns_on_the_gpu_match_the_sum_of_their_closed_forms() {
+    let Some(gpu) = test_gpu("two_suns_on_the_gpu_match_the_sum_of_their_closed_forms") else { return };
+    for m in media() {
+        let (d, depth, maps) = wall_frame_lights(vec![sun(), second_sun()], m.clone(), W, H);
+        let exact = directional_closed_form(&d);
+        let img = common::gpu_brute_force(&gpu, &cpu_frame_of(&d, &depth, &maps), &BruteForceSettings::default());
+        let e = common::max_rel(&img, &exact, 1e-9);
+        assert!(e < 1e-3, "{m:?}: GPU brute-force off the two suns' closed form by {e}");
+    }
+}
+
+#[test]
+fn a_sun_and_a_point_light_match_closed_form_plus_quadrature() {
+    for m in media() {
+        let (d, depth, maps) = wall_frame_lights(vec![sun(), lamp()], m.clone(), W, H);
+        let sun_only = directional_closed_form(&d.with_light(0));
+        let point = point_quadrature_of(&d, 1);
+        let mut exact = sun_only.clone();
+        for (e, p) in exact.pixels.iter_mut().zip(&point.pixels) {
+            for c in 0..3 {
+                e[c] += p[c];
+            }
+        }
+        let frame = cpu_frame_of(&d, &depth, &maps);
+        let (img, _) = reference::render(&frame, &ReferenceSettings { steps: 2048, seed: 5 }, &|_, _| {}).unwrap();
+        let e = common::max_rel(&img, &exact, 1e-9);
+        assert!(e < 5e-3, "{m:?}: reference off closed form + quadrature by {e}");
+        // The point light's step error at 256 steps (point_light_brute_force_is_within_its_step_error)
+        // bounds the sum's: the sun's share is exact at any step count.
+        let s = BruteForceSettings { steps: 256, ..Default::default() };
+        let (img, _) = brute_force::cpu::march(&frame, &s).unwrap();
+        let e = common::max_rel(&img, &exact, 1e-9);
+        assert!(e < 5e-4, "{m:?}: brute-force at 256 steps off closed form + quadrature by {e}");
     }
 }

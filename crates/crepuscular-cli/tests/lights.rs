@@ -70,6 +70,14 @@ fn sum(images: &[Image]) -> Image {
     out
 }
 
+/// How far a frame's in-scattering may be from the sum of its one-light frames: a per-light
+/// technique adds the lights in the same order as the test (exactly equal); one march over all
+/// lights sums them per sample before the transmittance, so f32 rounding (measured ≤ 1.4e-7 of
+/// the peak on llvmpipe and the CPU).
+fn bound(settings: &TechniqueSettings) -> f32 {
+    if settings.info().per_light { 0.0 } else { 1e-6 }
+}
+
 /// `night-street`'s first six lights: four spots, a point light and the moon.
 fn street() -> Scene {
     let mut s = small("night-street", 96, 54);
@@ -97,7 +105,7 @@ fn every_technique_sums_its_lights_gpu() {
         }
         let e = rel_diff(&all, &sum(&parts));
         eprintln!("{}: six lights vs the sum of six one-light frames: {e:.2e} of the peak", settings.name());
-        assert!(e < 1e-4, "{}: the lights' sum is off by {e:.2e} of the peak", settings.name());
+        assert!(e <= bound(&settings), "{}: the lights' sum is off by {e:.2e} of the peak", settings.name());
     }
 }
 
@@ -118,7 +126,7 @@ fn every_technique_sums_its_lights_cpu() {
             .collect();
         let e = rel_diff(&all, &sum(&parts));
         eprintln!("{} (CPU): six lights vs the sum of six one-light frames: {e:.2e} of the peak", settings.name());
-        assert!(e < 1e-5, "{} (CPU): the lights' sum is off by {e:.2e} of the peak", settings.name());
+        assert!(e <= bound(&settings), "{} (CPU): the lights' sum is off by {e:.2e} of the peak", settings.name());
     }
 }
 

@@ -1,6 +1,6 @@
 //! TOML scene files.
 //!
-//! A scene file describes one [`Scene`]: camera, medium, one light, objects and render
+//! A scene file describes one [`Scene`]: camera, medium, its lights, objects and render
 //! settings. Every key is optional unless marked *required*; unknown keys are errors. Numbers
 //! may be written as integers or floats. Paths (meshes, textures) are relative to the scene
 //! file's directory; absolute paths, `..` components and symbolic links leading out of that
@@ -26,7 +26,9 @@
 //! # phase = { kind = "rayleigh" }
 //! # phase = { kind = "hoffman-preetham", g = 0.76, rayleigh_fraction = [0.216, 0.391, 0.612] }
 //!
-//! [light]
+//! [[lights]]                             # one table per light, 1 to 16 of them, any mix of kinds;
+//!                                        # or a single [light] table (the same keys) for one light;
+//!                                        # neither: one default sun
 //! kind = "spot"                          # "directional" | "spot" | "point"; default "directional"
 //! position = [-10.0, 9.0, 0.0]           # spot, point: metres (required)
 //! direction = [1.0, -0.95, 0.0]          # directional, spot: where the light travels, from the
@@ -41,11 +43,18 @@
 //!                                        # spot, point: intensity I per steradian (default 50)
 //! texture = "gobo.png"                   # spot only: projected image, PNG (sRGB) or EXR (linear),
 //!                                        # at most 8192 × 8192; default none
+//! scattering = 1.0                       # scale of this light's in-scattering, ≥ 0: 0 opts it out
+//!                                        # of the effect (it still lights surfaces); default 1
+//!
+//! [[lights]]                             # a second light: a sun
+//! kind = "directional"
+//! direction = [0.3, -0.4, -1.0]
+//! intensity = 2.0
 //!
 //! # Directional light (a low sun: E ≈ 3–5):
-//! #   [light] kind = "directional", direction = [0.0, -0.3, -1.0], intensity = 4.0
+//! #   [[lights]] kind = "directional", direction = [0.0, -0.3, -1.0], intensity = 4.0
 //! # Point light (I ≈ target irradiance × distance²):
-//! #   [light] kind = "point", position = [0.0, 3.0, 0.0], intensity = 60.0
+//! #   [[lights]] kind = "point", position = [0.0, 3.0, 0.0], intensity = 60.0
 //!
 //! [[objects]]
 //! kind = "plane"                         # "plane" | "box" | "sphere" | "cylinder" | "mesh" (required)

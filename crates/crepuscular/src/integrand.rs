@@ -86,17 +86,6 @@ pub fn inscatter_density(fl: &FrameLight, medium: &Medium, shadow: &ShadowMap, v
     medium.scattering * medium.phase.eval(cos_theta) * l_in
 }
 
-/// Σ_k σs·p_k·L_in,k·V_k over the lights `lights` (indices into the frame's lights, usually
-/// [`crate::FrameDesc::scattering_lights`]) at x: the density every march sums, one loop over
-/// the lights per sample (docs/MODEL.md §6). Mirrors `inscatter_density_all` in WGSL.
-pub fn inscatter_density_all(frame: &CpuFrame, lights: &[usize], view_dir: Vec3, p: Vec3) -> Vec3 {
-    let desc = frame.desc;
-    lights
-        .iter()
-        .map(|&k| inscatter_density(&desc.lights[k], &desc.medium, &frame.shadow_maps[k], view_dir, p))
-        .sum()
-}
-
 /// How a host renderer shades its surfaces — not part of the effect's frame: the
 /// in-scattering never depends on it.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -10,7 +10,7 @@
 use crate::error::Error;
 use crate::frame::{CpuFrame, FrameDesc};
 use crate::frame::FrameLight;
-use crate::integrand::inscatter_density_all;
+use crate::integrand::inscatter_density;
 use crate::model::Light;
 use crate::model::segment_transmittance;
 use glam::Vec3;
@@ -207,20 +207,58 @@ impl MarchLights {
         Self { indices, cones, reaches }
     }
 
-    /// The interval of the view ray o + t·d, t in [0, s], that one march covers for all the
-    /// lights: the smallest interval holding every light's [`march_interval`] (a single light's
-    /// own interval; (0, s) as soon as one light is directional or marched `Fixed`). Empty
-    /// (0, 0) when no light reaches the ray. Mirrors `lights_interval` in WGSL.
-    pub fn interval(&self, o: Vec3, d: Vec3, s: f32, policy: SpotSteps, denominator: f32) -> (f32, f32) {
+    /// True when light `i` (of [`MarchLights::indices`]) is marched over its own interval
+    /// with its own N steps: a spot under a cone policy (its chord is its own; marching it
+    /// with the others would spread its samples over their longer interval). Every other light
+    /// shares one march. Mirrors `own_interval` in WGSL.
+    pub fn owns_interval(&self, i: usize, policy: SpotSteps) -> bool {
+        self.cones[i].is_some() && policy != SpotSteps::Fixed
+    }
+
+    /// The interval of the view ray o + t·d, t in [0, s], that the shared march covers: the
+    /// smallest interval holding the [`march_interval`] of every light that does not own one
+    /// ((0, s) as soon as one is directional). Empty (0, 0) when none reaches the ray. Mirrors
+    /// `shared_interval` in WGSL.
+    pub fn shared_interval(&self, o: Vec3, d: Vec3, s: f32, policy: SpotSteps, denominator: f32) -> (f32, f32) {
         let (mut lo, mut hi) = (f32::MAX, f32::MIN);
-        for (cone, reach) in self.cones.iter().zip(&self.reaches) {
-            let iv = march_interval(cone.as_ref(), *reach, o, d, s, policy, denominator);
+        for i in 0..self.indices.len() {
+            if self.owns_interval(i, policy) {
+                continue;
+            }
+            let iv = march_interval(self.cones[i].as_ref(), self.reaches[i], o, d, s, policy, denominator);
             if iv.1 > iv.0 {
                 lo = lo.min(iv.0);
                 hi = hi.max(iv.1);
             }
         }
         if hi > lo { (lo, hi) } else { (0.0, 0.0) }
+    }
+
+    /// Light `i`'s own [`march_interval`].
+    pub fn own_interval(&self, i: usize, o: Vec3, d: Vec3, s: f32, policy: SpotSteps, denominator: f32) -> (f32, f32) {
+        march_interval(self.cones[i].as_ref(), self.reaches[i], o, d, s, policy, denominator)
+    }
+}
+
+/// Which lights one march evaluates: those sharing the march, or one light on its own interval.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Which {
+    /// Every light that does not own an interval under this policy (`SHARED` in WGSL).
+    Shared(SpotSteps),
+    /// Light `i` of [`MarchLights::indices`] alone.
+    One(usize),
+}
+
+/// σs·p·L_in·V at `p` of the lights `which` selects. Mirrors `march_density` in WGSL.
+pub fn march_density(frame: &CpuFrame, lights: &MarchLights, which: Which, dir: Vec3, p: Vec3) -> Vec3 {
+    let desc = frame.desc;
+    let one = |i: usize| {
+        let k = lights.indices[i];
+        inscatter_density(&desc.lights[k], &desc.medium, &frame.shadow_maps[k], dir, p)
+    };
+    match which {
+        Which::One(i) => one(i),
+        Which::Shared(policy) => (0..lights.indices.len()).filter(|&i| !lights.owns_interval(i, policy)).map(one).sum(),
     }
 }
 
@@ -312,9 +350,11 @@ pub fn mean_extinction(desc: &FrameDesc) -> f32 {
 /// exactly over the step (an improvement on eq. 1's exp(−τ(s − l))·Δl that is exact for a
 /// constant integrand).
 /// Mirrors `march_steps` in common.wgsl.
+#[allow(clippy::too_many_arguments)]
 pub fn march_steps(
     frame: &CpuFrame,
     lights: &MarchLights,
+    which: Which,
     dir: Vec3,
     iv: (f32, f32),
     n: u32,
@@ -338,10 +378,39 @@ pub fn march_steps(
         let t0 = a + i as f32 * delta;
         let t = t0 + off;
         let p = o + dir * t;
-        // One loop over the samples; every light at each (docs/MODEL.md §6): the position and
-        // the transmittance are shared, the lights' densities summed.
-        sum += inscatter_density_all(frame, &lights.indices, dir, p) * (-st * t0).exp() * seg;
+        // One loop over the samples; every selected light at each (docs/MODEL.md §6): the
+        // position and the transmittance are shared, the lights' densities summed.
+        sum += march_density(frame, lights, which, dir, p) * (-st * t0).exp() * seg;
         i += stride;
+    }
+    sum
+}
+
+/// Every light's in-scattering on one view ray of length `s` (docs/MODEL.md §6): one march
+/// over the shared interval for the lights that share it, plus one over its own interval for
+/// each light that owns one ([`MarchLights::owns_interval`]); the steps i = first,
+/// first + stride, … < n of each. Mirrors `march_lights` in WGSL.
+#[allow(clippy::too_many_arguments)]
+pub fn march_lights(
+    frame: &CpuFrame,
+    lights: &MarchLights,
+    dir: Vec3,
+    s: f32,
+    n: u32,
+    first: u32,
+    stride: u32,
+    j: f32,
+    policy: SpotSteps,
+    denominator: f32,
+) -> Vec3 {
+    let o = frame.desc.camera.position;
+    let shared = lights.shared_interval(o, dir, s, policy, denominator);
+    let mut sum = march_steps(frame, lights, Which::Shared(policy), dir, shared, n, first, stride, j);
+    for i in 0..lights.indices.len() {
+        if lights.owns_interval(i, policy) {
+            let iv = lights.own_interval(i, o, dir, s, policy, denominator);
+            sum += march_steps(frame, lights, Which::One(i), dir, iv, n, first, stride, j);
+        }
     }
     sum
 }
@@ -366,9 +435,8 @@ pub struct PixelMarch {
 /// over the spot-step policy's interval, sampled at step midpoints or at the pixel's jitter.
 /// Mirrors `march_pixel` in common.wgsl.
 pub fn march_pixel(frame: &CpuFrame, lights: &MarchLights, m: &PixelMarch, x: u32, y: u32, dir: Vec3, s: f32) -> Vec3 {
-    let iv = lights.interval(frame.desc.camera.position, dir, s, m.spot_steps, m.spot_denominator);
     let j = if m.jitter { crate::shaders::pixel_jitter(x, y, m.frame_index) } else { 0.5 };
-    march_steps(frame, lights, dir, iv, m.steps, 0, 1, j)
+    march_lights(frame, lights, dir, s, m.steps, 0, 1, j, m.spot_steps, m.spot_denominator)
 }
 
 

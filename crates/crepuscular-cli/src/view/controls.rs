@@ -475,4 +475,34 @@ mod tests {
         let d = rotate_direction(Vec3::new(1.0, -0.2, 0.0), 0.3, 2.0);
         assert!((d.length() - 1.0).abs() < 1e-4 && d.y.abs() <= 0.995);
     }
+
+    #[test]
+    fn lights_are_added_selected_steered_and_removed() {
+        let mut c = Controls::of(&crepuscular_scene::builtin::builtin("atrium").unwrap());
+        assert_eq!((c.lights.len(), c.selected), (3, 0));
+        // A right drag steers the selected light only: select the second (a spot) and drag.
+        c.selected = 1;
+        let before = c.clone();
+        c.drag_light(egui::vec2(40.0, 0.0), false);
+        assert_eq!(c.lights[0], before.lights[0], "the sun must not move");
+        assert_eq!(c.lights[2], before.lights[2], "the other spot must not move");
+        assert_ne!(c.lights[1], before.lights[1], "the selected spot must turn");
+        // Adding selects the new light; removing drops the selected one; the last one stays.
+        assert!(c.add_light(Light::Point { position: Vec3::Y, color: Vec3::ONE, intensity: 10.0 }));
+        assert_eq!((c.lights.len(), c.selected), (4, 3));
+        assert!(matches!(c.light(), Light::Point { .. }));
+        c.selected = 0;
+        assert!(c.remove_light());
+        assert_eq!(c.lights.len(), 3);
+        assert!(matches!(c.lights[0].light, Light::Spot { .. }), "the sun was removed");
+        while c.lights.len() > 1 {
+            assert!(c.remove_light());
+        }
+        assert!(!c.remove_light(), "a frame keeps at least one light");
+        assert_eq!(c.lights.len(), 1);
+        while c.lights.len() < crepuscular::MAX_LIGHTS {
+            assert!(c.add_light(Light::Point { position: Vec3::Y, color: Vec3::ONE, intensity: 1.0 }));
+        }
+        assert!(!c.add_light(Light::Point { position: Vec3::Y, color: Vec3::ONE, intensity: 1.0 }));
+    }
 }

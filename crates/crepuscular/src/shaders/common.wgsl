@@ -326,21 +326,6 @@ fn inscatter_density(
     return f.sigma_s.xyz * phase(f, cos_theta) * li.radiance;
 }
 
-// integrand.rs inscatter_density_all: the sum over the frame's lights (docs/MODEL.md §6).
-fn inscatter_density_all(
-    f: Frame,
-    shadow_map: texture_2d_array<f32>,
-    spot_tex: texture_2d_array<f32>,
-    view_dir: vec3<f32>,
-    p: vec3<f32>,
-) -> vec3<f32> {
-    var sum = vec3<f32>(0.0);
-    for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
-        sum += inscatter_density(f, lights.items[k], shadow_map, spot_tex, view_dir, p);
-    }
-    return sum;
-}
-
 // ---- Where the N steps go (march.rs; Wyman & Ramsey 2008, Appendix B) ----
 
 // march.rs SpotCone::contains: inside the forward cone of the spot light.
@@ -463,13 +448,23 @@ fn march_interval(f: Frame, l: Light, o: vec3<f32>, d: vec3<f32>, s: f32, policy
     return iv;
 }
 
-// march.rs MarchLights::interval: the smallest interval holding every light's march_interval;
-// empty (0, 0) when no light reaches the ray.
-fn lights_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
+// march.rs MarchLights::owns_interval: a spot under a cone policy is marched over its own
+// chord with its own N steps; every other light shares one march (docs/MODEL.md §6).
+fn own_interval(l: Light, policy: u32) -> bool {
+    return l.kind == LIGHT_SPOT && policy != 0u;
+}
+
+// march.rs MarchLights::shared_interval: the smallest interval holding the march_interval of
+// every light that shares the march; empty (0, 0) when none reaches the ray.
+fn shared_interval(f: Frame, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
     var lo = 3.4e38;
     var hi = -3.4e38;
     for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
-        let iv = march_interval(f, lights.items[k], o, d, s, policy, denominator);
+        let l = lights.items[k];
+        if own_interval(l, policy) {
+            continue;
+        }
+        let iv = march_interval(f, l, o, d, s, policy, denominator);
         if iv.y > iv.x {
             lo = min(lo, iv.x);
             hi = max(hi, iv.y);
@@ -555,10 +550,39 @@ fn surface_radiance(
     return direct + shading.xyz * albedo;
 }
 
+// `which` of march_steps: every light that shares the march (not one light's own).
+const SHARED: u32 = 0xffffffffu;
+
+// march.rs march_density: σs·p·L_in·V at p of light `which`, or the sum over the lights that
+// share the march (SHARED) under the spot-step policy.
+fn march_density(
+    f: Frame,
+    shadow_map: texture_2d_array<f32>,
+    spot_tex: texture_2d_array<f32>,
+    dir: vec3<f32>,
+    p: vec3<f32>,
+    which: u32,
+    policy: u32,
+) -> vec3<f32> {
+    if which != SHARED {
+        return inscatter_density(f, lights.items[which], shadow_map, spot_tex, dir, p);
+    }
+    var sum = vec3<f32>(0.0);
+    for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
+        let l = lights.items[k];
+        if !own_interval(l, policy) {
+            sum += inscatter_density(f, l, shadow_map, spot_tex, dir, p);
+        }
+    }
+    return sum;
+}
+
 // march.rs march_steps: eq. 1 of Tóth & Umenhoffer 2009 over the interval iv = [t0, t1] of the
 // view ray from the eye along dir, cut into n equal steps Δ; sums the steps i = first,
 // first + stride, … < n (brute-force: 0, 1; interleaved: its block offset, M²), each sampled at
-// (i + j)·Δ and weighted by the transmittance integrated exactly over the step.
+// (i + j)·Δ and weighted by the transmittance integrated exactly over the step, of light
+// `which` or of every light sharing the march (SHARED; one loop over the samples, every light
+// at each).
 fn march_steps(
     f: Frame,
     shadow_map: texture_2d_array<f32>,
@@ -569,6 +593,8 @@ fn march_steps(
     first: u32,
     stride: u32,
     j: f32,
+    which: u32,
+    policy: u32,
 ) -> vec3<f32> {
     if iv.y <= iv.x {
         return vec3<f32>(0.0);
@@ -582,14 +608,42 @@ fn march_steps(
         let t0 = iv.x + f32(i) * delta;
         let t = t0 + off;
         let p = f.camera_pos.xyz + dir * t;
-        // One loop over the samples, every light at each (docs/MODEL.md §6).
-        sum += inscatter_density_all(f, shadow_map, spot_tex, dir, p) * exp(-st * t0) * seg;
+        sum += march_density(f, shadow_map, spot_tex, dir, p, which, policy) * exp(-st * t0) * seg;
     }
     return sum;
 }
 
-// march.rs march_pixel: eq. 1 for pixel px's own ray (brute-force; subsampled), N steps over the
-// spot-step policy's interval, at step midpoints or at the pixel's jitter.
+// march.rs march_lights: every light's in-scattering on one view ray (docs/MODEL.md §6): one
+// march over the shared interval for the lights that share it, plus one over its own chord
+// for each spot under a cone policy; the steps i = first, first + stride, … < n of each.
+fn march_lights(
+    f: Frame,
+    shadow_map: texture_2d_array<f32>,
+    spot_tex: texture_2d_array<f32>,
+    dir: vec3<f32>,
+    s: f32,
+    n: u32,
+    first: u32,
+    stride: u32,
+    j: f32,
+    policy: u32,
+    denominator: f32,
+) -> vec3<f32> {
+    let o = f.camera_pos.xyz;
+    let shared_iv = shared_interval(f, o, dir, s, policy, denominator);
+    var sum = march_steps(f, shadow_map, spot_tex, dir, shared_iv, n, first, stride, j, SHARED, policy);
+    for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
+        let l = lights.items[k];
+        if own_interval(l, policy) {
+            let iv = march_interval(f, l, o, dir, s, policy, denominator);
+            sum += march_steps(f, shadow_map, spot_tex, dir, iv, n, first, stride, j, k, policy);
+        }
+    }
+    return sum;
+}
+
+// march.rs march_pixel: eq. 1 for pixel px's own ray (brute-force; subsampled), N steps per
+// light group (march_lights), at step midpoints or at the pixel's jitter.
 fn march_pixel(
     f: Frame,
     shadow_map: texture_2d_array<f32>,
@@ -603,10 +657,9 @@ fn march_pixel(
     spot_steps: u32,
     spot_denominator: f32,
 ) -> vec3<f32> {
-    let iv = lights_interval(f, f.camera_pos.xyz, dir, s, spot_steps, spot_denominator);
     var j = 0.5;
     if jitter == 1u {
         j = pixel_jitter(px, frame_index);
     }
-    return march_steps(f, shadow_map, spot_tex, dir, iv, steps, 0u, 1u, j);
+    return march_lights(f, shadow_map, spot_tex, dir, s, steps, 0u, 1u, j, spot_steps, spot_denominator);
 }

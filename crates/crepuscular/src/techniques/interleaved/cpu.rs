@@ -6,7 +6,7 @@ use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
 use crate::integrand::lit_incident;
-use crate::march::{MarchLights, march_steps, mean_extinction, step_offset};
+use crate::march::{MarchLights, Which, march_lights, mean_extinction, step_offset};
 use crate::shaders::pixel_jitter;
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
@@ -32,12 +32,23 @@ pub fn phase_lut(lut: &PhaseLut, c: f32) -> Vec3 {
     Vec3::new(a[0], a[1], a[2]) * (1.0 - f) + Vec3::new(b[0], b[1], b[2]) * f
 }
 
+/// Mirrors `density_lut` in march.wgsl: σs·lut(cos θ)·L_in·V of light `k` of the frame at `p`.
+fn density_lut(frame: &CpuFrame, lut: &PhaseLut, k: usize, dir: Vec3, p: Vec3) -> Vec3 {
+    let desc = frame.desc;
+    let (l_in, wl) = lit_incident(&desc.lights[k], &desc.medium, &frame.shadow_maps[k], p);
+    if l_in == Vec3::ZERO {
+        return Vec3::ZERO;
+    }
+    desc.medium.scattering * phase_lut(lut, -wl.dot(dir)) * l_in
+}
+
 /// Mirrors `march_steps_lut` in march.wgsl: [`crate::march::march_steps`] (eq. 1 over the
 /// steps i = first, first + stride, … < n) with σs·lut(cos θ) for σs·p(cos θ).
 #[allow(clippy::too_many_arguments)]
 pub fn march_steps_lut(
     frame: &CpuFrame,
     lights: &MarchLights,
+    which: Which,
     lut: &PhaseLut,
     dir: Vec3,
     iv: (f32, f32),
@@ -60,17 +71,42 @@ pub fn march_steps_lut(
     let mut i = first;
     while i < n {
         let t0 = a + i as f32 * delta;
-        let t = t0 + off;
-        let p = o + dir * t;
-        let tr = (-st * t0).exp() * seg;
-        for &k in &lights.indices {
-            let (l_in, wl) = lit_incident(&desc.lights[k], &desc.medium, &frame.shadow_maps[k], p);
-            if l_in != Vec3::ZERO {
-                let cos_theta = -wl.dot(dir);
-                sum += desc.medium.scattering * phase_lut(lut, cos_theta) * l_in * tr;
-            }
-        }
+        let p = o + dir * (t0 + off);
+        let d: Vec3 = match which {
+            Which::One(l) => density_lut(frame, lut, lights.indices[l], dir, p),
+            Which::Shared(policy) => (0..lights.indices.len())
+                .filter(|&l| !lights.owns_interval(l, policy))
+                .map(|l| density_lut(frame, lut, lights.indices[l], dir, p))
+                .sum(),
+        };
+        sum += d * (-st * t0).exp() * seg;
         i += stride;
+    }
+    sum
+}
+
+/// Mirrors `march_lights_lut` in march.wgsl: [`crate::march::march_lights`] with the phase table.
+#[allow(clippy::too_many_arguments)]
+fn march_lights_lut(
+    frame: &CpuFrame,
+    lights: &MarchLights,
+    s: &InterleavedSettings,
+    lut: &PhaseLut,
+    dir: Vec3,
+    dist: f32,
+    first: u32,
+    stride: u32,
+    j: f32,
+) -> Vec3 {
+    let o = frame.desc.camera.position;
+    let (policy, den) = (s.spot_steps, s.spot_denominator);
+    let shared = lights.shared_interval(o, dir, dist, policy, den);
+    let mut sum = march_steps_lut(frame, lights, Which::Shared(policy), lut, dir, shared, s.steps, first, stride, j);
+    for l in 0..lights.indices.len() {
+        if lights.owns_interval(l, policy) {
+            let iv = lights.own_interval(l, o, dir, dist, policy, den);
+            sum += march_steps_lut(frame, lights, Which::One(l), lut, dir, iv, s.steps, first, stride, j);
+        }
     }
     sum
 }
@@ -89,13 +125,12 @@ pub fn march_ray(
     dir: Vec3,
     dist: f32,
 ) -> Vec3 {
-    let iv = lights.interval(frame.desc.camera.position, dir, dist, s.spot_steps, s.spot_denominator);
     let j = if s.jitter { pixel_jitter(x / s.block, y / s.block, s.frame_index) } else { 0.5 };
     let stride = s.block * s.block;
     let k = block_offset(s, x, y);
     match lut {
-        Some(lut) => march_steps_lut(frame, lights, lut, dir, iv, s.steps, k, stride, j),
-        None => march_steps(frame, lights, dir, iv, s.steps, k, stride, j),
+        Some(lut) => march_lights_lut(frame, lights, s, lut, dir, dist, k, stride, j),
+        None => march_lights(frame, lights, dir, dist, s.steps, k, stride, j, s.spot_steps, s.spot_denominator),
     }
 }
 

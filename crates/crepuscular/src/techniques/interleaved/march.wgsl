@@ -46,9 +46,19 @@ fn phase_lut(c: f32) -> vec3<f32> {
     return lut[i0].xyz * (1.0 - f) + lut[i0 + 1u].xyz * f;
 }
 
+// σs·lut(cos θ)·L_in·V of one light at p (inscatter_density with the phase from the table).
+fn density_lut(l: Light, dir: vec3<f32>, p: vec3<f32>) -> vec3<f32> {
+    let li = lit_incident(frame, l, shadow_map, spot_tex, p);
+    if all(li.radiance == vec3<f32>(0.0)) {
+        return vec3<f32>(0.0);
+    }
+    return frame.sigma_s.xyz * phase_lut(-dot(li.dir, dir)) * li.radiance;
+}
+
 // march_steps (common.wgsl) with the phase function read from the table: eq. 1 over the steps
-// i = first, first + stride, … < n of the interval iv, σs·lut(cos θ)·L_in·V per step.
-fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u32, j: f32) -> vec3<f32> {
+// i = first, first + stride, … < n of the interval iv, σs·lut(cos θ)·L_in·V per step, of light
+// `which` or of every light sharing the march (SHARED).
+fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u32, j: f32, which: u32) -> vec3<f32> {
     if iv.y <= iv.x {
         return vec3<f32>(0.0);
     }
@@ -59,24 +69,42 @@ fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u3
     var sum = vec3<f32>(0.0);
     for (var i = first; i < n; i += stride) {
         let t0 = iv.x + f32(i) * delta;
-        let t = t0 + off;
-        let p = frame.camera_pos.xyz + dir * t;
-        let tr = exp(-st * t0) * seg;
-        for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
-            let li = lit_incident(frame, lights.items[k], shadow_map, spot_tex, p);
-            if any(li.radiance != vec3<f32>(0.0)) {
-                let cos_theta = -dot(li.dir, dir);
-                sum += frame.sigma_s.xyz * phase_lut(cos_theta) * li.radiance * tr;
+        let p = frame.camera_pos.xyz + dir * (t0 + off);
+        var d = vec3<f32>(0.0);
+        if which != SHARED {
+            d = density_lut(lights.items[which], dir, p);
+        } else {
+            for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
+                let l = lights.items[k];
+                if !own_interval(l, params.spot_steps) {
+                    d += density_lut(l, dir, p);
+                }
             }
+        }
+        sum += d * exp(-st * t0) * seg;
+    }
+    return sum;
+}
+
+// march_lights (common.wgsl) with the phase table.
+fn march_lights_lut(dir: vec3<f32>, s: f32, n: u32, first: u32, stride: u32, j: f32) -> vec3<f32> {
+    let o = frame.camera_pos.xyz;
+    let policy = params.spot_steps;
+    let shared_iv = shared_interval(frame, o, dir, s, policy, params.spot_denominator);
+    var sum = march_steps_lut(dir, shared_iv, n, first, stride, j, SHARED);
+    for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
+        let l = lights.items[k];
+        if own_interval(l, policy) {
+            let iv = march_interval(frame, l, o, dir, s, policy, params.spot_denominator);
+            sum += march_steps_lut(dir, iv, n, first, stride, j, k);
         }
     }
     return sum;
 }
 
 // §4.1: "in a particular pixel we evaluate just N/M² terms" — the terms k, k + M², … of eq. 1
-// over the interval the spot-step policy picks, on this pixel's own ray.
+// over the intervals the spot-step policy picks (march_lights), on this pixel's own ray.
 fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec3<f32> {
-    let iv = lights_interval(frame, frame.camera_pos.xyz, dir, s, params.spot_steps, params.spot_denominator);
     var j = 0.5;
     if params.jitter == 1u {
         j = pixel_jitter(px / params.block, params.frame_index);
@@ -84,9 +112,11 @@ fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec3<f32> {
     let stride = params.block * params.block;
     let k = block_offset(px);
     if params.phase_lut == 1u {
-        return march_steps_lut(dir, iv, params.steps, k, stride, j);
+        return march_lights_lut(dir, s, params.steps, k, stride, j);
     }
-    return march_steps(frame, shadow_map, spot_tex, dir, iv, params.steps, k, stride, j);
+    return march_lights(
+        frame, shadow_map, spot_tex, dir, s, params.steps, k, stride, j, params.spot_steps, params.spot_denominator,
+    );
 }
 
 @compute @workgroup_size(8, 8)

@@ -203,9 +203,9 @@ fn inputs_that_do_not_match_the_frame_are_errors_naming_them() {
     check(&mut sc, &GpuFrame { depth: other_frame.depth, ..frame }, &out, "depth", "frame's size");
     // A point light's frame with a one-layer shadow map.
     let mut point = desc.clone();
-    point.light = builtin::builtin("cage").unwrap().light;
-    point.shadow.layers = 6;
-    check(&mut sc, &GpuFrame { desc: &point, ..frame }, &out, "shadow_map", "6 layer");
+    point.lights[0].light = builtin::builtin("cage").unwrap().lights[0].light.clone();
+    point.lights[0].shadow.layers = 6;
+    check(&mut sc, &GpuFrame { desc: &point, ..frame }, &out, "shadow_maps", "lights[0] (point) needs layers 0..6");
     // The real thing still renders.
     let mut encoder = gpu.device.create_command_encoder(&Default::default());
     sc.encode(&mut encoder, &frame, &out.create_view(&Default::default())).unwrap();

@@ -171,10 +171,8 @@ fn view_desc(light: Light, w: u32, h: u32) -> FrameDesc {
     let shadow = ShadowProjection::fit(&light, &camera, w as f32 / h as f32, bounds, 64);
     FrameDesc {
         camera: crepuscular::FrameCamera::look_at(&camera, w as f32 / h as f32),
-        light,
+        lights: vec![crepuscular::FrameLight::new(light, shadow)],
         medium: Medium::default(),
-        shadow,
-        shadow_bias: 0.02,
         width: w,
         height: h,
     }
@@ -392,7 +390,7 @@ fn wall_depth(desc: &FrameDesc, boxes: &[([u32; 4], f32)]) -> Vec<f32> {
 fn refinement_marks_both_sides_of_every_depth_step_and_nothing_on_a_plane() {
     for (name, light) in [("sun", sun(Vec3::new(0.3, -0.2, 1.0))), ("point", point(Vec3::new(-2.0, 1.0, -8.0)))] {
         let desc = view_desc(light, VW, VH);
-        let sm = ShadowMap { projection: desc.shadow.clone(), depth: vec![1.0; desc.shadow.layers as usize * 64 * 64] };
+        let sm = ShadowMap { projection: desc.lights[0].shadow.clone(), depth: vec![1.0; desc.lights[0].shadow.layers as usize * 64 * 64] };
         for settings in [
             EpipolarSettings { slices: Some(96), samples: Some(128), initial_samples: 16, ..Default::default() },
             EpipolarSettings {
@@ -412,7 +410,7 @@ fn refinement_marks_both_sides_of_every_depth_step_and_nothing_on_a_plane() {
             // exactly the initial samples, and every other texel interpolates between the two
             // initial samples around it.
             let depth = wall_depth(&desc, &[]);
-            let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &sm, surface: None };
+            let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
             let coords = cpu::coordinates(&frame, &p, &lines);
             let r = cpu::refine(&desc, &p, &lines, &coords);
             let interp = r.interp;
@@ -442,7 +440,7 @@ fn refinement_marks_both_sides_of_every_depth_step_and_nothing_on_a_plane() {
             // ray-march samples, nothing else is added, and every other texel interpolates
             // between the nearest samples around it with no step in between.
             let depth = wall_depth(&desc, &[([50, 20, 110, 65], 10.0), ([15, 60, 45, 85], 27.0)]);
-            let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &sm, surface: None };
+            let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
             let coords = cpu::coordinates(&frame, &p, &lines);
             let r = cpu::refine(&desc, &p, &lines, &coords);
             let (interp, list) = (r.interp, r.list);
@@ -712,7 +710,7 @@ fn epipolar_gpu_matches_its_cpu_mirror_pass_by_pass() {
         let scene = small(name, 512);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
         for s in mirror_settings(name) {
             set_settings(&mut ep, &s);
@@ -739,7 +737,7 @@ fn spot_step_policies_change_the_marched_samples_and_each_matches_the_mirror() {
     let scene = small("stained-glass", 512);
     let desc = frame_desc(&scene);
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-    let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+    let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
     let run = |spot_steps| {
         let s = EpipolarSettings { spot_steps, steps: 32, ..Default::default() };
         let (img, _, d) = cpu::render_with_debug(&frame, &s).unwrap();
@@ -809,9 +807,9 @@ fn closed_form_check(
             d.medium = m.clone();
             d
         };
-        let sm = ShadowMap { projection: desc.shadow.clone(), depth: vec![1.0; 64 * 64] };
+        let sm = ShadowMap { projection: desc.lights[0].shadow.clone(), depth: vec![1.0; 64 * 64] };
         let depth = wall_depth(&desc, &[]);
-        let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &sm, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
         let s = EpipolarSettings::default();
         let (img, d, stats) = run(&frame, &s);
         let e = epipole_point(&d.params).unwrap();
@@ -1009,7 +1007,7 @@ fn epipolar_vs_reference_on_every_builtin_scene_cpu() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (rf, _) = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let (img, stats, d) = cpu::render_with_debug(&frame, &EpipolarSettings::default()).unwrap();
         let (psnr, flip) = metrics(&desc, &h.depth, &h.surface, &rf, &img, scene.render.exposure);
@@ -1034,8 +1032,8 @@ fn epipolar_vs_reference_on_every_builtin_scene_gpu() {
         assert!(g.out.all_finite());
         let depth = gpu.read_texture_f32(&tex.depth, 0).unwrap();
         let surface = gpu.read_image(&tex.surface).unwrap();
-        let shadow_map = host::read_shadow_map(&gpu, &tex, &desc).unwrap();
-        let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
+        let shadow_map = host::read_shadow_maps(&gpu, &tex, &desc).unwrap();
+        let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &shadow_map, surface: Some(&surface) };
         let (rf, _) = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let (psnr, flip) = metrics(&desc, &depth, &surface, &rf, &g.out, scene.render.exposure);
         check_quality(name, "gpu", psnr, flip, &g.stats, &g.params, &desc);
@@ -1138,7 +1136,7 @@ fn invalid_settings_and_device_limits_are_errors_not_panics() {
     let scene = small("cage", 64);
     let desc = frame_desc(&scene);
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-    let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+    let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
     let up = UploadedFrame::new(&gpu, &frame).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
     let view = out.create_view(&Default::default());
@@ -1179,7 +1177,7 @@ fn moved(name: &str, f: impl Fn(&mut crepuscular_scene::Scene)) -> crepuscular_s
 
 #[test]
 fn camera_at_the_light_and_light_behind_the_camera_give_finite_output() {
-    let light_pos = |s: &crepuscular_scene::Scene| match &s.light {
+    let light_pos = |s: &crepuscular_scene::Scene| match &s.lights[0].light {
         Light::Point { position, .. } | Light::Spot { position, .. } => *position,
         Light::Directional { direction, .. } => -*direction * 100.0,
     };
@@ -1191,7 +1189,7 @@ fn camera_at_the_light_and_light_behind_the_camera_give_finite_output() {
             true,
             moved("stained-glass", |s| {
                 s.camera.position = light_pos(s);
-                if let Light::Spot { direction, .. } = &s.light {
+                if let Light::Spot { direction, .. } = &s.lights[0].light {
                     s.camera.look_at = s.camera.position + *direction;
                 }
             }),
@@ -1209,7 +1207,7 @@ fn camera_at_the_light_and_light_behind_the_camera_give_finite_output() {
             "terrain, sun behind the camera",
             false,
             moved("terrain", |s| {
-                if let Light::Directional { direction, .. } = &s.light {
+                if let Light::Directional { direction, .. } = &s.lights[0].light {
                     s.camera.look_at = s.camera.position + *direction;
                 }
             }),
@@ -1228,7 +1226,7 @@ fn camera_at_the_light_and_light_behind_the_camera_give_finite_output() {
     for (what, degenerate, scene) in cases {
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let (img, stats, d) = cpu::render_with_debug(&frame, &EpipolarSettings::default()).unwrap();
         let e = d.params.epipole;
         eprintln!("{what}: epipole {e:?}, degenerate {}, {:?}", d.params.degenerate, stats.extra);
@@ -1241,7 +1239,7 @@ fn camera_at_the_light_and_light_behind_the_camera_give_finite_output() {
             // Naïve subsampling: every line is a row (spanning the image, unless a spot light's
             // cone culls or shortens it).
             assert!(d.lines.iter().all(|l| l.dir == [-1.0, 0.0]), "{what}");
-            let spot = matches!(desc.light, Light::Spot { .. });
+            let spot = matches!(desc.lights[0].light, Light::Spot { .. });
             assert!(d.lines.iter().all(|l| l.is_valid() || spot) && d.lines.iter().any(|l| l.is_valid()), "{what}");
         }
         if let (Some(gpu), Some(ep)) = (&gpu, ep.as_mut()) {
@@ -1257,7 +1255,7 @@ fn camera_at_the_light_and_light_behind_the_camera_give_finite_output() {
         let scene = scene_at("cage", w, h, 64);
         let desc = frame_desc(&scene);
         let hr = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &hr.depth, shadow_map: &hr.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &hr.depth, shadow_maps: &hr.shadow_maps, surface: None };
         let (img, _) = cpu::render(&frame, &EpipolarSettings::default()).unwrap();
         assert!(img.all_finite(), "{w}×{h}");
         if let (Some(gpu), Some(ep)) = (&gpu, ep.as_mut()) {
@@ -1355,13 +1353,13 @@ fn sweep_settings() {
             let scene = scene_at(name, w, h, 1024);
             let desc = frame_desc(&scene);
             let host = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-            let frame = CpuFrame { desc: &desc, depth: &host.depth, shadow_map: &host.shadow_map, surface: None };
+            let frame = CpuFrame { desc: &desc, depth: &host.depth, shadow_maps: &host.shadow_maps, surface: None };
             let reference = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap().0;
             Frame { scene, desc, host, reference }
         })
         .collect();
     for f in &frames {
-        let frame = CpuFrame { desc: &f.desc, depth: &f.host.depth, shadow_map: &f.host.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &f.desc, depth: &f.host.depth, shadow_maps: &f.host.shadow_maps, surface: None };
         let bf = crepuscular::techniques::brute_force::cpu::march(&frame, &Default::default()).unwrap().0;
         let (ss, sst) = crepuscular::techniques::subsampled::cpu::render(&frame, &Default::default()).unwrap();
         let m =
@@ -1377,7 +1375,7 @@ fn sweep_settings() {
         let mut line = format!("{label:32}");
         let (mut mp, mut mf, mut ms) = (0.0, 0.0, 0.0);
         for f in &frames {
-            let frame = CpuFrame { desc: &f.desc, depth: &f.host.depth, shadow_map: &f.host.shadow_map, surface: None };
+            let frame = CpuFrame { desc: &f.desc, depth: &f.host.depth, shadow_maps: &f.host.shadow_maps, surface: None };
             let (img, st) = cpu::render(&frame, s).unwrap();
             let (psnr, flip) =
                 metrics(&f.desc, &f.host.depth, &f.host.surface, &f.reference, &img, f.scene.render.exposure);

@@ -111,7 +111,7 @@ fn interleaved_gpu_matches_its_cpu_mirror_pass_by_pass() {
         let scene = small(name, 512);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
         // One GPU object for every setting: settings changes, texture reuse and table rebuilds.
         let mut il = interleaved_gpu(&gpu, &InterleavedSettings::default());
@@ -215,7 +215,7 @@ struct WallTruth {
 }
 
 fn wall_truth(desc: &FrameDesc, s: &InterleavedSettings) -> WallTruth {
-    let Light::Directional { direction, color, intensity } = &desc.light else { unreachable!() };
+    let Light::Directional { direction, color, intensity } = &desc.lights[0].light else { unreachable!() };
     let (w, h) = (desc.width, desc.height);
     let st = desc.medium.extinction().as_dvec3();
     let ss = desc.medium.scattering.as_dvec3();
@@ -355,7 +355,7 @@ fn directional_interleaved_matches_the_closed_form() {
     let mut worst = [[0.0f64; 4]; 5];
     for (mi, m) in media().into_iter().enumerate() {
         let (d, depth, sm) = wall_frame(sun(), m.clone(), 64, 36);
-        let frame = CpuFrame { desc: &d, depth: &depth, shadow_map: &sm, surface: None };
+        let frame = CpuFrame { desc: &d, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
         for s in closed_form_settings() {
             let t = wall_truth(&d, &s);
             let lut_err = if s.phase_lut { PhaseLut::new(&m.phase, s.phase_lut_size).max_rel_error } else { 0.0 };
@@ -395,7 +395,7 @@ fn images_smaller_than_a_block_renormalise_by_the_offsets_covered() {
     // result is checked against `ideal`, and on for a finiteness check.
     let gpu = test_gpu("images_smaller_than_a_block_renormalise_by_the_offsets_covered");
     let (d, depth, sm) = wall_frame(sun(), media()[0].clone(), 3, 2);
-    let frame = CpuFrame { desc: &d, depth: &depth, shadow_map: &sm, surface: None };
+    let frame = CpuFrame { desc: &d, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
     let d4 = || InterleavedSettings { depth_aware: false, ..Default::default() };
     for s in [
         d4(),
@@ -435,7 +435,7 @@ fn block_one_is_brute_force() {
         let scene = small(name, 512);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = gpu.as_ref().map(|g| UploadedFrame::new(g, &frame).unwrap());
         for (steps, jitter, spot_steps) in [(64, false, SpotSteps::Fixed), (17, true, SpotSteps::ExactCone)] {
             let il = InterleavedSettings { block: 1, steps, jitter, frame_index: 7, spot_steps, ..Default::default() };
@@ -518,7 +518,7 @@ fn interleaved_vs_reference_on_every_builtin_scene_cpu() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (rf, _) = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let (il, _) = cpu::render(&frame, &InterleavedSettings::default()).unwrap();
         let (psnr, flip) = metrics(&frame, &h.surface, &rf, &il, scene.render.exposure);
@@ -556,8 +556,8 @@ fn interleaved_vs_reference_on_every_builtin_scene_gpu() {
         assert_eq!(g.stats.backend, "gpu");
         let depth = gpu.read_texture_f32(&tex.depth, 0).unwrap();
         let surface = gpu.read_image(&tex.surface).unwrap();
-        let shadow_map = host::read_shadow_map(&gpu, &tex, &desc).unwrap();
-        let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
+        let shadow_map = host::read_shadow_maps(&gpu, &tex, &desc).unwrap();
+        let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &shadow_map, surface: Some(&surface) };
         let (rf, _) = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let (psnr, flip) = metrics(&frame, &surface, &rf, &g.out, scene.render.exposure);
         check_quality(name, "gpu", psnr, flip);
@@ -612,7 +612,7 @@ fn the_phase_table_changes_each_pixel_by_at_most_its_error() {
         let scene = small(name, 512);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let s = InterleavedSettings::default();
         let (a, _) = cpu::render(&frame, &s).unwrap();
         let (b, stats) = cpu::render(&frame, &InterleavedSettings { phase_lut: true, ..s }).unwrap();
@@ -643,7 +643,7 @@ fn validate_rejects_bad_settings() {
         (InterleavedSettings { spot_denominator: 1.5, ..d() }, "interleaved.spot_denominator"),
     ];
     let (desc, depth, sm) = wall_frame(sun(), Medium::default(), 8, 4);
-    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &sm, surface: None };
+    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
     for (s, key) in cases {
         match s.validate() {
             Err(crepuscular::Error::Invalid { key: k, .. }) => assert_eq!(k, key),

@@ -40,10 +40,10 @@ fn scene_at(name: &str, w: u32, h: u32, shadow: u32) -> Scene {
 /// rectification (§4.2) is possible (`auto` still takes the epipolar one: the camera's
 /// far/near ratio is far above `max_projective_depth_ratio`, so the tests ask for it).
 fn side_lit(mut scene: Scene) -> Scene {
-    let Light::Directional { color, intensity, .. } = scene.light.clone() else { panic!("{}: not a sun", scene.name) };
+    let Light::Directional { color, intensity, .. } = scene.lights[0].light.clone() else { panic!("{}: not a sun", scene.name) };
     let f = scene.camera.look_at - scene.camera.position;
     let right = Vec3::new(f.x, 0.0, f.z).normalize().cross(Vec3::Y);
-    scene.light = Light::Directional { direction: (right - Vec3::Y * 0.45).normalize(), color, intensity };
+    scene.lights[0].light = Light::Directional { direction: (right - Vec3::Y * 0.45).normalize(), color, intensity };
     scene.name = format!("{} (side-lit)", scene.name);
     scene
 }
@@ -115,7 +115,8 @@ fn prefiltered_of(sc: &Scattering) -> &prefiltered::Prefiltered {
 /// One frame; `host`: the host's rasterized rectified map, handed in with the frame.
 fn run_gpu(gpu: &GpuContext, sc: &mut Scattering, frame: &GpuFrame, host: Option<&wgpu::TextureView>) -> GpuRun {
     let out = gpu.create_output_texture(frame.desc.width, frame.desc.height);
-    let frame = GpuFrame { rectified_shadow_map: host, ..*frame };
+    let hosts = [host];
+    let frame = GpuFrame { rectified_shadow_maps: if host.is_some() { &hosts } else { &[] }, ..*frame };
     let stats = sc.render(&frame, &out.create_view(&Default::default())).expect("render");
     let pf = prefiltered_of(sc);
     let (depth, basis, cumw) = pf.read_maps(gpu).expect("read maps");
@@ -388,7 +389,7 @@ fn regions_recombine_to_the_single_prefix_sum() {
     for scene in [scene_at("colonnade", 96, 54, 512), side_lit(scene_at("colonnade", 96, 54, 512))] {
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         for (precision, bound) in [(BasisPrecision::Float16, 5e-3), (BasisPrecision::Unorm8, 2e-2)] {
             let one = PrefilteredSettings { precision, map_size: [240, 128], ..Default::default() };
             let (base, st) = cpu::render(&frame, &one).unwrap();
@@ -516,7 +517,7 @@ fn check_mirror(
     assert_eq!(depth_in.len(), n);
     // Pass 2, prefilter, on the same depths: 8-bit values within 2/255 (one rounding step of
     // the running mean), weight sums to f32 rounding.
-    let host_bias = host_map.map(|_| desc.shadow_bias);
+    let host_bias = host_map.map(|_| desc.lights[0].shadow_bias);
     let (cb, cc) = cpu::prefilter(desc, &rect, s, &depth_in, host_bias);
     assert_eq!(g.basis.len(), cb.len(), "{label}");
     let btol = match s.precision {
@@ -540,7 +541,7 @@ fn check_mirror(
         depth: depth_in.clone(),
         basis: g.basis.clone(),
         cumw: g.cumw.clone(),
-        channels: s.channels(&desc.light),
+        channels: s.channels(&desc.lights[0].light),
         image: Image::new(1, 1),
     };
     let ce = cpu::evaluate(frame, s, &p, epipole);
@@ -593,7 +594,7 @@ fn check_mirror(
         want.remove(0);
     }
     assert_eq!(names, want, "{label}: GPU passes");
-    let sets = s.sets(&desc.light) as u64;
+    let sets = s.sets(&desc.lights[0].light) as u64;
     assert_eq!(g.basis.len() as u64, sets * s.layers() as u64 * rect.width as u64 * rect.height as u64, "{label}");
     let maps = rect.width as u64 * rect.height as u64 * (sets * s.bases as u64 * s.precision.bytes() + 8);
     assert!(g.stats.gpu_memory_bytes >= maps, "{label}: memory {} < {maps}", g.stats.gpu_memory_bytes);
@@ -616,7 +617,7 @@ fn prefiltered_gpu_matches_its_cpu_mirror_pass_by_pass() {
         let scene = scene_at(name, 96, 54, 512);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
         let mut cases = vec![("defaults", small_settings())];
         match *name {
@@ -660,7 +661,7 @@ fn prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map() {
     let scene = side_lit(scene_at("colonnade", 96, 54, 512));
     let desc = frame_desc(&scene);
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-    let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+    let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
     let up = UploadedFrame::new(&gpu, &frame).unwrap();
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let projective = PrefilteredSettings { rectification: RectificationChoice::Projective, ..small_settings() };
@@ -673,7 +674,7 @@ fn prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map() {
         let rect = Rectification::new(&desc, &s.rectify_options());
         assert_eq!(rect.mode, Mode::Projective, "{label}: the side-lit sun is rectified projectively");
         let mut pf = prefiltered_gpu(&gpu, &s);
-        let request = pf.raster_request(&desc).expect("a projective frame has a raster request");
+        let request = pf.raster_requests(&desc)[0].clone().expect("a projective frame has a raster request");
         assert_eq!(Some(&request), rect.raster().as_ref());
         // The two host rasterizers agree (edges may round differently)...
         let cmap = raster::rasterize_rectified(&scene.geometry, &request);
@@ -724,15 +725,15 @@ fn prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map() {
     // A host map is ignored where the frame is not projective: the built-in colonnade (sun in
     // view) goes epipolar, has no raster request, and resamples its map even when handed one.
     let mut pf = prefiltered_gpu(&gpu, &projective);
-    let request = pf.raster_request(&desc).unwrap();
+    let request = pf.raster_requests(&desc)[0].clone().unwrap();
     let gtex = host.render_rectified(&gpu, &request).unwrap();
     let view =
         gtex.create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() });
     let front = scene_at("colonnade", 96, 54, 512);
     let fdesc = frame_desc(&front);
-    assert!(pf.raster_request(&fdesc).is_none(), "the sun in view goes epipolar: nothing to rasterize");
+    assert!(pf.raster_requests(&fdesc)[0].is_none(), "the sun in view goes epipolar: nothing to rasterize");
     let fh = host_cpu::render(&front.geometry, &front.shading(), &fdesc);
-    let fframe = CpuFrame { desc: &fdesc, depth: &fh.depth, shadow_map: &fh.shadow_map, surface: None };
+    let fframe = CpuFrame { desc: &fdesc, depth: &fh.depth, shadow_maps: &fh.shadow_maps, surface: None };
     let fup = UploadedFrame::new(&gpu, &fframe).unwrap();
     let g = run_gpu(&gpu, &mut pf, &fup.frame(&fdesc), Some(&view));
     assert_eq!((g.stats.extra["projective"], g.stats.extra["host_rasterized"]), (0.0, 0.0));
@@ -828,7 +829,7 @@ fn closed_form_check(backend: &str, run: &mut dyn FnMut(&CpuFrame, &PrefilteredS
     for (what, light, choice, mode) in wall_suns() {
         for m in closed_form_media() {
             let (desc, depth, sm) = wall_frame(light.clone(), m.clone(), CW, CH);
-            let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &sm, surface: None };
+            let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
             for (precision, bound) in [(BasisPrecision::Float16, 5e-3f64), (BasisPrecision::Unorm8, 1e-2)] {
                 let s = PrefilteredSettings { rectification: choice, precision, ..small_settings() };
                 let (img, stats) = run(&frame, &s);
@@ -876,7 +877,7 @@ fn an_empty_map_leaves_every_ray_lit() {
     let mut failures = vec![];
     for (what, light, choice, _) in wall_suns() {
         let (desc, depth, sm) = wall_frame(light, m.clone(), CW, CH);
-        let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &sm, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
         let s = PrefilteredSettings { rectification: choice, precision: BasisPrecision::Float16, ..small_settings() };
         let e = closed_form_errors(&frame, &s, &cpu::render(&frame, &s).unwrap().0);
         eprintln!(
@@ -953,17 +954,17 @@ fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut Scattering)>) -> 
             let img = gpu.read_image(&out).unwrap();
             let depth = gpu.read_texture_f32(&tex.depth, 0).unwrap();
             let surface = gpu.read_image(&tex.surface).unwrap();
-            (img, stats, depth, surface, host::read_shadow_map(gpu, &tex, &desc).unwrap())
+            (img, stats, depth, surface, host::read_shadow_maps(gpu, &tex, &desc).unwrap())
         }
         None => {
             let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
             let (img, stats) = render_cpu(&choice, &frame, Some(&scene.geometry), &|_, _| {}).unwrap();
-            (img, stats, h.depth, h.surface, h.shadow_map)
+            (img, stats, h.depth, h.surface, h.shadow_maps)
         }
     };
     assert!(img.all_finite(), "{}", scene.name);
-    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &shadow_map, surface: Some(&surface) };
+    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &shadow_map, surface: Some(&surface) };
     let (rf, _) = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
     let tone = ToneMap::new(scene.render.exposure);
     let t = surface_transmittance(&desc, &depth);
@@ -1112,7 +1113,7 @@ fn validate_rejects_bad_settings_naming_the_key() {
     }
     // The CPU backend validates before it renders.
     let (desc, depth, sm) = wall_frame(sun(Vec3::new(1.0, -0.5, -0.2)), dense(), 16, 9);
-    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &sm, surface: None };
+    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
     let e = cpu::render(&frame, &PrefilteredSettings { regions: 9, ..d() }).unwrap_err().to_string();
     assert!(e.contains("prefiltered.regions"), "{e}");
     // So does the scene-file / --set path.
@@ -1177,7 +1178,7 @@ fn gpu_refuses_bad_settings_and_stays_usable() {
     let e = Scattering::from_gpu(&gpu, settings(PrefilteredSettings { bases: 6, ..Default::default() })).err().unwrap();
     assert!(e.to_string().contains("prefiltered.bases"), "{e}");
     let (desc, depth, sm) = wall_frame(sun(Vec3::new(1.0, -0.5, -0.2)), dense(), 32, 18);
-    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_map: &sm, surface: None };
+    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
     let up = UploadedFrame::new(&gpu, &frame).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
     let view = out.create_view(&Default::default());

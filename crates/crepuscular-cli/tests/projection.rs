@@ -64,8 +64,8 @@ fn gpu_frame(gpu: &GpuContext, scene: &Scene, desc: &FrameDesc, settings: &Techn
         }
         None => {
             let surface = gpu.read_image(&tex.surface).unwrap();
-            let sm = host::read_shadow_map(gpu, &tex, desc).unwrap();
-            let frame = CpuFrame { desc, depth: &depth, shadow_map: &sm, surface: Some(&surface) };
+            let sm = host::read_shadow_maps(gpu, &tex, desc).unwrap();
+            let frame = CpuFrame { desc, depth: &depth, shadow_maps: &sm, surface: Some(&surface) };
             render_cpu(settings, &frame, Some(&scene.geometry), &|_, _| {}).unwrap().0
         }
     };
@@ -74,7 +74,7 @@ fn gpu_frame(gpu: &GpuContext, scene: &Scene, desc: &FrameDesc, settings: &Techn
 
 fn cpu_frame(scene: &Scene, desc: &FrameDesc, settings: &TechniqueSettings) -> (Image, Vec<f32>) {
     let h = host_cpu::render(&scene.geometry, &scene.shading(), desc);
-    let frame = CpuFrame { desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+    let frame = CpuFrame { desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
     (render_cpu(settings, &frame, Some(&scene.geometry), &|_, _| {}).unwrap().0, h.depth)
 }
 
@@ -190,8 +190,8 @@ fn reversed_shadows(desc: &FrameDesc) -> FrameDesc {
         glam::Vec4::new(0.0, 0.0, 1.0, 1.0),
     );
     let mut d = desc.clone();
-    d.shadow.view_proj = d.shadow.view_proj.map(|m| flip * m);
-    d.shadow.depth = DepthConvention::Reversed;
+    d.lights[0].shadow.view_proj = d.lights[0].shadow.view_proj.map(|m| flip * m);
+    d.lights[0].shadow.depth = DepthConvention::Reversed;
     d
 }
 

@@ -55,7 +55,7 @@ fn brute_force_vs_reference_on_every_builtin_scene_cpu() {
         let scene = small(name);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (bf, _) = crepuscular::techniques::brute_force::cpu::march(&frame, &BruteForceSettings::default()).unwrap();
         let (rf, _) = crepuscular::techniques::reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let t = crepuscular::frame::surface_transmittance(&desc, &h.depth);

@@ -66,7 +66,7 @@ fn case(name: impl Into<String>, camera: Camera, light: Light, medium: Medium) -
     scene.render.height = H;
     scene.render.shadow.size = 256;
     scene.camera = camera;
-    scene.light = light;
+    scene.lights[0].light = light;
     scene.medium = medium;
     Case { name: name.into(), scene, bounded: true }
 }

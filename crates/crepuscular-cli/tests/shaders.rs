@@ -38,44 +38,79 @@ fn struct_members(module: &naga::Module, name: &str) -> (Vec<(String, u32)>, u32
     panic!("struct {name} not found");
 }
 
+/// Checks the WGSL struct `name` against its Rust twin's member offsets and size.
+fn check_struct(module: &naga::Module, name: &str, rust: &[(&str, usize)], size: usize) {
+    let (members, span) = struct_members(module, name);
+    assert_eq!(members.len(), rust.len(), "{name}: field count");
+    for ((wn, wo), (rn, ro)) in members.iter().zip(rust) {
+        assert_eq!(wn, rn, "{name}");
+        assert_eq!(*wo as usize, *ro, "{name}: offset of {rn}");
+    }
+    assert_eq!(span as usize, size, "{name}: size");
+}
+
 #[test]
 fn frame_uniforms_match_the_wgsl_layout() {
+    use crepuscular::{LightUniforms, LightsUniforms};
     let module = parse("common", &crepuscular::shaders::compose(crepuscular::techniques::brute_force::MARCH_WGSL));
-    let (members, span) = struct_members(&module, "Frame");
-    let rust = [
-        ("inv_view_proj", offset_of!(FrameUniforms, inv_view_proj)),
-        ("inv_projection", offset_of!(FrameUniforms, inv_projection)),
-        ("inv_view", offset_of!(FrameUniforms, inv_view)),
-        ("view_proj", offset_of!(FrameUniforms, view_proj)),
-        ("shadow_view_proj", offset_of!(FrameUniforms, shadow_view_proj)),
-        ("camera_pos", offset_of!(FrameUniforms, camera_pos)),
-        ("camera_fwd", offset_of!(FrameUniforms, camera_fwd)),
-        ("light_pos", offset_of!(FrameUniforms, light_pos)),
-        ("light_dir", offset_of!(FrameUniforms, light_dir)),
-        ("light_color", offset_of!(FrameUniforms, light_color)),
-        ("sigma_s", offset_of!(FrameUniforms, sigma_s)),
-        ("sigma_a", offset_of!(FrameUniforms, sigma_a)),
-        ("rayleigh_fraction", offset_of!(FrameUniforms, rayleigh_fraction)),
-        ("shadow_near", offset_of!(FrameUniforms, shadow_near)),
-        ("shadow_far", offset_of!(FrameUniforms, shadow_far)),
-        ("shadow_bias", offset_of!(FrameUniforms, shadow_bias)),
-        ("shadow_texel", offset_of!(FrameUniforms, shadow_texel)),
-        ("depth_params", offset_of!(FrameUniforms, depth_params)),
-        ("width", offset_of!(FrameUniforms, width)),
-        ("height", offset_of!(FrameUniforms, height)),
-        ("light_kind", offset_of!(FrameUniforms, light_kind)),
-        ("phase_kind", offset_of!(FrameUniforms, phase_kind)),
-        ("shadow_layers", offset_of!(FrameUniforms, shadow_layers)),
-        ("shadow_size", offset_of!(FrameUniforms, shadow_size)),
-        ("shadow_orthographic", offset_of!(FrameUniforms, shadow_orthographic)),
-        ("spot_textured", offset_of!(FrameUniforms, spot_textured)),
-    ];
-    assert_eq!(members.len(), rust.len(), "field count");
-    for ((wn, wo), (rn, ro)) in members.iter().zip(rust) {
-        assert_eq!(wn, rn);
-        assert_eq!(*wo as usize, ro, "offset of {rn}");
-    }
-    assert_eq!(span as usize, std::mem::size_of::<FrameUniforms>());
+    check_struct(
+        &module,
+        "Frame",
+        &[
+            ("inv_view_proj", offset_of!(FrameUniforms, inv_view_proj)),
+            ("inv_projection", offset_of!(FrameUniforms, inv_projection)),
+            ("inv_view", offset_of!(FrameUniforms, inv_view)),
+            ("view_proj", offset_of!(FrameUniforms, view_proj)),
+            ("camera_pos", offset_of!(FrameUniforms, camera_pos)),
+            ("camera_fwd", offset_of!(FrameUniforms, camera_fwd)),
+            ("sigma_s", offset_of!(FrameUniforms, sigma_s)),
+            ("sigma_a", offset_of!(FrameUniforms, sigma_a)),
+            ("rayleigh_fraction", offset_of!(FrameUniforms, rayleigh_fraction)),
+            ("depth_params", offset_of!(FrameUniforms, depth_params)),
+            ("width", offset_of!(FrameUniforms, width)),
+            ("height", offset_of!(FrameUniforms, height)),
+            ("phase_kind", offset_of!(FrameUniforms, phase_kind)),
+            ("_pad", offset_of!(FrameUniforms, _pad)),
+        ],
+        std::mem::size_of::<FrameUniforms>(),
+    );
+    check_struct(
+        &module,
+        "Light",
+        &[
+            ("shadow_view_proj", offset_of!(LightUniforms, shadow_view_proj)),
+            ("position", offset_of!(LightUniforms, position)),
+            ("direction", offset_of!(LightUniforms, direction)),
+            ("color", offset_of!(LightUniforms, color)),
+            ("shadow_near", offset_of!(LightUniforms, shadow_near)),
+            ("shadow_far", offset_of!(LightUniforms, shadow_far)),
+            ("shadow_bias", offset_of!(LightUniforms, shadow_bias)),
+            ("shadow_texel", offset_of!(LightUniforms, shadow_texel)),
+            ("kind", offset_of!(LightUniforms, kind)),
+            ("shadow_layers", offset_of!(LightUniforms, shadow_layers)),
+            ("shadow_size", offset_of!(LightUniforms, shadow_size)),
+            ("shadow_orthographic", offset_of!(LightUniforms, shadow_orthographic)),
+            ("shadow_first_layer", offset_of!(LightUniforms, shadow_first_layer)),
+            ("shadow_clear", offset_of!(LightUniforms, shadow_clear)),
+            ("texture_layer", offset_of!(LightUniforms, texture_layer)),
+            ("_pad0", offset_of!(LightUniforms, _pad0)),
+            ("texture_size", offset_of!(LightUniforms, texture_size)),
+            ("_pad1", offset_of!(LightUniforms, _pad1)),
+        ],
+        std::mem::size_of::<LightUniforms>(),
+    );
+    check_struct(
+        &module,
+        "Lights",
+        &[
+            ("count", offset_of!(LightsUniforms, count)),
+            ("_pad0", offset_of!(LightsUniforms, _pad)),
+            ("_pad1", offset_of!(LightsUniforms, _pad) + 4),
+            ("_pad2", offset_of!(LightsUniforms, _pad) + 8),
+            ("items", offset_of!(LightsUniforms, items)),
+        ],
+        std::mem::size_of::<LightsUniforms>(),
+    );
 }
 
 /// Checks a pass's `Params` uniform block against its Rust twin: member names, offsets, size
@@ -231,6 +266,15 @@ fn wgsl_light_and_phase_kinds_are_the_rust_constants() {
         ("PHASE_HOFFMAN_PREETHAM", PHASE_HOFFMAN_PREETHAM),
     ] {
         let decl = format!("const {name}: u32 = {value}u;");
+        assert!(common.contains(&decl), "common.wgsl lacks `{decl}`");
+    }
+    // The lights block: its size, the missing-texture marker, its binding.
+    for decl in [
+        format!("const MAX_LIGHTS: u32 = {MAX_LIGHTS}u;"),
+        format!("items: array<Light, {MAX_LIGHTS}>,"),
+        format!("const NO_TEXTURE: u32 = 0x{NO_TEXTURE:x}u;"),
+        format!("@group(0) @binding({}) var<uniform> lights: Lights;", crepuscular::techniques::pass::LIGHTS_BINDING),
+    ] {
         assert!(common.contains(&decl), "common.wgsl lacks `{decl}`");
     }
 }

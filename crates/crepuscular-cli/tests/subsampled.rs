@@ -83,7 +83,7 @@ fn subsampled_gpu_matches_its_cpu_mirror_pass_by_pass() {
         let scene = small(name, 512);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         for settings in mirror_settings() {
             let cpu_grid = subsampled::cpu::march(&frame, &settings).unwrap();
             let (_, cpu_remarched) = subsampled::cpu::upsample(&frame, &settings, &cpu_grid);
@@ -145,7 +145,7 @@ fn the_grid_is_reallocated_only_when_its_size_changes() {
     let scene = small("cage", 256);
     let desc = frame_desc(&scene);
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-    let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+    let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
     let up = crepuscular::gpu::UploadedFrame::new(&gpu, &frame).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
     let view = out.create_view(&Default::default());
@@ -270,7 +270,7 @@ fn closed_form_check(backend: &str, run: &dyn Fn(&CpuFrame, &SubsampledSettings)
     use closed_form::*;
     for m in media() {
         let (d, depth, sm) = frame(m.clone());
-        let frame = CpuFrame { desc: &d, depth: &depth, shadow_map: &sm, surface: None };
+        let frame = CpuFrame { desc: &d, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
         let exact_img = exact_image(&d);
         for &(grid, factor, bound) in CLOSED_FORM_CASES {
             // A pure bilinear filter first (the wall's depth slope is then irrelevant): the
@@ -365,7 +365,7 @@ fn factor_one_is_brute_force_cpu() {
         let scene = small(name, 256);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         for (s, b) in factor_one_settings() {
             let (img, stats) = subsampled::cpu::render(&frame, &s).unwrap();
             let (bf, _) = crepuscular::techniques::brute_force::cpu::march(&frame, &b).unwrap();
@@ -383,7 +383,7 @@ fn factor_one_is_brute_force_gpu() {
         let scene = small(name, 256);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: None };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = crepuscular::gpu::UploadedFrame::new(&gpu, &frame).unwrap();
         for (s, b) in factor_one_settings() {
             let (_, img, stats) = gpu_subsampled(&gpu, &frame, &s);
@@ -456,7 +456,7 @@ fn subsampled_vs_reference_on_every_builtin_scene_cpu() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (img, stats) = subsampled::cpu::render(&frame, &SubsampledSettings::default()).unwrap();
         let (rf, _) = crepuscular::techniques::reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let t = surface_transmittance(&desc, &h.depth);
@@ -513,7 +513,7 @@ fn edge_remarching_improves_silhouettes() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (rf, _) = crepuscular::techniques::reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let t = surface_transmittance(&desc, &h.depth);
         let rff = composite(&h.surface, &rf, &t);
@@ -550,7 +550,7 @@ fn sweep_depth_tolerance() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_map: &h.shadow_map, surface: Some(&h.surface) };
+        let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (rf, _) = crepuscular::techniques::reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
         let t = surface_transmittance(&desc, &h.depth);
         let rff = composite(&h.surface, &rf, &t);

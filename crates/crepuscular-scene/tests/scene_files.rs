@@ -92,13 +92,13 @@ fn every_builtin_loads_with_geometry() {
 
 #[test]
 fn builtin_lights_are_the_advertised_kinds() {
-    let kind = |n: &str| builtin(n).unwrap().light.kind_name();
+    let kind = |n: &str| builtin(n).unwrap().lights[0].light.kind_name();
     assert_eq!(kind("colonnade"), "directional");
     assert_eq!(kind("forest"), "directional");
     assert_eq!(kind("terrain"), "directional");
     assert_eq!(kind("cage"), "point");
     assert_eq!(kind("stained-glass"), "spot");
-    match builtin("stained-glass").unwrap().light {
+    match builtin("stained-glass").unwrap().lights[0].light.clone() {
         Light::Spot { texture: Some(t), .. } => {
             assert_eq!((t.width, t.height), (256, 256));
             assert_eq!(t.texels.len(), 256 * 256);
@@ -111,7 +111,7 @@ fn builtin_lights_are_the_advertised_kinds() {
         _ => panic!("stained-glass needs a textured spot light"),
     }
     for (name, _) in builtin_names() {
-        if let Light::Directional { direction, .. } = builtin(name).unwrap().light {
+        if let Light::Directional { direction, .. } = builtin(name).unwrap().lights[0].light.clone() {
             assert!((direction.length() - 1.0).abs() < 1e-5);
             assert!(direction.y < 0.0, "{name}: the sun must shine downwards");
         }
@@ -189,7 +189,7 @@ fn documented_example_parses_with_all_keys() {
     assert_eq!(s.medium.scattering, Vec3::splat(0.04));
     assert_eq!(s.medium.absorption, Vec3::splat(0.005));
     assert_eq!(s.medium.phase, Phase::HenyeyGreenstein { g: 0.6 });
-    match &s.light {
+    match &s.lights[0].light {
         Light::Spot { position, direction, outer_angle_degrees, inner_angle_degrees, color, intensity, texture } => {
             assert_eq!(*position, Vec3::new(-10.0, 9.0, 0.0));
             assert!((direction.length() - 1.0).abs() < 1e-6);
@@ -235,7 +235,7 @@ fn minimal_file_takes_defaults() {
     assert_eq!(s.camera, crepuscular::Camera::default());
     assert_eq!(s.medium, crepuscular::Medium::default());
     assert_eq!(s.render, crepuscular_scene::RenderSettings::default());
-    match s.light {
+    match s.lights[0].light.clone() {
         Light::Directional { direction, color, intensity } => {
             assert!((direction - Vec3::new(0.0, -1.0, -1.0).normalize()).length() < 1e-6);
             assert_eq!((color, intensity), (Vec3::ONE, 1.0));
@@ -245,7 +245,7 @@ fn minimal_file_takes_defaults() {
     assert_eq!(s.geometry.triangle_count(), 0);
     // No [light] at all: the default sun.
     let s = parse_scene_str("", "empty.toml", Path::new(".")).unwrap();
-    assert!(matches!(s.light, Light::Directional { direction, .. } if direction.z > 0.0 && direction.y < 0.0));
+    assert!(matches!(s.lights[0].light, Light::Directional { direction, .. } if direction.z > 0.0 && direction.y < 0.0));
     assert_eq!(s.name, "empty");
 }
 
@@ -273,7 +273,7 @@ kind = "plane"
 scale = 10
 "#;
     let s = parse_scene_str(text, "inline.toml", Path::new(".")).unwrap();
-    assert!(matches!(s.light, Light::Point { intensity, .. } if intensity == 50.0));
+    assert!(matches!(s.lights[0].light, Light::Point { intensity, .. } if intensity == 50.0));
     assert!(matches!(s.medium.phase, Phase::HoffmanPreetham { g, .. } if (g - 0.76).abs() < 1e-6));
     let spot = parse_scene_str(
         "[light]\nkind = \"spot\"\nposition = [0, 5, 0]\ndirection = [0, -1, 0]\nouter_angle_degrees = 40\n[medium]\nphase = { kind = \"rayleigh\" }",
@@ -281,7 +281,7 @@ scale = 10
         Path::new("."),
     )
     .unwrap();
-    match spot.light {
+    match spot.lights[0].light.clone() {
         Light::Spot { outer_angle_degrees, inner_angle_degrees, intensity, texture, .. } => {
             assert_eq!(outer_angle_degrees, 40.0);
             assert!((inner_angle_degrees - 32.0).abs() < 1e-5);

@@ -15,7 +15,7 @@
 //! Run: `cargo run --release -p crepuscular --example own_renderer [-- OUT_DIR [TECHNIQUE]]`
 //! (default: the current directory, every GPU technique), writing `own_renderer-<technique>.ppm`.
 
-use crepuscular::frame::{FrameDesc, GpuFrame};
+use crepuscular::frame::{FrameDesc, FrameLight, GpuFrame};
 use crepuscular::tonemap::ToneMap;
 use crepuscular::{
     Composite, CompositeInputs, CompositeTarget, DepthConvention, FrameCamera, GpuContext, Light, Medium, Scattering,
@@ -272,15 +272,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         lit.extend_from_slice(&(sun_color * sun_intensity).extend(0.0).to_array());
         lit.extend_from_slice(&eye.extend(1.0).to_array());
         queue.write_buffer(&lit_buffer, 0, bytemuck::cast_slice(&lit));
-        let desc = FrameDesc {
-            camera: camera.clone(),
-            light: light.clone(),
-            medium: medium.clone(),
-            shadow: shadow.clone(),
+        // The engine's one light (add more with their shadow maps' layers: FrameLight::shadow_layer).
+        let sun = FrameLight {
             shadow_bias: 0.02, // world units along the light's depth axis
-            width: WIDTH,
-            height: HEIGHT,
+            ..FrameLight::new(light.clone(), shadow.clone())
         };
+        let desc = FrameDesc { camera: camera.clone(), lights: vec![sun], medium: medium.clone(), width: WIDTH, height: HEIGHT };
         let mut encoder = device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -332,9 +329,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let gpu_frame = GpuFrame {
             desc: &desc,
             depth: &depth_view,
-            shadow_map: &shadow_array,
-            spot_texture: None,
-            rectified_shadow_map: None,
+            shadow_maps: &shadow_array,
+            spot_textures: None,
+            rectified_shadow_maps: &[],
         };
         scattering.encode(&mut encoder, &gpu_frame, &inscatter_view)?;
         // 4. … and its composite, with the display transform, into the engine's target.

@@ -222,12 +222,43 @@ fn bench_writes_json_markdown_and_plots_with_the_device() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("wyman-steps"));
 }
 
+/// The `lights` preset runs small on the CPU and writes its table: every technique at every
+/// light count, the first light's cost and each added light's, and the plots.
+#[test]
+fn the_lights_preset_writes_its_table() {
+    let d = tmp("lights");
+    let out = bin()
+        .args(["bench", "--preset", "lights", "--backend", "cpu", "--sizes", "32x18", "--repeat", "1"])
+        .args(["--warmup", "0", "--reference-steps", "8", "--flicker-frames", "0", "--output"])
+        .arg(&d)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("bench.json")).unwrap()).unwrap();
+    let recs = r["records"].as_array().unwrap();
+    assert_eq!(recs.len(), 5 * 5, "5 techniques × 5 light counts");
+    for n in [0, 1, 2, 4, 8] {
+        let scene = format!("night-street:lights={n}");
+        let lights: Vec<f64> = recs.iter().filter(|x| x["scene"] == scene.as_str()).map(|x| x["extra"]["lights"].as_f64().unwrap()).collect();
+        assert_eq!(lights, vec![n as f64; 5], "{scene}: the lights that reach the view");
+    }
+    let md = std::fs::read_to_string(d.join("bench.md")).unwrap();
+    let table = md.split("## Lights table").nth(1).unwrap_or_else(|| panic!("no lights table\n{md}"));
+    let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| technique")).collect();
+    assert_eq!(rows.len(), 5, "{table}");
+    assert!(rows.iter().all(|r| r.split('|').filter(|c| c.trim() == "–").count() == 0), "{table}");
+    for f in ["time_vs_lights.svg", "time_vs_lights.png", "psnr_vs_lights.svg"] {
+        assert!(d.join(f).exists(), "{f} missing");
+    }
+}
+
 /// The Klehm et al. 2014 presets run at a small screen size (their maps keep the paper's sizes)
 /// and lay their rows out as the paper's tables.
 #[test]
 fn klehm_presets_run_small_and_write_the_papers_tables() {
     let d = tmp("klehm");
-    for (preset, rows) in [("klehm-table1", 13), ("klehm-table2", 10), ("klehm-scenes", 10)] {
+    let scenes = crepuscular_scene::builtin::builtin_names().len();
+    for (preset, rows) in [("klehm-table1", 13), ("klehm-table2", 10), ("klehm-scenes", 2 * scenes)] {
         let out = bin()
             .args(["bench", "--preset", preset, "--backend", "cpu", "--sizes", "32x18", "--repeat", "1"])
             .args(["--warmup", "0", "--reference-steps", "0", "--output"])
@@ -242,7 +273,7 @@ fn klehm_presets_run_small_and_write_the_papers_tables() {
         let md = std::fs::read_to_string(d.join(preset).join("bench.md")).unwrap();
         let table = md.split("## Paper table").nth(1).unwrap_or_else(|| panic!("{preset}: no paper table\n{md}"));
         let lines = table.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| scene")).count();
-        assert_eq!(lines, if preset == "klehm-scenes" { 5 } else { rows }, "{preset}: {table}");
+        assert_eq!(lines, if preset == "klehm-scenes" { scenes } else { rows }, "{preset}: {table}");
         if preset == "klehm-table2" {
             // The paper's Memory column: columns · rows · M bytes.
             for x in recs {

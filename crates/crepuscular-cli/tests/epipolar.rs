@@ -712,11 +712,15 @@ fn epipolar_gpu_matches_its_cpu_mirror_pass_by_pass() {
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
-        for s in mirror_settings(name) {
+        // A scene with several lights: pass by pass for one light of each kind in it (the
+        // technique runs once per light, docs/MODEL.md §6).
+        for (k, s) in one_light_of_each_kind(&desc).into_iter().flat_map(|k| mirror_settings(name).into_iter().map(move |s| (k, s))) {
+            let d = desc.with_light(k);
+            let frame = frame.with_light(&d, k);
             set_settings(&mut ep, &s);
-            let g = run_gpu(&gpu, &mut ep, &up.frame(&desc));
+            let g = run_gpu(&gpu, &mut ep, &up.frame(&d));
             let label = format!(
-                "{name} slices {} S {} K {} {:?} taps {} {:?} prefilter {:?}",
+                "{name} light {k} slices {} S {} K {} {:?} taps {} {:?} prefilter {:?}",
                 g.params.slices,
                 g.params.samples,
                 g.params.initial_samples,
@@ -728,6 +732,25 @@ fn epipolar_gpu_matches_its_cpu_mirror_pass_by_pass() {
             eprintln!("{}", check_mirror(&label, &frame, &s, &g));
         }
     }
+}
+
+/// True for a built-in scene with one light.
+fn one_light(name: &str) -> bool {
+    builtin::builtin(name).expect("built-in scene").lights.len() == 1
+}
+
+/// The first light of each kind that reaches the view (the only light of a one-light frame).
+fn one_light_of_each_kind(desc: &FrameDesc) -> Vec<usize> {
+    let mut kinds = Vec::new();
+    let mut out = Vec::new();
+    for k in desc.scattering_lights() {
+        let kind = desc.lights[k].light.kind_name();
+        if !kinds.contains(&kind) {
+            kinds.push(kind);
+            out.push(k);
+        }
+    }
+    out
 }
 
 #[test]
@@ -1003,7 +1026,8 @@ fn check_quality(
 
 #[test]
 fn epipolar_vs_reference_on_every_builtin_scene_cpu() {
-    for (name, _) in builtin::builtin_names() {
+    // The one-light scenes (the several-light ones are tests/lights.rs's).
+    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| one_light(n)) {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
@@ -1019,7 +1043,8 @@ fn epipolar_vs_reference_on_every_builtin_scene_cpu() {
 fn epipolar_vs_reference_on_every_builtin_scene_gpu() {
     let Some(gpu) = test_gpu("epipolar_vs_reference_on_every_builtin_scene_gpu") else { return };
     let mut ep = epipolar_gpu(&gpu, EpipolarSettings::default());
-    for (name, _) in builtin::builtin_names() {
+    // The one-light scenes (the several-light ones are tests/lights.rs's).
+    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| one_light(n)) {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         // The GPU host renderer's own depth and shadow map; the reference runs on the CPU over

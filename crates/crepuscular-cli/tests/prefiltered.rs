@@ -577,7 +577,10 @@ fn check_mirror(
         "{label}: end to end: mean {mean:.2e}, worst {worst:.2e} of the peak"
     );
     // Stats: the same rectification, samples and map size on both backends.
-    assert_eq!(g.stats.extra, cs.extra, "{label}: stats extra");
+    // `Scattering` adds the count of lights that reach the view; the rest is the technique's.
+    let mut ge = g.stats.extra.clone();
+    assert_eq!(ge.remove("lights"), Some(1.0), "{label}: one light per run");
+    assert_eq!(ge, cs.extra, "{label}: stats extra");
     assert_eq!(g.stats.raymarched_samples, cs.raymarched_samples, "{label}");
     assert_eq!(g.stats.extra["projective"], (rect.mode == Mode::Projective) as u32 as f64, "{label}");
     assert_eq!(g.stats.extra["host_rasterized"], host_map.is_some() as u32 as f64, "{label}");
@@ -647,12 +650,33 @@ fn prefiltered_gpu_matches_its_cpu_mirror_pass_by_pass() {
             "cage" => cases.push(("8 bands", PrefilteredSettings { bands: 8, ..small_settings() })),
             _ => {}
         }
-        for (what, s) in cases {
-            set_settings(&mut pf, &s);
-            let g = run_gpu(&gpu, &mut pf, &up.frame(&desc), None);
-            eprintln!("{}", check_mirror(&format!("{name}, {what}"), &frame, &s, &g, None));
+        // A scene with several lights: pass by pass for one light of each kind in it (the
+        // technique runs once per light, docs/MODEL.md §6).
+        for k in one_light_of_each_kind(&desc) {
+            let d = desc.with_light(k);
+            let frame = frame.with_light(&d, k);
+            for (what, s) in &cases {
+                set_settings(&mut pf, s);
+                let g = run_gpu(&gpu, &mut pf, &up.frame(&d), None);
+                let label = format!("{name}, light {k} ({}), {what}", d.lights[0].light.kind_name());
+                eprintln!("{}", check_mirror(&label, &frame, s, &g, None));
+            }
         }
     }
+}
+
+/// The first light of each kind that reaches the view (the only light of a one-light frame).
+fn one_light_of_each_kind(desc: &crepuscular::frame::FrameDesc) -> Vec<usize> {
+    let mut kinds = Vec::new();
+    let mut out = Vec::new();
+    for k in desc.scattering_lights() {
+        let kind = desc.lights[k].light.kind_name();
+        if !kinds.contains(&kind) {
+            kinds.push(kind);
+            out.push(k);
+        }
+    }
+    out
 }
 
 #[test]
@@ -980,7 +1004,9 @@ fn quality_check(backend: &str, mut gpu: Option<(&GpuContext, &mut Scattering)>)
         eprintln!("{backend} {}: frame and reference in {:.1} s", scene.name, t.elapsed().as_secs_f64());
         r
     };
-    for (name, _) in builtin::builtin_names() {
+    // The one-light scenes (the several-light ones are tests/lights.rs's).
+    let one_light = |n: &str| builtin::builtin(n).expect("built-in scene").lights.len() == 1;
+    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| one_light(n)) {
         let scene = scene_at(name, 160, 90, 1024);
         let desc = frame_desc(&scene);
         let (psnr, flip, st) = run(&scene);

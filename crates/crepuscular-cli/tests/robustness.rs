@@ -71,6 +71,12 @@ fn case(name: impl Into<String>, camera: Camera, light: Light, medium: Medium) -
     Case { name: name.into(), scene, bounded: true }
 }
 
+/// `c` with more lights (docs/MODEL.md §6: the frame's in-scattering is their sum).
+fn with_lights(mut c: Case, more: Vec<Light>) -> Case {
+    c.scene.lights.extend(more.into_iter().map(crepuscular_scene::SceneLight::new));
+    c
+}
+
 /// A case whose integral diverges (see [`Case::bounded`]).
 fn singular(mut c: Case) -> Case {
     c.bounded = false;
@@ -194,6 +200,29 @@ fn cases() -> Vec<Case> {
             base.clone(),
             sun(-toward_ndc(&base, 0.1, 0.1)),
             Medium { phase: Phase::HenyeyGreenstein { g: 0.99 }, ..fog() },
+        ),
+        // Several lights: one behind the camera and another on screen; two epipoles on screen;
+        // all three kinds at once; two spots crossing.
+        with_lights(
+            case("lights: sun behind the camera + spot on screen", base.clone(), sun(fwd), fog()),
+            vec![spot(base.look_at + right * 5.0 + Vec3::Y * 3.0, -right + Vec3::NEG_Y * 0.3, 25.0)],
+        ),
+        with_lights(
+            case("lights: two epipoles on screen (sun + point)", base.clone(), sun(-toward_ndc(&base, -0.4, 0.2)), fog()),
+            vec![point(base.position + toward_ndc(&base, 0.4, 0.1) * 8.0)],
+        ),
+        with_lights(
+            case(
+                "lights: spot behind, point on screen, sun on the edge",
+                base.clone(),
+                spot(base.position - fwd * 3.0 + Vec3::Y, fwd, 20.0),
+                fog(),
+            ),
+            vec![point(base.position + toward_ndc(&base, -0.3, -0.2) * 6.0), sun(-toward_ndc(&base, 1.0, 0.2))],
+        ),
+        with_lights(
+            case("lights: two spots crossing", base.clone(), spot(base.look_at - right * 6.0, right, 20.0), fog()),
+            vec![spot(base.look_at + right * 6.0 + Vec3::Y * 2.0, -right + Vec3::NEG_Y * 0.2, 20.0)],
         ),
     ];
     // Seeded random views: camera anywhere around the colonnade looking at a random point,

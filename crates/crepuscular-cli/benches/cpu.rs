@@ -40,7 +40,7 @@ fn setup() -> (crepuscular::frame::FrameDesc, host_cpu::CpuHost, crepuscular_sce
 fn techniques(c: &mut Criterion) {
     let (desc, host, _) = setup();
     let frame =
-        CpuFrame { desc: &desc, depth: &host.depth, shadow_map: &host.shadow_map, surface: Some(&host.surface) };
+        CpuFrame { desc: &desc, depth: &host.depth, shadow_maps: &host.shadow_maps, surface: Some(&host.surface) };
     let mut g = c.benchmark_group("cpu 64x36");
     g.bench_function("reference steps=64", |b| {
         let s = ReferenceSettings { steps: 64, seed: 1 };
@@ -71,7 +71,7 @@ fn host(c: &mut Criterion) {
 fn metrics_benches(c: &mut Criterion) {
     let (desc, host, _) = setup();
     let frame =
-        CpuFrame { desc: &desc, depth: &host.depth, shadow_map: &host.shadow_map, surface: Some(&host.surface) };
+        CpuFrame { desc: &desc, depth: &host.depth, shadow_maps: &host.shadow_maps, surface: Some(&host.surface) };
     let (reference, _) = reference::render(&frame, &ReferenceSettings { steps: 64, seed: 1 }, &|_, _| {}).unwrap();
     let (test, _) = brute_force::cpu::march(&frame, &BruteForceSettings { steps: 8, ..Default::default() }).unwrap();
     let tone = ToneMap::default();

@@ -93,7 +93,9 @@ impl MotionPath {
             .lights
             .iter()
             .find_map(|l| match &l.light {
-                Light::Point { position, .. } => Some((0.05 * position.distance(scene.camera.look_at)).clamp(0.05, 1.0)),
+                Light::Point { position, .. } => {
+                    Some((0.05 * position.distance(scene.camera.look_at)).clamp(0.05, 1.0))
+                }
                 _ => None,
             })
             .unwrap_or(0.0);
@@ -698,7 +700,10 @@ mod tests {
             let (c, l) = p.pose(&s.camera, &s.lights[0].light, 0.25);
             assert!(c.position.distance(s.camera.position) > 0.1, "{name}: the camera does not move");
             assert_eq!(c.look_at, s.camera.look_at);
-            assert!(light_vector(&l).distance(light_vector(&s.lights[0].light)) > 0.02, "{name}: the light does not move");
+            assert!(
+                light_vector(&l).distance(light_vector(&s.lights[0].light)) > 0.02,
+                "{name}: the light does not move"
+            );
         }
         // A scene from a file (any name that is not built in) gets the generic path.
         let s = builtin::builtin("cage").unwrap();

@@ -184,9 +184,8 @@ fn lights_table(r: &BenchReport) -> String {
     for t in techniques {
         let at = |n: usize| r.records.iter().find(|x| x.technique == t && light_count(&x.scene) == Some(n));
         let time = |n: usize| at(n).map(|x| x.total_ms[0]);
-        let cell = |n: usize| {
-            at(n).map_or("–".into(), |x| format!("{:.1} ({})", x.total_ms[0], fmt_opt(x.psnr_db, 1)))
-        };
+        let cell =
+            |n: usize| at(n).map_or("–".into(), |x| format!("{:.1} ({})", x.total_ms[0], fmt_opt(x.psnr_db, 1)));
         let first = time(1).zip(time(0)).map(|(a, b)| a - b);
         let added = |n: usize| time(n).zip(time(1)).map(|(a, b)| (a - b) / (n - 1) as f64);
         let f = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.1}"));
@@ -1514,9 +1513,10 @@ pub fn write(r: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
     }
     // Time and quality vs the number of lights (the `lights` preset): one curve per technique.
     if r.plan.scenes.iter().all(|s| light_count(s).is_some()) && r.plan.scenes.len() > 1 {
-        for (what, file, quality) in
-            [("technique time per frame, ms (median)", "time_vs_lights", false), ("PSNR vs reference, dB", "psnr_vs_lights", true)]
-        {
+        for (what, file, quality) in [
+            ("technique time per frame, ms (median)", "time_vs_lights", false),
+            ("PSNR vs reference, dB", "psnr_vs_lights", true),
+        ] {
             let mut curves: Curves = Vec::new();
             for x in &r.records {
                 let Some(n) = light_count(&x.scene) else { continue };
@@ -1529,7 +1529,14 @@ pub fn write(r: &BenchReport, dir: &Path) -> Result<Vec<PathBuf>> {
             }
             let p = dir.join(format!("{file}.svg"));
             let (w, h) = r.plan.sizes[0];
-            if line_plot(&p, &format!("{what} vs lights — {LIGHTS_SCENE} {w}×{h} — {dev}"), "lights", what, false, &curves)? {
+            if line_plot(
+                &p,
+                &format!("{what} vs lights — {LIGHTS_SCENE} {w}×{h} — {dev}"),
+                "lights",
+                what,
+                false,
+                &curves,
+            )? {
                 written.push(p.with_extension("png"));
                 written.push(p);
             }

@@ -78,7 +78,7 @@ struct ViewArgs {
     /// and exit with code 0.
     #[arg(long, value_name = "N")]
     screenshot_after: Option<u32>,
-    /// Screenshot path: --screenshot-after writes it; F12 / P write `<stem>-<n>.png` and
+    /// Screenshot path: --screenshot-after writes it (and `<stem>.json`); F12 / P write `<stem>-<n>.png` and
     /// `<stem>-<n>.json` (scene, camera, light, medium, settings, stats) beside it.
     #[arg(long, short, default_value = "crepuscular-view.png")]
     output: PathBuf,

@@ -8,8 +8,8 @@ use crepuscular::stats::{PassTime, TechniqueStats};
 use crepuscular::techniques::{epipolar, interleaved, prefiltered};
 use crepuscular::tonemap::composite;
 use crepuscular::{
-    AnyGpuTechnique, Composite, CompositeInputs, CompositeTarget, CpuFrame, GpuFrame, Image, Scattering,
-    StatsMode, TechniqueSettings,
+    AnyGpuTechnique, Composite, CompositeInputs, CompositeTarget, CpuFrame, GpuFrame, Image, Scattering, StatsMode,
+    TechniqueSettings,
 };
 use crepuscular_scene::{Geometry, GpuHost, Scene, builtin, file, host, host_cpu};
 use serde::Serialize;
@@ -338,7 +338,8 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
         }
         None => {
             let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
+            let frame =
+                CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
             let (inscatter, stats) = render_cpu(&opts.technique, &frame, Some(&scene.geometry), opts.progress)?;
             check_finite(&inscatter, &opts.technique)?;
             let final_radiance = composite(&h.surface, &inscatter, &surface_transmittance(&desc, &h.depth));
@@ -469,7 +470,8 @@ pub fn debug_view(
         }
         None => {
             let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
+            let frame =
+                CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
             epipolar::cpu::render_with_debug(&frame, settings)?.2
         }
     };
@@ -519,7 +521,8 @@ fn prefiltered_debug_view(
         }
         None => {
             let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
+            let frame =
+                CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
             let rect = prefiltered::Rectification::new(&desc, &settings.rectify_options());
             let raster = rect.raster().map(|r| crepuscular_scene::raster::rasterize_rectified(&scene.geometry, &r));
             (prefiltered::cpu::passes(&frame, settings, raster.as_deref())?.0, h.depth)

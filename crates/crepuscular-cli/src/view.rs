@@ -574,7 +574,8 @@ impl Viewer {
         {
             let path = self.output.clone();
             self.save_screenshot(&path)?;
-            eprintln!("wrote {} after {} frames", path.display(), self.frames_rendered);
+            output::write_atomic(&path.with_extension("json"), self.view_state_json()?.as_bytes())?;
+            eprintln!("wrote {} (and its .json) after {} frames", path.display(), self.frames_rendered);
             if let Some(f) = self.history.back() {
                 let (w, h) = self.render_size();
                 let passes: Vec<String> = f.passes.iter().map(|p| format!("{} {:.1}", p.name, p.ms)).collect();

@@ -239,7 +239,11 @@ fn the_lights_preset_writes_its_table() {
     assert_eq!(recs.len(), 5 * 5, "5 techniques × 5 light counts");
     for n in [0, 1, 2, 4, 8] {
         let scene = format!("night-street:lights={n}");
-        let lights: Vec<f64> = recs.iter().filter(|x| x["scene"] == scene.as_str()).map(|x| x["extra"]["lights"].as_f64().unwrap()).collect();
+        let lights: Vec<f64> = recs
+            .iter()
+            .filter(|x| x["scene"] == scene.as_str())
+            .map(|x| x["extra"]["lights"].as_f64().unwrap())
+            .collect();
         assert_eq!(lights, vec![n as f64; 5], "{scene}: the lights that reach the view");
     }
     let md = std::fs::read_to_string(d.join("bench.md")).unwrap();

@@ -390,7 +390,10 @@ fn wall_depth(desc: &FrameDesc, boxes: &[([u32; 4], f32)]) -> Vec<f32> {
 fn refinement_marks_both_sides_of_every_depth_step_and_nothing_on_a_plane() {
     for (name, light) in [("sun", sun(Vec3::new(0.3, -0.2, 1.0))), ("point", point(Vec3::new(-2.0, 1.0, -8.0)))] {
         let desc = view_desc(light, VW, VH);
-        let sm = ShadowMap { projection: desc.lights[0].shadow.clone(), depth: vec![1.0; desc.lights[0].shadow.layers as usize * 64 * 64] };
+        let sm = ShadowMap {
+            projection: desc.lights[0].shadow.clone(),
+            depth: vec![1.0; desc.lights[0].shadow.layers as usize * 64 * 64],
+        };
         for settings in [
             EpipolarSettings { slices: Some(96), samples: Some(128), initial_samples: 16, ..Default::default() },
             EpipolarSettings {
@@ -714,7 +717,10 @@ fn epipolar_gpu_matches_its_cpu_mirror_pass_by_pass() {
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
         // A scene with several lights: pass by pass for one light of each kind in it (the
         // technique runs once per light, docs/MODEL.md §6).
-        for (k, s) in one_light_of_each_kind(&desc).into_iter().flat_map(|k| mirror_settings(name).into_iter().map(move |s| (k, s))) {
+        for (k, s) in one_light_of_each_kind(&desc)
+            .into_iter()
+            .flat_map(|k| mirror_settings(name).into_iter().map(move |s| (k, s)))
+        {
             let d = desc.with_light(k);
             let frame = frame.with_light(&d, k);
             set_settings(&mut ep, &s);
@@ -1400,7 +1406,8 @@ fn sweep_settings() {
         let mut line = format!("{label:32}");
         let (mut mp, mut mf, mut ms) = (0.0, 0.0, 0.0);
         for f in &frames {
-            let frame = CpuFrame { desc: &f.desc, depth: &f.host.depth, shadow_maps: &f.host.shadow_maps, surface: None };
+            let frame =
+                CpuFrame { desc: &f.desc, depth: &f.host.depth, shadow_maps: &f.host.shadow_maps, surface: None };
             let (img, st) = cpu::render(&frame, s).unwrap();
             let (psnr, flip) =
                 metrics(&f.desc, &f.host.depth, &f.host.surface, &f.reference, &img, f.scene.render.exposure);

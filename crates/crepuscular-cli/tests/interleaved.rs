@@ -495,7 +495,10 @@ const THRESHOLDS: &[(&str, f64, f64)] = &[
 const REFERENCE: ReferenceSettings = ReferenceSettings { steps: 512, seed: 1 };
 
 fn threshold(name: &str) -> (f64, f64) {
-    let t = THRESHOLDS.iter().find(|t| t.0 == name).unwrap_or_else(|| panic!("no threshold for built-in scene {name}: measure it and add one"));
+    let t = THRESHOLDS
+        .iter()
+        .find(|t| t.0 == name)
+        .unwrap_or_else(|| panic!("no threshold for built-in scene {name}: measure it and add one"));
     (t.1, t.2)
 }
 

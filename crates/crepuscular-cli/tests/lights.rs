@@ -144,7 +144,10 @@ fn colonnade_with_idle_lights() -> Scene {
         intensity: 500.0,
         texture: None,
     }));
-    s.lights.push(SceneLight { light: Light::Point { position: s.camera.look_at, color: Vec3::ONE, intensity: 80.0 }, scattering: 0.0 });
+    s.lights.push(SceneLight {
+        light: Light::Point { position: s.camera.look_at, color: Vec3::ONE, intensity: 80.0 },
+        scattering: 0.0,
+    });
     s
 }
 
@@ -305,8 +308,9 @@ fn multi_light_quality(backend: &str, gpu: Option<&GpuContext>) {
         scene.render.shadow.size = 1024;
         assert!(scene.lights.len() > 1, "{name} has several lights");
         let opts = |technique| RenderOptions { technique, progress: &|_, _| {} };
-        let reference = render(&scene, None, &opts(TechniqueSettings::Reference(ReferenceSettings { steps: 512, seed: 1 })))
-            .unwrap();
+        let reference =
+            render(&scene, None, &opts(TechniqueSettings::Reference(ReferenceSettings { steps: 512, seed: 1 })))
+                .unwrap();
         let tone = ToneMap::new(scene.render.exposure);
         for t in crepuscular::techniques::TECHNIQUES.iter().filter(|t| t.gpu) {
             let settings = parse_technique(t.name, &scene, &[]).unwrap();

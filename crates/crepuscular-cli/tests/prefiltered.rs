@@ -40,7 +40,9 @@ fn scene_at(name: &str, w: u32, h: u32, shadow: u32) -> Scene {
 /// rectification (§4.2) is possible (`auto` still takes the epipolar one: the camera's
 /// far/near ratio is far above `max_projective_depth_ratio`, so the tests ask for it).
 fn side_lit(mut scene: Scene) -> Scene {
-    let Light::Directional { color, intensity, .. } = scene.lights[0].light.clone() else { panic!("{}: not a sun", scene.name) };
+    let Light::Directional { color, intensity, .. } = scene.lights[0].light.clone() else {
+        panic!("{}: not a sun", scene.name)
+    };
     let f = scene.camera.look_at - scene.camera.position;
     let right = Vec3::new(f.x, 0.0, f.z).normalize().cross(Vec3::Y);
     scene.lights[0].light = Light::Directional { direction: (right - Vec3::Y * 0.45).normalize(), color, intensity };
@@ -509,7 +511,13 @@ fn check_mirror(
         None => {
             let cd = cpu::rectify(frame, &rect);
             let (frac, worst) = frac_within(&g.depth, &cd, 1e-4);
-            assert!(frac >= 0.99, "{label}: rectified depth: only {:.3} % within 1e-4 (worst {worst})", frac * 100.0);
+            assert!(
+                frac >= 0.99,
+                "{label}: rectified depth: only {:.3} % within 1e-4 (worst {worst}; {:?}, ranges {:?})",
+                frac * 100.0,
+                rect.mode,
+                rect.ranges
+            );
             (g.depth.clone(), frac, worst)
         }
         Some(m) => (m.to_vec(), 1.0, 0.0),
@@ -982,7 +990,8 @@ fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut Scattering)>) -> 
         }
         None => {
             let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-            let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
+            let frame =
+                CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
             let (img, stats) = render_cpu(&choice, &frame, Some(&scene.geometry), &|_, _| {}).unwrap();
             (img, stats, h.depth, h.surface, h.shadow_maps)
         }

@@ -34,8 +34,10 @@ const H: u32 = 36;
 /// two backends differ in f32 rounding there). The sweep found prefiltered taking the projective
 /// map with the sun on a screen corner (NMAE 1.00 CPU, 2.94 llvmpipe); the projective map is now
 /// refused within 0.1 NDC of the screen (0.09 there). docs/ROBUSTNESS.md has the full table.
+/// Every bound is below 1.0, the NMAE of a black picture wherever the reference is visible
+/// (interleaved's and subsampled's were 1.1 until 2026-12-02: a black output passed them).
 const MAX_NMAE: &[(&str, f64)] =
-    &[("brute-force", 0.35), ("interleaved", 1.1), ("subsampled", 1.1), ("epipolar", 0.35), ("prefiltered", 0.85)];
+    &[("brute-force", 0.35), ("interleaved", 0.98), ("subsampled", 0.95), ("epipolar", 0.35), ("prefiltered", 0.85)];
 
 fn bound(technique: &str) -> f64 {
     MAX_NMAE
@@ -208,7 +210,12 @@ fn cases() -> Vec<Case> {
             vec![spot(base.look_at + right * 5.0 + Vec3::Y * 3.0, -right + Vec3::NEG_Y * 0.3, 25.0)],
         ),
         with_lights(
-            case("lights: two epipoles on screen (sun + point)", base.clone(), sun(-toward_ndc(&base, -0.4, 0.2)), fog()),
+            case(
+                "lights: two epipoles on screen (sun + point)",
+                base.clone(),
+                sun(-toward_ndc(&base, -0.4, 0.2)),
+                fog(),
+            ),
             vec![point(base.position + toward_ndc(&base, 0.4, 0.1) * 8.0)],
         ),
         with_lights(
@@ -225,23 +232,34 @@ fn cases() -> Vec<Case> {
             vec![spot(base.look_at + right * 6.0 + Vec3::Y * 2.0, -right + Vec3::NEG_Y * 0.2, 20.0)],
         ),
     ];
-    // Seeded random views: camera anywhere around the colonnade looking at a random point,
-    // any light kind, anywhere.
-    let mut rng = Lcg(0x5eed_2026);
-    for i in 0..12 {
-        let position = Vec3::new(rng.range(-12.0, 12.0), rng.range(0.3, 8.0), rng.range(-12.0, 12.0));
-        let look_at = Vec3::new(rng.range(-4.0, 4.0), rng.range(0.0, 4.0), rng.range(-4.0, 4.0));
-        let camera = Camera { position, look_at, ..base.clone() };
-        let dir = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, -0.05), rng.range(-1.0, 1.0));
-        let at = Vec3::new(rng.range(-8.0, 8.0), rng.range(1.0, 10.0), rng.range(-8.0, 8.0));
-        let light = match i % 3 {
-            0 => sun(dir),
-            1 => spot(at, (look_at - at).normalize_or(Vec3::NEG_Y), rng.range(10.0, 60.0)),
-            _ => point(at),
-        };
-        v.push(case(format!("random #{i} ({})", light.kind_name()), camera, light, fog()));
-    }
+    v.extend(random_cases(RANDOM_VIEWS));
     v
+}
+
+/// How many seeded random views the default sweep adds to the hard cases (the long sweep,
+/// [`every_technique_over_many_seeded_views`], runs the same sequence further).
+const RANDOM_VIEWS: usize = 12;
+
+/// The first `n` seeded random views: camera anywhere around the colonnade looking at a random
+/// point, any light kind, anywhere. The sequence does not depend on `n`.
+fn random_cases(n: usize) -> Vec<Case> {
+    let base = builtin::builtin("colonnade").expect("colonnade").camera;
+    let mut rng = Lcg(0x5eed_2026);
+    (0..n)
+        .map(|i| {
+            let position = Vec3::new(rng.range(-12.0, 12.0), rng.range(0.3, 8.0), rng.range(-12.0, 12.0));
+            let look_at = Vec3::new(rng.range(-4.0, 4.0), rng.range(0.0, 4.0), rng.range(-4.0, 4.0));
+            let camera = Camera { position, look_at, ..base.clone() };
+            let dir = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, -0.05), rng.range(-1.0, 1.0));
+            let at = Vec3::new(rng.range(-8.0, 8.0), rng.range(1.0, 10.0), rng.range(-8.0, 8.0));
+            let light = match i % 3 {
+                0 => sun(dir),
+                1 => spot(at, (look_at - at).normalize_or(Vec3::NEG_Y), rng.range(10.0, 60.0)),
+                _ => point(at),
+            };
+            case(format!("random #{i} ({})", light.kind_name()), camera, light, fog())
+        })
+        .collect()
 }
 
 /// A tiny deterministic generator (the sweep must be reproducible without a dependency).
@@ -285,6 +303,14 @@ fn nmae(test: &Image, reference: &Image) -> f64 {
     num / den.max(1e-3 * 3.0 * test.pixels.len() as f64)
 }
 
+/// True where an image holds one value in every pixel (rgb within 10⁻⁶ of its largest value):
+/// black, or any constant, which no view of a shaft or a cone should give.
+fn constant(img: &Image) -> bool {
+    let peak = img.pixels.iter().flat_map(|p| p[..3].iter().map(|v| v.abs())).fold(0.0f32, f32::max);
+    let first = img.pixels[0];
+    img.pixels.iter().all(|p| (0..3).all(|c| (p[c] - first[c]).abs() <= 1e-6 * peak))
+}
+
 fn check(c: &Case, backend: &str, technique: &str, out: &RenderOutput, reference: &RenderOutput) -> f64 {
     let name = &c.name;
     assert!(finite(&out.inscatter), "{backend} {technique} on `{name}`: NaN or Inf in the in-scattering");
@@ -292,14 +318,27 @@ fn check(c: &Case, backend: &str, technique: &str, out: &RenderOutput, reference
     let e = nmae(&out.inscatter, &reference.inscatter);
     let max = bound(technique);
     assert!(!c.bounded || e <= max, "{backend} {technique} on `{name}`: NMAE {e:.3} > {max}");
+    // Apart from the bound (which a black picture fails: its NMAE is 1 wherever the reference
+    // is visible): where the reference is visible and not constant, neither is the technique.
+    if c.bounded && visible(&reference.inscatter) && !constant(&reference.inscatter) {
+        assert!(!constant(&out.inscatter), "{backend} {technique} on `{name}`: a constant (or black) in-scattering");
+    }
     e
 }
 
-/// Runs the sweep on one backend and prints, per technique, its worst case.
-fn sweep(gpu: Option<&crepuscular::gpu::GpuContext>, backend: &str) {
+/// True where the in-scattering's mean is above [`nmae`]'s floor (visible at exposure 1).
+fn visible(img: &Image) -> bool {
+    let sum: f64 = img.pixels.iter().flat_map(|p| p[..3].iter().map(|v| v.abs() as f64)).sum();
+    sum > 1e-3 * 3.0 * img.pixels.len() as f64
+}
+
+/// Runs `cases` on one backend and prints, per technique, its worst case; `verbose`: a line per
+/// case too.
+fn sweep(cases: &[Case], gpu: Option<&crepuscular::gpu::GpuContext>, backend: &str, verbose: bool) {
     let techniques = techniques();
     let mut worst: Vec<(f64, String)> = vec![(0.0, String::new()); techniques.len()];
-    for c in cases() {
+    let started = std::time::Instant::now();
+    for (k, c) in cases.iter().enumerate() {
         let opts = |technique| RenderOptions { technique, progress: &|_, _| {} };
         let reference = render(&c.scene, None, &opts(TechniqueSettings::Reference(REFERENCE)))
             .unwrap_or_else(|e| panic!("reference on `{}`: {e:#}", c.name));
@@ -308,28 +347,59 @@ fn sweep(gpu: Option<&crepuscular::gpu::GpuContext>, backend: &str) {
         for (i, t) in techniques.iter().enumerate() {
             let out = render(&c.scene, gpu, &opts(t.clone()))
                 .unwrap_or_else(|e| panic!("{backend} {} on `{}`: {e:#}", t.name(), c.name));
-            let e = check(&c, backend, t.name(), &out, &reference);
+            let e = check(c, backend, t.name(), &out, &reference);
             line += &format!(" {}={e:.3}", t.name());
             if c.bounded && e > worst[i].0 {
                 worst[i] = (e, c.name.clone());
             }
         }
-        eprintln!("{line}{}", if c.bounded { "" } else { "  (diverging integral: finiteness only)" });
+        if verbose {
+            eprintln!("{line}{}", if c.bounded { "" } else { "  (diverging integral: finiteness only)" });
+        } else if (k + 1) % 50 == 0 {
+            eprintln!("{backend}: {} of {} views ({:.0} s)", k + 1, cases.len(), started.elapsed().as_secs_f64());
+        }
     }
+    eprintln!("{backend}: {} views, {:.0} s", cases.len(), started.elapsed().as_secs_f64());
     for (t, (e, name)) in techniques.iter().zip(&worst) {
-        eprintln!("{backend} worst for {}: NMAE {e:.3} on `{name}`", t.name());
+        eprintln!("{backend} worst for {}: NMAE {e:.3} on `{name}` (bound {})", t.name(), bound(t.name()));
     }
 }
 
 #[test]
 fn every_technique_survives_every_hard_view_cpu() {
-    sweep(None, "cpu");
+    sweep(&cases(), None, "cpu", true);
 }
 
 #[test]
 fn every_technique_survives_every_hard_view_gpu() {
     let Some(gpu) = test_gpu("every_technique_survives_every_hard_view_gpu") else { return };
-    sweep(Some(&gpu), "gpu");
+    sweep(&cases(), Some(&gpu), "gpu", true);
+}
+
+/// The long sweep, outside the default test run (docs/ROBUSTNESS.md): the seeded random views
+/// continued to `CREPUSCULAR_SWEEP_VIEWS` (default 1000), every technique, on the backends in
+/// `CREPUSCULAR_SWEEP_BACKENDS` (`cpu`, `gpu` or `cpu,gpu`, the default), the same checks and
+/// bounds as the default sweep; prints progress every 50 views and the worst case per
+/// technique. `cargo test --release -p crepuscular-cli --test robustness -- --ignored --nocapture`
+#[test]
+#[ignore = "the long sweep: about 1000 views per backend; run it with -- --ignored"]
+fn every_technique_over_many_seeded_views() {
+    let n = match std::env::var("CREPUSCULAR_SWEEP_VIEWS") {
+        Ok(v) => v.parse().unwrap_or_else(|_| panic!("CREPUSCULAR_SWEEP_VIEWS={v}: not a count")),
+        Err(_) => 1000,
+    };
+    let backends = std::env::var("CREPUSCULAR_SWEEP_BACKENDS").unwrap_or_else(|_| "cpu,gpu".into());
+    let cases = random_cases(n);
+    for backend in backends.split(',') {
+        match backend {
+            "cpu" => sweep(&cases, None, "cpu", false),
+            "gpu" => {
+                let Some(gpu) = test_gpu("every_technique_over_many_seeded_views") else { return };
+                sweep(&cases, Some(&gpu), "gpu", false);
+            }
+            other => panic!("CREPUSCULAR_SWEEP_BACKENDS: `{other}` is not cpu or gpu"),
+        }
+    }
 }
 
 #[test]

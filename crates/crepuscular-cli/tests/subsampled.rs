@@ -452,7 +452,8 @@ fn check(name: &str, backend: &str, psnr: f64, flip: f64, remarched: f64) {
 
 #[test]
 fn subsampled_vs_reference_on_every_builtin_scene_cpu() {
-    for (name, _) in builtin::builtin_names() {
+    // The one-light scenes (the several-light ones are tests/lights.rs's).
+    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| builtin::builtin(n).unwrap().lights.len() == 1) {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
@@ -470,7 +471,8 @@ fn subsampled_vs_reference_on_every_builtin_scene_cpu() {
 fn subsampled_vs_reference_on_every_builtin_scene_gpu() {
     use crepuscular_cli::render::{RenderOptions, render};
     let Some(gpu) = crepuscular::gpu::test_gpu("subsampled_vs_reference_on_every_builtin_scene_gpu") else { return };
-    for (name, _) in builtin::builtin_names() {
+    // The one-light scenes (the several-light ones are tests/lights.rs's).
+    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| builtin::builtin(n).unwrap().lights.len() == 1) {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         // The reference over the shadow map and depth the GPU host renderer drew.

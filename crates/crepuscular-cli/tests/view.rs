@@ -77,6 +77,8 @@ fn view_renders_frames_under_xvfb_and_saves_the_scene_image() {
         ("brute-force", "colonnade", None),
         ("epipolar", "cage", None),
         ("prefiltered", "forest", Some("map_size=[256, 256]")),
+        // Several lights (six lamps, a lantern and the moon): one march for all of them.
+        ("brute-force", "night-street", None),
     ] {
         let png = d.join(format!("{technique}.png"));
         let mut cmd = under_xvfb(&xvfb);
@@ -93,6 +95,11 @@ fn view_renders_frames_under_xvfb_and_saves_the_scene_image() {
         let mean: f64 =
             img.pixels().map(|p| p.0.iter().map(|&c| c as f64).sum::<f64>()).sum::<f64>() / (320.0 * 180.0 * 3.0);
         assert!(mean > 5.0, "{technique}: the scene image is black (mean {mean})");
+        // The screenshot's state lists every light of the scene.
+        let state: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(png.with_extension("json")).unwrap()).unwrap();
+        let lights = crepuscular_scene::builtin::builtin(scene).unwrap().lights.len();
+        assert_eq!(state["lights"].as_array().map(|l| l.len()), Some(lights), "{technique} on {scene}: {state}");
     }
     // The scene image is the tone-mapped final image `render` writes for the same frame.
     let r = d.join("render.png");

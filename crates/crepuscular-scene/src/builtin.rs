@@ -244,11 +244,14 @@ fn colonnade() -> Scene {
         },
         // Sun outside the colonnade, about 16° high and a little to the left, behind a column
         // as seen from the camera: travelling towards +z (the camera), down and to the right.
-        lights: vec![Light::Directional {
-            direction: Vec3::new(0.505, -0.244, 0.827).normalize(),
-            color: Vec3::new(1.0, 0.86, 0.66),
-            intensity: 4.0,
-        }.into()],
+        lights: vec![
+            Light::Directional {
+                direction: Vec3::new(0.505, -0.244, 0.827).normalize(),
+                color: Vec3::new(1.0, 0.86, 0.66),
+                intensity: 4.0,
+            }
+            .into(),
+        ],
         geometry: g,
         render: render(0.03, Vec3::new(0.025, 0.03, 0.04)),
     }
@@ -354,11 +357,14 @@ fn forest() -> Scene {
             absorption: Vec3::splat(0.01),
             phase: Phase::HenyeyGreenstein { g: 0.55 },
         },
-        lights: vec![Light::Directional {
-            direction: Vec3::new(0.3, -0.45, 1.0).normalize(),
-            color: Vec3::new(1.0, 0.9, 0.72),
-            intensity: 4.0,
-        }.into()],
+        lights: vec![
+            Light::Directional {
+                direction: Vec3::new(0.3, -0.45, 1.0).normalize(),
+                color: Vec3::new(1.0, 0.9, 0.72),
+                intensity: 4.0,
+            }
+            .into(),
+        ],
         geometry: g,
         render: render(0.04, Vec3::new(0.025, 0.03, 0.025)),
     }
@@ -495,15 +501,18 @@ fn stained_glass() -> Scene {
             absorption: Vec3::splat(0.005),
             phase: Phase::HenyeyGreenstein { g: 0.5 },
         },
-        lights: vec![Light::Spot {
-            position,
-            direction: (target - position).normalize(),
-            outer_angle_degrees: 16.0,
-            inner_angle_degrees: 13.0,
-            color: Vec3::new(1.0, 0.95, 0.88),
-            intensity: 8000.0,
-            texture: Some(Arc::new(stained_glass_texture(STAINED_GLASS_TEXTURE_SIZE))),
-        }.into()],
+        lights: vec![
+            Light::Spot {
+                position,
+                direction: (target - position).normalize(),
+                outer_angle_degrees: 16.0,
+                inner_angle_degrees: 13.0,
+                color: Vec3::new(1.0, 0.95, 0.88),
+                intensity: 8000.0,
+                texture: Some(Arc::new(stained_glass_texture(STAINED_GLASS_TEXTURE_SIZE))),
+            }
+            .into(),
+        ],
         geometry: g,
         render: render(0.02, Vec3::new(0.12, 0.12, 0.13)),
     }
@@ -578,11 +587,14 @@ fn cage() -> Scene {
             absorption: Vec3::splat(0.01),
             phase: Phase::HenyeyGreenstein { g: 0.3 },
         },
-        lights: vec![Light::Point {
-            position: Vec3::new(0.12, yc + 0.2, -0.1),
-            color: Vec3::new(1.0, 0.78, 0.5),
-            intensity: 80.0,
-        }.into()],
+        lights: vec![
+            Light::Point {
+                position: Vec3::new(0.12, yc + 0.2, -0.1),
+                color: Vec3::new(1.0, 0.78, 0.5),
+                intensity: 80.0,
+            }
+            .into(),
+        ],
         geometry: g,
         render: render(0.02, Vec3::new(0.02, 0.022, 0.03)),
     }
@@ -655,11 +667,14 @@ fn terrain() -> Scene {
             absorption: Vec3::splat(0.004),
             phase: Phase::HenyeyGreenstein { g: 0.5 },
         },
-        lights: vec![Light::Directional {
-            direction: Vec3::new(0.5, -0.2, 1.0).normalize(),
-            color: Vec3::new(1.0, 0.76, 0.52),
-            intensity: 4.5,
-        }.into()],
+        lights: vec![
+            Light::Directional {
+                direction: Vec3::new(0.5, -0.2, 1.0).normalize(),
+                color: Vec3::new(1.0, 0.76, 0.52),
+                intensity: 4.5,
+            }
+            .into(),
+        ],
         geometry: g,
         render: render(0.15, Vec3::new(0.05, 0.055, 0.07)),
     }

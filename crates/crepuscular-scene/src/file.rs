@@ -93,9 +93,9 @@
 //! ``scenes/x.toml:3:1: medium.scatterin: unknown field `scatterin`, expected one of `scattering`, ...``.
 
 use crate::mesh::{self, Transform};
+use crate::scene::SceneLight;
 use crate::scene::{Geometry, RenderSettings, Scene};
 use crepuscular::{Camera, Light, Medium, Phase, RgbTexture};
-use crate::scene::SceneLight;
 use glam::Vec3;
 use serde::Deserialize;
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
@@ -649,7 +649,11 @@ fn build(ctx: &Ctx, raw: RawScene) -> Result<Scene, SceneError> {
     let medium = build_medium(ctx, raw.medium.unwrap_or_default())?;
     let lights = match (raw.light, raw.lights) {
         (Some(_), Some(_)) => {
-            return Err(ctx.err("lights", "[light] and [[lights]]", "give either one [light] table or [[lights]] tables"));
+            return Err(ctx.err(
+                "lights",
+                "[light] and [[lights]]",
+                "give either one [light] table or [[lights]] tables",
+            ));
         }
         (Some(l), None) => vec![build_light(ctx, "light", l)?],
         (None, None) => vec![build_light(ctx, "light", RawLight::default())?],
@@ -795,8 +799,7 @@ fn build_light_kind(ctx: &Ctx, key: &str, l: RawLight) -> Result<Light, SceneErr
         LightKind::Spot => "spot",
         LightKind::Point => "point",
     };
-    let not_used =
-        |name: &str, value: String| Err(ctx.err(k(name), value, format!("not used by a {kind} light")));
+    let not_used = |name: &str, value: String| Err(ctx.err(k(name), value, format!("not used by a {kind} light")));
     let color = match l.color {
         Some(c) => ctx.ranged3(&k("color"), c.0, 0.0, f32::MAX, "colour components must be ≥ 0 and finite")?,
         None => Vec3::ONE,

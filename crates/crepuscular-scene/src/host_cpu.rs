@@ -28,7 +28,8 @@ pub struct CpuHost {
 /// radiance (shaded with `shading`, lit by every light) on the CPU.
 pub fn render(geometry: &Geometry, shading: &SurfaceShading, desc: &FrameDesc) -> CpuHost {
     let t0 = Instant::now();
-    let shadow_maps: Vec<ShadowMap> = desc.lights.iter().map(|l| raster::render_shadow_map(geometry, &l.shadow)).collect();
+    let shadow_maps: Vec<ShadowMap> =
+        desc.lights.iter().map(|l| raster::render_shadow_map(geometry, &l.shadow)).collect();
     let frame = crepuscular::CpuFrame { desc, depth: &[], shadow_maps: &shadow_maps, surface: None };
     let t1 = Instant::now();
     let vp = desc.camera.view_proj();

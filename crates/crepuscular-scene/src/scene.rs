@@ -138,7 +138,11 @@ impl Scene {
             .iter()
             .map(|l| {
                 let shadow = ShadowProjection::fit(&l.light, &self.camera, aspect, bounds, r.shadow.size);
-                FrameLight { shadow_bias: r.shadow.bias, scattering: l.scattering, ..FrameLight::new(l.light.clone(), shadow) }
+                FrameLight {
+                    shadow_bias: r.shadow.bias,
+                    scattering: l.scattering,
+                    ..FrameLight::new(l.light.clone(), shadow)
+                }
             })
             .collect();
         let mut desc = FrameDesc {

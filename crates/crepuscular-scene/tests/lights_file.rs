@@ -49,7 +49,10 @@ scattering = 0.0
     assert_eq!(s.lights.iter().map(|l| l.scattering).collect::<Vec<_>>(), vec![1.0, 0.5, 0.0]);
     // The frame packs their shadow maps: one layer, one layer, six cube faces.
     let d = s.frame_desc();
-    assert_eq!(d.lights.iter().map(|l| (l.shadow_layer, l.shadow.layers)).collect::<Vec<_>>(), vec![(0, 1), (1, 1), (2, 6)]);
+    assert_eq!(
+        d.lights.iter().map(|l| (l.shadow_layer, l.shadow.layers)).collect::<Vec<_>>(),
+        vec![(0, 1), (1, 1), (2, 6)]
+    );
     assert_eq!(d.lights.iter().map(|l| l.scattering).collect::<Vec<_>>(), vec![1.0, 0.5, 0.0]);
 }
 
@@ -66,7 +69,8 @@ fn the_old_light_table_is_one_light() {
 
 #[test]
 fn bad_light_lists_name_the_light_and_key() {
-    let (k, _, m) = invalid("[light]\nkind = \"point\"\nposition = [0.0, 3.0, 0.0]\n[[lights]]\nkind = \"directional\"\n");
+    let (k, _, m) =
+        invalid("[light]\nkind = \"point\"\nposition = [0.0, 3.0, 0.0]\n[[lights]]\nkind = \"directional\"\n");
     assert_eq!(k, "lights");
     assert!(m.contains("either"), "{m}");
     let (k, v, _) = invalid("lights = []\n");

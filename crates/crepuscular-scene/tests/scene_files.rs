@@ -245,7 +245,9 @@ fn minimal_file_takes_defaults() {
     assert_eq!(s.geometry.triangle_count(), 0);
     // No [light] at all: the default sun.
     let s = parse_scene_str("", "empty.toml", Path::new(".")).unwrap();
-    assert!(matches!(s.lights[0].light, Light::Directional { direction, .. } if direction.z > 0.0 && direction.y < 0.0));
+    assert!(
+        matches!(s.lights[0].light, Light::Directional { direction, .. } if direction.z > 0.0 && direction.y < 0.0)
+    );
     assert_eq!(s.name, "empty");
 }
 

@@ -277,7 +277,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             shadow_bias: 0.02, // world units along the light's depth axis
             ..FrameLight::new(light.clone(), shadow.clone())
         };
-        let desc = FrameDesc { camera: camera.clone(), lights: vec![sun], medium: medium.clone(), width: WIDTH, height: HEIGHT };
+        let desc = FrameDesc {
+            camera: camera.clone(),
+            lights: vec![sun],
+            medium: medium.clone(),
+            width: WIDTH,
+            height: HEIGHT,
+        };
         let mut encoder = device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {

@@ -391,7 +391,11 @@ impl FrameDesc {
                 return Err(Error::invalid(format!("lights[{k}].scattering"), fl.scattering, "must be finite and ≥ 0"));
             }
             if !(fl.shadow_bias.is_finite() && fl.shadow_bias >= 0.0) {
-                return Err(Error::invalid(format!("lights[{k}].shadow_bias"), fl.shadow_bias, "must be finite and ≥ 0"));
+                return Err(Error::invalid(
+                    format!("lights[{k}].shadow_bias"),
+                    fl.shadow_bias,
+                    "must be finite and ≥ 0",
+                ));
             }
             if fl.shadow.size == 0 {
                 return Err(Error::invalid(format!("lights[{k}].shadow.size"), 0, "must be at least 1"));
@@ -476,7 +480,10 @@ impl CpuFrame<'_> {
                 return Err(Error::invalid(
                     format!("shadow_maps[{k}]"),
                     format!("{} layer(s) of {}² texels, {} depths", p.layers, p.size, sm.depth.len()),
-                    format!("must be rendered with lights[{k}]'s shadow projection ({} layer(s) of {}²)", fl.shadow.layers, fl.shadow.size),
+                    format!(
+                        "must be rendered with lights[{k}]'s shadow projection ({} layer(s) of {}²)",
+                        fl.shadow.layers, fl.shadow.size
+                    ),
                 ));
             }
         }
@@ -519,11 +526,7 @@ pub struct GpuFrame<'a> {
 impl<'a> GpuFrame<'a> {
     /// Light `k`'s own frame: `desc` (from [`FrameDesc::with_light`]) over the same textures.
     pub fn with_light<'b>(&'b self, desc: &'b FrameDesc, k: usize) -> GpuFrame<'b> {
-        GpuFrame {
-            desc,
-            rectified_shadow_maps: self.rectified_shadow_maps.get(k..k + 1).unwrap_or(&[]),
-            ..*self
-        }
+        GpuFrame { desc, rectified_shadow_maps: self.rectified_shadow_maps.get(k..k + 1).unwrap_or(&[]), ..*self }
     }
 
     /// The host's rectified raster of this frame's only light, if it gave one.

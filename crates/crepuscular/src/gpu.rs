@@ -515,7 +515,11 @@ impl UploadedFrame {
                 let list: Vec<&crate::RgbTexture> = textures.iter().map(|(_, t)| *t).collect();
                 gpu.upload_spot_textures(&list).create_view(&array)
             });
-            Self { depth: depth.create_view(&Default::default()), shadow_maps: shadow.create_view(&array), spot_textures: spot }
+            Self {
+                depth: depth.create_view(&Default::default()),
+                shadow_maps: shadow.create_view(&array),
+                spot_textures: spot,
+            }
         })
     }
 

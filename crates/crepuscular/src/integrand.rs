@@ -125,7 +125,8 @@ pub fn surface_radiance(frame: &CpuFrame, shading: &SurfaceShading, p: Vec3, nor
         let (l_in, wl) = light_radiance(&fl.light, &desc.medium, &fl.shadow.view_proj[0], p);
         let cosine = n.dot(-wl).max(0.0);
         if cosine > 0.0 && l_in.max_element() > 0.0 {
-            let v = shadow.visibility_pcf(light_position(&fl.light), p, n, fl.shadow_bias, shading.normal_offset_texels);
+            let v =
+                shadow.visibility_pcf(light_position(&fl.light), p, n, fl.shadow_bias, shading.normal_offset_texels);
             direct += albedo / std::f32::consts::PI * l_in * cosine * v;
         }
     }

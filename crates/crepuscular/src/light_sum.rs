@@ -83,7 +83,11 @@ impl LightSum {
             })
             .collect();
         let bind = gpu.scoped("binding the light sum", || {
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("light sum"), layout, entries: &entries })
+            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("light sum"),
+                layout,
+                entries: &entries,
+            })
         })?;
         if self.binds.len() >= MAX_BINDS {
             self.binds.remove(0);

@@ -8,8 +8,8 @@
 //! the surface or the far plane. For directional and point lights every policy is `Fixed`.
 
 use crate::error::Error;
-use crate::frame::{CpuFrame, FrameDesc};
 use crate::frame::FrameLight;
+use crate::frame::{CpuFrame, FrameDesc};
 use crate::integrand::inscatter_density;
 use crate::model::Light;
 use crate::model::segment_transmittance;
@@ -438,7 +438,6 @@ pub fn march_pixel(frame: &CpuFrame, lights: &MarchLights, m: &PixelMarch, x: u3
     let j = if m.jitter { crate::shaders::pixel_jitter(x, y, m.frame_index) } else { 0.5 };
     march_lights(frame, lights, dir, s, m.steps, 0, 1, j, m.spot_steps, m.spot_denominator)
 }
-
 
 #[cfg(test)]
 mod tests {

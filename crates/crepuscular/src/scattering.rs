@@ -499,10 +499,8 @@ impl Scattering {
             self.gpu.wait()?;
             self.stats();
         }
-        let mut encoder = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(self.name()) });
+        let mut encoder =
+            self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(self.name()) });
         self.encode(&mut encoder, frame, output)?;
         self.gpu.scoped("submitting the frame", || self.gpu.queue.submit([encoder.finish()]))?;
         self.end_frame();
@@ -616,7 +614,10 @@ fn check_frame(
                 return Err(Error::invalid(
                     "spot_textures",
                     size(tex),
-                    format!("lights[{k}]'s {}×{} texture in layer {} does not fit", t.width, t.height, fl.texture_layer),
+                    format!(
+                        "lights[{k}]'s {}×{} texture in layer {} does not fit",
+                        t.width, t.height, fl.texture_layer
+                    ),
                 ));
             }
         }
@@ -672,7 +673,8 @@ impl TechniqueSettings {
                 }
                 parts.push(st);
             }
-            let stats = if parts.is_empty() { TechniqueStats::empty(self.name(), "cpu") } else { TechniqueStats::sum(parts) };
+            let stats =
+                if parts.is_empty() { TechniqueStats::empty(self.name(), "cpu") } else { TechniqueStats::sum(parts) };
             (sum, stats)
         };
         stats.extra.insert("lights".into(), lights.len() as f64);

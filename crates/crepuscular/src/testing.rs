@@ -79,6 +79,123 @@ pub fn wall_closed_form(desc: &FrameDesc, x: u32, y: u32) -> DVec3 {
     sum
 }
 
+/// The half-plane occluder of [`half_plane_frame`]: an opaque plane y = [`HalfPlane::height`]
+/// over x < [`HalfPlane::edge_x`] (world metres), lit by a sun in the y–z plane. The camera of
+/// the wall frame (at the origin) sits in its shadow.
+#[derive(Clone, Copy, Debug)]
+pub struct HalfPlane {
+    /// The plane's height above the camera, metres.
+    pub height: f64,
+    /// Where the shadow map's edge lies in world x: the boundary between the last texel column
+    /// holding the plane and the first one without it (so the discrete map and the closed form
+    /// agree on where the shadow ends).
+    pub edge_x: f64,
+}
+
+/// Height of the half-plane occluder above the camera, metres.
+pub const HALF_PLANE_HEIGHT: f64 = 6.0;
+/// The x near which the half-plane's edge is put (then moved to a texel column boundary), metres.
+pub const HALF_PLANE_EDGE: f64 = 3.0;
+
+/// The sun of [`half_plane_frame`]: in the y–z plane (so the shadow map's columns run along
+/// world z and its edge is a straight line of texel boundaries), shining towards the camera
+/// from above and in front (the epipole 27° above the view axis: on screen, 60° field of view).
+pub fn half_plane_sun() -> Light {
+    Light::Directional {
+        direction: Vec3::new(0.0, -0.5, 1.0).normalize(),
+        color: Vec3::new(1.0, 0.9, 0.8),
+        intensity: 4.0,
+    }
+}
+
+/// The wall frame ([`wall_frame`], `w × h`) with a shadowed closed form (docs/MODEL.md §4, rung
+/// 2): the [`half_plane_sun`] over the [`HalfPlane`] occluder, its `size²` shadow map written
+/// texel by texel (the plane's depth along each texel centre's light ray where that centre
+/// lies at x < the edge; empty elsewhere). Returns the description, the depth buffer, the
+/// shadow map and the occluder.
+pub fn half_plane_frame(medium: Medium, w: u32, h: u32, size: u32) -> (FrameDesc, Vec<f32>, ShadowMap, HalfPlane) {
+    let camera = Camera {
+        position: Vec3::ZERO,
+        look_at: Vec3::new(0.0, 0.0, -1.0),
+        up: Vec3::Y,
+        fov_y_degrees: 60.0,
+        near: 0.1,
+        far: 100.0,
+    };
+    let aspect = w as f32 / h as f32;
+    // Deep in z, so every plane point that shadows a view ray is inside the depth range.
+    let bounds = Bounds { min: Vec3::new(-40.0, -40.0, -100.0), max: Vec3::new(40.0, 40.0, 1.0) };
+    let light = half_plane_sun();
+    let shadow = ShadowProjection::fit(&light, &camera, aspect, bounds, size);
+    let inv = shadow.view_proj[0].as_dmat4().inverse();
+    let n = size as f64;
+    let ndc = |i: u32| (i as f64 + 0.5) / n * 2.0 - 1.0;
+    // A texel's column decides its world x: the light's x axis is world ±x for a sun in the
+    // y–z plane (checked here, so the edge is one column boundary).
+    let world_x = |u: f64, v: f64| inv.project_point3(DVec3::new(u, v, 0.5)).x;
+    assert!((world_x(0.3, -0.9) - world_x(0.3, 0.9)).abs() < 1e-6, "half_plane_frame: light x is not world x");
+    let mut depth = vec![1.0f32; (size * size) as usize];
+    for ty in 0..size {
+        for tx in 0..size {
+            let (u, v) = (ndc(tx), -ndc(ty));
+            let (p0, p1) = (inv.project_point3(DVec3::new(u, v, 0.0)), inv.project_point3(DVec3::new(u, v, 1.0)));
+            if p0.x < HALF_PLANE_EDGE {
+                // Orthographic: depth is linear along the light ray.
+                // Towards the map's corners the plane lies nearer the light than the fitted
+                // depth range (outside `bounds`): clamped to the near plane. That keeps every
+                // shadow test's answer: the view rays lie inside `bounds`, so deeper than the
+                // near plane by at least the fit's padding (0.6 m, ≫ the bias), and below the
+                // plane wherever its point is nearer the light than theirs.
+                let d = (HALF_PLANE_HEIGHT - p0.y) / (p1.y - p0.y);
+                assert!(d < 1.0, "half_plane_frame: the plane lies beyond the depth range ({d})");
+                depth[(ty * size + tx) as usize] = d.max(0.0) as f32;
+            }
+        }
+    }
+    // The column boundary where the plane ends.
+    let edge = (0..size)
+        .find_map(|i| {
+            let (a, b) = (world_x(ndc(i), 0.0), world_x(ndc(i + 1), 0.0));
+            ((a < HALF_PLANE_EDGE) != (b < HALF_PLANE_EDGE)).then(|| world_x((i + 1) as f64 / n * 2.0 - 1.0, 0.0))
+        })
+        .expect("half_plane_frame: the edge is inside the map");
+    let map = ShadowMap { projection: shadow.clone(), depth };
+    let camera = FrameCamera::look_at(&camera, aspect);
+    let depth = vec![camera.depth_of(WALL_DISTANCE); (w * h) as usize];
+    let mut desc = FrameDesc { camera, lights: vec![FrameLight::new(light, shadow)], medium, width: w, height: h };
+    desc.assign_layers();
+    (desc, depth, map, HalfPlane { height: HALF_PLANE_HEIGHT, edge_x: edge })
+}
+
+impl HalfPlane {
+    /// The in-scattering at pixel (x, y) of a [`half_plane_frame`], in f64. The camera sits in
+    /// the shadow, which is {x < edge, y < height − bias·|d_y|} (a point is shadowed where the
+    /// light ray from it meets the plane more than the light's bias away); a view ray
+    /// t·r leaves it at t₁ = min(edge/r_x if r_x > 0, (height − bias·|d_y|)/r_y if r_y > 0, s)
+    /// and is lit on [t₁, s]: σs·p·E·(e^(−σt·t₁) − e^(−σt·s))/σt (σs·p·E·(s − t₁) where σt = 0).
+    pub fn closed_form(&self, desc: &FrameDesc, x: u32, y: u32) -> DVec3 {
+        let inv = desc.camera.view_proj().as_dmat4().inverse();
+        let (w, h) = (desc.width as f64, desc.height as f64);
+        let ndc = DVec3::new((x as f64 + 0.5) / w * 2.0 - 1.0, 1.0 - (y as f64 + 0.5) / h * 2.0, 1.0);
+        let r = inv.project_point3(ndc).normalize();
+        let s = WALL_DISTANCE as f64 / r.dot(DVec3::NEG_Z);
+        let fl = &desc.lights[0];
+        let Light::Directional { direction, color, intensity } = &fl.light else { unreachable!() };
+        let d = direction.as_dvec3().normalize();
+        let top = self.height - fl.shadow_bias as f64 * d.y.abs();
+        let leave = |a: f64, c: f64| if a > 0.0 { c / a } else { f64::INFINITY };
+        let t1 = leave(r.x, self.edge_x).min(leave(r.y, top)).min(s);
+        let st = desc.medium.extinction().as_dvec3();
+        let f = |st: f64| if st > 0.0 { ((-st * t1).exp() - (-st * s).exp()) / st } else { s - t1 };
+        let p = DVec3::from(desc.medium.phase.eval_f64(-d.dot(r)));
+        desc.medium.scattering.as_dvec3()
+            * p
+            * color.as_dvec3()
+            * (*intensity as f64 * fl.scattering as f64)
+            * DVec3::new(f(st.x), f(st.y), f(st.z))
+    }
+}
+
 /// The media the closed-form tests sweep: each phase function, coloured and grey σs, with and
 /// without absorption, and σt = 0 in one channel.
 pub fn wall_media() -> Vec<Medium> {

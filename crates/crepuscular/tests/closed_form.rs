@@ -72,7 +72,8 @@ fn point_quadrature_of(desc: &FrameDesc, k: usize) -> Image {
                     let d = v.length();
                     let wl = v / d;
                     let p = DVec3::from(desc.medium.phase.eval_f64(-wl.dot(dir)));
-                    let f = (-st * t).exp() * ss * p * color.as_dvec3() * (*intensity as f64) * (-st * d).exp() / (d * d);
+                    let f =
+                        (-st * t).exp() * ss * p * color.as_dvec3() * (*intensity as f64) * (-st * d).exp() / (d * d);
                     sum += f * wi * 0.5 * h;
                 }
             }

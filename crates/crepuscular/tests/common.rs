@@ -8,9 +8,13 @@ use crepuscular::{CpuFrame, Image, TechniqueSettings};
 
 /// Runs `brute-force` on the GPU over exactly the CPU frame's depth and shadow map.
 pub fn gpu_brute_force(gpu: &GpuContext, frame: &CpuFrame, settings: &BruteForceSettings) -> Image {
+    gpu_technique(gpu, frame, TechniqueSettings::BruteForce(settings.clone()))
+}
+
+/// Runs a GPU technique over exactly the CPU frame's depth and shadow maps.
+pub fn gpu_technique(gpu: &GpuContext, frame: &CpuFrame, settings: TechniqueSettings) -> Image {
     let up = UploadedFrame::new(gpu, frame).expect("upload");
     let out = gpu.create_output_texture(frame.desc.width, frame.desc.height);
-    let settings = TechniqueSettings::BruteForce(settings.clone());
     gpu_render(gpu, settings, &up.frame(frame.desc), &out.create_view(&Default::default())).expect("render");
     gpu.read_image(&out).expect("readback")
 }

@@ -77,7 +77,12 @@ pub(crate) struct InputOutcome {
 impl Controls {
     /// The camera and light of `scene`.
     pub(crate) fn of(scene: &Scene) -> Self {
-        Self { orbit: Orbit::from_camera(&scene.camera), lights: scene.lights.clone(), selected: 0, settle_scroll: true }
+        Self {
+            orbit: Orbit::from_camera(&scene.camera),
+            lights: scene.lights.clone(),
+            selected: 0,
+            settle_scroll: true,
+        }
     }
 
     /// The selected light.

@@ -161,13 +161,7 @@ impl BruteForce {
                 gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("brute-force"),
                     layout: &self.layout,
-                    entries: &pass::frame_pass_bindings(
-                        &self.buffers,
-                        &self.params_buffer,
-                        frame,
-                        &self.white,
-                        output,
-                    ),
+                    entries: &pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, output),
                 })
             })?;
             self.binds.store(key, bind);

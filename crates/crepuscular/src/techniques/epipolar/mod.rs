@@ -1090,7 +1090,12 @@ impl Epipolar {
                     (Some(p), Some(src)) => Some(group(
                         "epipolar prefilter",
                         &self.layouts.prefilter,
-                        &[e(0, pb()), e(1, R::TextureView(src)), e(2, R::TextureView(&p.view)), pass::lights_binding(&self.buffers.lights)],
+                        &[
+                            e(0, pb()),
+                            e(1, R::TextureView(src)),
+                            e(2, R::TextureView(&p.view)),
+                            pass::lights_binding(&self.buffers.lights),
+                        ],
                     )),
                     _ => None,
                 };
@@ -1123,8 +1128,7 @@ impl Epipolar {
                     ],
                 );
                 let mut me =
-                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, marched)
-                        .to_vec();
+                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, marched).to_vec();
                 me[4] = e(4, R::TextureView(march_spot));
                 me[6] = pass::lights_binding(&self.march_lights);
                 me.extend([e(7, sized.list.as_entire_binding()), e(8, self.counters.as_entire_binding())]);
@@ -1142,8 +1146,7 @@ impl Epipolar {
                     ],
                 );
                 let mut ue =
-                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, output)
-                        .to_vec();
+                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, output).to_vec();
                 ue.extend([
                     e(6, R::TextureView(radiance)),
                     e(7, sized.lines.as_entire_binding()),

@@ -307,10 +307,7 @@ impl Prefiltered {
             let (w, h, layers, p) = m.key;
             w as u64 * h as u64 * (layers as u64 * 4 * p.bytes() + 4 + 4 * m.sets as u64)
         });
-        maps + self.rows_buffer.as_ref().map_or(0, |b| b.size())
-            + self.buffers.size()
-            + self.params_buffer.size()
-            + 16
+        maps + self.rows_buffer.as_ref().map_or(0, |b| b.size()) + self.buffers.size() + self.params_buffer.size() + 16
     }
 
     /// Reads back the last frame's maps for tests and debug views, laid out as
@@ -425,8 +422,7 @@ impl Prefiltered {
                     ],
                 );
                 let mut entries =
-                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, output)
-                        .to_vec();
+                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, output).to_vec();
                 let sampler = if rect.full_circle { &self.wrap_sampler } else { &self.clamp_sampler };
                 entries.extend([
                     wgpu::BindGroupEntry { binding: 6, resource: rows.as_entire_binding() },

@@ -370,7 +370,7 @@ impl Rectification {
                 boundary.push(corners[i].lerp(corners[(i + 1) % 4], k as f32 / 64.0).normalize());
             }
         }
-        let theta = |d: Vec3| d.dot(a).clamp(-1.0, 1.0).acos();
+        let theta = |d: Vec3| angle_between(d, a);
         let phi = |d: Vec3| d.dot(e2).atan2(d.dot(e1));
         let mut t0 = boundary.iter().map(|&d| theta(d)).fold(f32::MAX, f32::min);
         let mut t1 = boundary.iter().map(|&d| theta(d)).fold(f32::MIN, f32::max);
@@ -405,7 +405,11 @@ impl Rectification {
         // the shafts are, instead of spreading evenly to the far plane (linear columns put the
         // colonnade's whole shadow structure in its first 5 % of columns at far = 200 m). Our
         // choice; §4.1 leaves the x parameterisation open. Local lights: ψ linear.
-        let knee = if r.local { 0.0 } else { (desc.lights[0].shadow.texel_world * desc.lights[0].shadow.size as f32).max(1e-3) };
+        let knee = if r.local {
+            0.0
+        } else {
+            (desc.lights[0].shadow.texel_world * desc.lights[0].shadow.size as f32).max(1e-3)
+        };
         r.region_x = vec![0.0, c_max, knee];
         // Per row: the θ interval of the slice inside the frustum, and its reference ray.
         let planes = frustum_side_normals(&corners);
@@ -550,7 +554,7 @@ impl Rectification {
                 let [ex, _, ez] = self.axes;
                 (dir.dot(ez) / dir.dot(ex).max(1e-6), false)
             }
-            Mode::Epipolar => (dir.dot(self.axes[2]).clamp(-1.0, 1.0).acos(), true),
+            Mode::Epipolar => (angle_between(dir, self.axes[2]), true),
         };
         let f = |a: f32, b: f32| {
             if geometric { (param.max(1e-6) / a).ln() / (b / a).ln() } else { (param - a) / (b - a) }
@@ -588,12 +592,15 @@ impl Rectification {
                     phi = phi.clamp(self.ranges.x, self.ranges.y);
                 }
                 let row = (phi - self.ranges.x) / (self.ranges.y - self.ranges.x) * self.height as f32;
-                let theta = dir.dot(a).clamp(-1.0, 1.0).acos();
+                let theta = angle_between(dir, a);
                 let z = (theta - self.ranges.z) / (self.ranges.w - self.ranges.z);
                 let c = if self.local {
-                    let to_cam = (self.camera - self.light).normalize_or_zero();
-                    let to_p = (p - self.light).normalize_or_zero();
-                    to_cam.dot(to_p).clamp(-1.0, 1.0).acos()
+                    let (to_cam, to_p) = (self.camera - self.light, p - self.light);
+                    if to_cam.length_squared() > 0.0 && to_p.length_squared() > 0.0 {
+                        angle_between(to_cam, to_p)
+                    } else {
+                        0.0
+                    }
                 } else {
                     v.reject_from_normalized(a).length()
                 };
@@ -639,7 +646,7 @@ impl Rectification {
                 if len < 1e-6 {
                     return 0.0;
                 }
-                let theta = (v.dot(self.axes[2]) / len).clamp(-1.0, 1.0).acos();
+                let theta = angle_between(v, self.axes[2]);
                 ((theta - self.ranges.z) / (self.ranges.w - self.ranges.z)).clamp(0.0, 1.0)
             }
         }
@@ -755,6 +762,13 @@ pub fn line_occluder(shadow: &ShadowMap, light_pos: Vec3, p: Vec3, dir: Vec3, bi
     let stored = pr.linear(d);
     let o = if pr.orthographic { q + dir * (stored - pr.linear(ndc.z)) } else { light_pos + dir * (stored / c.w) };
     Some(o + dir * bias)
+}
+
+/// The angle between `a` and `b` (any non-zero lengths), atan2(|a × b|, a · b): well
+/// conditioned near 0 and π, where acos of the normalised dot product loses √(2ε) ≈ 3.5e-4 rad
+/// in f32. Mirrors `angle_between` in geometry.wgsl.
+pub fn angle_between(a: Vec3, b: Vec3) -> f32 {
+    a.cross(b).length().atan2(a.dot(b))
 }
 
 #[cfg(test)]

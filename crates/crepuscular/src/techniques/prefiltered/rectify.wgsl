@@ -94,7 +94,7 @@ fn occluder_depth(p: Params, col: f32, o: vec3<f32>) -> f32 {
     if len < 1e-6 {
         return 0.0;
     }
-    let theta = acos(clamp(dot(v, p.axes[2].xyz) / len, -1.0, 1.0));
+    let theta = angle_between(v, p.axes[2].xyz);
     return clamp((theta - p.ranges.z) / (p.ranges.w - p.ranges.z), 0.0, 1.0);
 }
 

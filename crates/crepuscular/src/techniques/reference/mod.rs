@@ -209,7 +209,11 @@ pub fn render(
                             let v = eye - c;
                             let b = dir.dot(v);
                             let disc = b * b - (v.dot(v) - r * r);
-                            if disc < 0.0 { (0.0, 0.0) } else { (t_lo.max(-b - disc.sqrt()), t_hi.min(-b + disc.sqrt())) }
+                            if disc < 0.0 {
+                                (0.0, 0.0)
+                            } else {
+                                (t_lo.max(-b - disc.sqrt()), t_hi.min(-b + disc.sqrt()))
+                            }
                         }
                         _ => (t_lo, t_hi),
                     };

@@ -7,5 +7,6 @@ pub mod bench;
 pub mod compare;
 pub mod metrics;
 pub mod output;
+pub mod quality;
 pub mod render;
 pub mod view;

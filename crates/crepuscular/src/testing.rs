@@ -21,17 +21,23 @@ pub fn wall_frame(light: Light, medium: Medium, w: u32, h: u32) -> (FrameDesc, V
     (desc, depth, maps.remove(0))
 }
 
-/// [`wall_frame`] with several lights, each with its own empty shadow map (layers packed in
-/// order, [`FrameDesc::assign_layers`]).
-pub fn wall_frame_lights(lights: Vec<Light>, medium: Medium, w: u32, h: u32) -> (FrameDesc, Vec<f32>, Vec<ShadowMap>) {
-    let camera = Camera {
+/// The camera of the wall frames: at the origin looking down −Z, 60° vertical field of view,
+/// near 0.1 m, far 100 m.
+pub fn wall_camera() -> Camera {
+    Camera {
         position: Vec3::ZERO,
         look_at: Vec3::new(0.0, 0.0, -1.0),
         up: Vec3::Y,
         fov_y_degrees: 60.0,
         near: 0.1,
         far: 100.0,
-    };
+    }
+}
+
+/// [`wall_frame`] with several lights, each with its own empty shadow map (layers packed in
+/// order, [`FrameDesc::assign_layers`]).
+pub fn wall_frame_lights(lights: Vec<Light>, medium: Medium, w: u32, h: u32) -> (FrameDesc, Vec<f32>, Vec<ShadowMap>) {
+    let camera = wall_camera();
     let aspect = w as f32 / h as f32;
     let bounds = Bounds { min: Vec3::splat(-40.0), max: Vec3::new(40.0, 40.0, 1.0) };
     let lights: Vec<FrameLight> = lights
@@ -114,14 +120,7 @@ pub fn half_plane_sun() -> Light {
 /// lies at x < the edge; empty elsewhere). Returns the description, the depth buffer, the
 /// shadow map and the occluder.
 pub fn half_plane_frame(medium: Medium, w: u32, h: u32, size: u32) -> (FrameDesc, Vec<f32>, ShadowMap, HalfPlane) {
-    let camera = Camera {
-        position: Vec3::ZERO,
-        look_at: Vec3::new(0.0, 0.0, -1.0),
-        up: Vec3::Y,
-        fov_y_degrees: 60.0,
-        near: 0.1,
-        far: 100.0,
-    };
+    let camera = wall_camera();
     let aspect = w as f32 / h as f32;
     // Deep in z, so every plane point that shadows a view ray is inside the depth range.
     let bounds = Bounds { min: Vec3::new(-40.0, -40.0, -100.0), max: Vec3::new(40.0, 40.0, 1.0) };

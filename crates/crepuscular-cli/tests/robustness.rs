@@ -311,19 +311,31 @@ fn constant(img: &Image) -> bool {
     img.pixels.iter().all(|p| (0..3).all(|c| (p[c] - first[c]).abs() <= 1e-6 * peak))
 }
 
-fn check(c: &Case, backend: &str, technique: &str, out: &RenderOutput, reference: &RenderOutput) -> f64 {
+/// The case's NMAE, and what is wrong with the output, if anything: NaN or Inf, an error over
+/// the technique's bound, a constant (or black) picture.
+fn check(
+    c: &Case,
+    backend: &str,
+    technique: &str,
+    out: &RenderOutput,
+    reference: &RenderOutput,
+) -> (f64, Option<String>) {
     let name = &c.name;
-    assert!(finite(&out.inscatter), "{backend} {technique} on `{name}`: NaN or Inf in the in-scattering");
-    assert!(finite(&out.final_radiance), "{backend} {technique} on `{name}`: NaN or Inf in the final image");
     let e = nmae(&out.inscatter, &reference.inscatter);
     let max = bound(technique);
-    assert!(!c.bounded || e <= max, "{backend} {technique} on `{name}`: NMAE {e:.3} > {max}");
-    // Apart from the bound (which a black picture fails: its NMAE is 1 wherever the reference
-    // is visible): where the reference is visible and not constant, neither is the technique.
-    if c.bounded && visible(&reference.inscatter) && !constant(&reference.inscatter) {
-        assert!(!constant(&out.inscatter), "{backend} {technique} on `{name}`: a constant (or black) in-scattering");
-    }
-    e
+    let failure = if !finite(&out.inscatter) || !finite(&out.final_radiance) {
+        Some(format!("{backend} {technique} on `{name}`: NaN or Inf in the output"))
+    } else if c.bounded && e > max {
+        Some(format!("{backend} {technique} on `{name}`: NMAE {e:.3} > {max}"))
+    } else if c.bounded && visible(&reference.inscatter) && !constant(&reference.inscatter) && constant(&out.inscatter)
+    {
+        // Apart from the bound (which a black picture fails: its NMAE is 1 wherever the
+        // reference is visible): where the reference is visible and varies, so does the output.
+        Some(format!("{backend} {technique} on `{name}`: a constant (or black) in-scattering"))
+    } else {
+        None
+    };
+    (e, failure)
 }
 
 /// True where the in-scattering's mean is above [`nmae`]'s floor (visible at exposure 1).
@@ -332,10 +344,11 @@ fn visible(img: &Image) -> bool {
     sum > 1e-3 * 3.0 * img.pixels.len() as f64
 }
 
-/// Runs `cases` on one backend and prints, per technique, its worst case; `verbose`: a line per
-/// case too.
-fn sweep(cases: &[Case], gpu: Option<&crepuscular::gpu::GpuContext>, backend: &str, verbose: bool) {
+/// Runs `cases` on one backend, prints per technique its worst case and returns every failure
+/// ([`check`]); `verbose`: a line per case too.
+fn sweep(cases: &[Case], gpu: Option<&crepuscular::gpu::GpuContext>, backend: &str, verbose: bool) -> Vec<String> {
     let techniques = techniques();
+    let mut failures = Vec::new();
     let mut worst: Vec<(f64, String)> = vec![(0.0, String::new()); techniques.len()];
     let started = std::time::Instant::now();
     for (k, c) in cases.iter().enumerate() {
@@ -347,7 +360,8 @@ fn sweep(cases: &[Case], gpu: Option<&crepuscular::gpu::GpuContext>, backend: &s
         for (i, t) in techniques.iter().enumerate() {
             let out = render(&c.scene, gpu, &opts(t.clone()))
                 .unwrap_or_else(|e| panic!("{backend} {} on `{}`: {e:#}", t.name(), c.name));
-            let e = check(c, backend, t.name(), &out, &reference);
+            let (e, failure) = check(c, backend, t.name(), &out, &reference);
+            failures.extend(failure);
             line += &format!(" {}={e:.3}", t.name());
             if c.bounded && e > worst[i].0 {
                 worst[i] = (e, c.name.clone());
@@ -363,24 +377,32 @@ fn sweep(cases: &[Case], gpu: Option<&crepuscular::gpu::GpuContext>, backend: &s
     for (t, (e, name)) in techniques.iter().zip(&worst) {
         eprintln!("{backend} worst for {}: NMAE {e:.3} on `{name}` (bound {})", t.name(), bound(t.name()));
     }
+    eprintln!(
+        "{backend}: {} failures{}",
+        failures.len(),
+        failures.iter().map(|f| format!("\n  {f}")).collect::<String>()
+    );
+    failures
 }
 
 #[test]
 fn every_technique_survives_every_hard_view_cpu() {
-    sweep(&cases(), None, "cpu", true);
+    let failures = sweep(&cases(), None, "cpu", true);
+    assert!(failures.is_empty(), "{failures:#?}");
 }
 
 #[test]
 fn every_technique_survives_every_hard_view_gpu() {
     let Some(gpu) = test_gpu("every_technique_survives_every_hard_view_gpu") else { return };
-    sweep(&cases(), Some(&gpu), "gpu", true);
+    let failures = sweep(&cases(), Some(&gpu), "gpu", true);
+    assert!(failures.is_empty(), "{failures:#?}");
 }
 
 /// The long sweep, outside the default test run (docs/ROBUSTNESS.md): the seeded random views
 /// continued to `CREPUSCULAR_SWEEP_VIEWS` (default 1000), every technique, on the backends in
 /// `CREPUSCULAR_SWEEP_BACKENDS` (`cpu`, `gpu` or `cpu,gpu`, the default), the same checks and
-/// bounds as the default sweep; prints progress every 50 views and the worst case per
-/// technique. `cargo test --release -p crepuscular-cli --test robustness -- --ignored --nocapture`
+/// bounds as the default sweep; prints progress every 50 views, the worst case per technique
+/// and every failure, and fails at the end if there was one. `cargo test --release -p crepuscular-cli --test robustness -- --ignored --nocapture`
 #[test]
 #[ignore = "the long sweep: about 1000 views per backend; run it with -- --ignored"]
 fn every_technique_over_many_seeded_views() {
@@ -390,16 +412,19 @@ fn every_technique_over_many_seeded_views() {
     };
     let backends = std::env::var("CREPUSCULAR_SWEEP_BACKENDS").unwrap_or_else(|_| "cpu,gpu".into());
     let cases = random_cases(n);
+    let mut failures = Vec::new();
     for backend in backends.split(',') {
         match backend {
-            "cpu" => sweep(&cases, None, "cpu", false),
+            "cpu" => failures.extend(sweep(&cases, None, "cpu", false)),
             "gpu" => {
                 let Some(gpu) = test_gpu("every_technique_over_many_seeded_views") else { return };
-                sweep(&cases, Some(&gpu), "gpu", false);
+                failures.extend(sweep(&cases, Some(&gpu), "gpu", false));
             }
             other => panic!("CREPUSCULAR_SWEEP_BACKENDS: `{other}` is not cpu or gpu"),
         }
     }
+    // Every view is run and every failure listed before the test fails.
+    assert!(failures.is_empty(), "{} failures: {failures:#?}", failures.len());
 }
 
 #[test]

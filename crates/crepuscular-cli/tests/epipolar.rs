@@ -733,11 +733,6 @@ fn epipolar_gpu_matches_its_cpu_mirror_pass_by_pass() {
     }
 }
 
-/// True for a built-in scene with one light.
-fn one_light(name: &str) -> bool {
-    builtin::builtin(name).expect("built-in scene").lights.len() == 1
-}
-
 /// The first light of each kind that reaches the view (the only light of a one-light frame).
 fn one_light_of_each_kind(desc: &FrameDesc) -> Vec<usize> {
     let mut kinds = Vec::new();
@@ -1012,7 +1007,7 @@ fn check_quality(
 #[test]
 fn epipolar_vs_reference_on_every_builtin_scene_cpu() {
     // The one-light scenes (the several-light ones are tests/lights.rs's).
-    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| one_light(n)) {
+    for name in builtin::one_light_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
@@ -1029,7 +1024,7 @@ fn epipolar_vs_reference_on_every_builtin_scene_gpu() {
     let Some(gpu) = test_gpu("epipolar_vs_reference_on_every_builtin_scene_gpu") else { return };
     let mut ep = epipolar_gpu(&gpu, EpipolarSettings::default());
     // The one-light scenes (the several-light ones are tests/lights.rs's).
-    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| one_light(n)) {
+    for name in builtin::one_light_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         // The GPU host renderer's own depth and shadow map; the reference runs on the CPU over

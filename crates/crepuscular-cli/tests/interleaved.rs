@@ -506,7 +506,7 @@ fn check_quality(name: &str, backend: &str, psnr: f64, flip: f64) {
 #[test]
 fn interleaved_vs_reference_on_every_builtin_scene_cpu() {
     // The one-light scenes (the several-light ones are tests/lights.rs's).
-    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| builtin::builtin(n).unwrap().lights.len() == 1) {
+    for name in builtin::one_light_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
@@ -537,7 +537,7 @@ fn interleaved_vs_reference_on_every_builtin_scene_gpu() {
     let Some(gpu) = test_gpu("interleaved_vs_reference_on_every_builtin_scene_gpu") else { return };
     let mut il = interleaved_gpu(&gpu, &InterleavedSettings::default());
     // The one-light scenes (the several-light ones are tests/lights.rs's).
-    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| builtin::builtin(n).unwrap().lights.len() == 1) {
+    for name in builtin::one_light_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         // The GPU host renderer's own depth and shadow map, as `crepuscular render` uses them;

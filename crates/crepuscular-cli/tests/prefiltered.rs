@@ -1006,8 +1006,7 @@ fn quality_check(backend: &str, mut gpu: Option<(&GpuContext, &mut Scattering)>)
         r
     };
     // The one-light scenes (the several-light ones are tests/lights.rs's).
-    let one_light = |n: &str| builtin::builtin(n).expect("built-in scene").lights.len() == 1;
-    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| one_light(n)) {
+    for name in builtin::one_light_names() {
         let scene = scene_at(name, 160, 90, 1024);
         let desc = frame_desc(&scene);
         let (psnr, flip, st) = run(&scene);

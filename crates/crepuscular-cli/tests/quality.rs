@@ -40,7 +40,7 @@ fn check(name: &str, backend: &str, r_in: &Image, t_in: &Image, r_fin: &Image, t
 #[test]
 fn brute_force_vs_reference_on_every_builtin_scene_cpu() {
     // The one-light scenes (the several-light ones are tests/lights.rs's).
-    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| builtin::builtin(n).unwrap().lights.len() == 1) {
+    for name in builtin::one_light_names() {
         let scene = small(name);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
@@ -57,7 +57,7 @@ fn brute_force_vs_reference_on_every_builtin_scene_cpu() {
 fn brute_force_vs_reference_on_every_builtin_scene_gpu() {
     let Some(gpu) = test_gpu("brute_force_vs_reference_on_every_builtin_scene_gpu") else { return };
     // The one-light scenes (the several-light ones are tests/lights.rs's).
-    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| builtin::builtin(n).unwrap().lights.len() == 1) {
+    for name in builtin::one_light_names() {
         let scene = small(name);
         let run = |technique| render(&scene, Some(&gpu), &RenderOptions { technique, progress: &|_, _| {} }).unwrap();
         let bf = run(TechniqueSettings::BruteForce(BruteForceSettings::default()));

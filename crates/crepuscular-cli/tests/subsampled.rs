@@ -439,7 +439,7 @@ fn check(name: &str, backend: &str, psnr: f64, flip: f64, remarched: f64) {
 #[test]
 fn subsampled_vs_reference_on_every_builtin_scene_cpu() {
     // The one-light scenes (the several-light ones are tests/lights.rs's).
-    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| builtin::builtin(n).unwrap().lights.len() == 1) {
+    for name in builtin::one_light_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
@@ -458,7 +458,7 @@ fn subsampled_vs_reference_on_every_builtin_scene_gpu() {
     use crepuscular_cli::render::{RenderOptions, render};
     let Some(gpu) = crepuscular::gpu::test_gpu("subsampled_vs_reference_on_every_builtin_scene_gpu") else { return };
     // The one-light scenes (the several-light ones are tests/lights.rs's).
-    for (name, _) in builtin::builtin_names().iter().filter(|(n, _)| builtin::builtin(n).unwrap().lights.len() == 1) {
+    for name in builtin::one_light_names() {
         let scene = small(name, 1024);
         let desc = frame_desc(&scene);
         // The reference over the shadow map and depth the GPU host renderer drew.

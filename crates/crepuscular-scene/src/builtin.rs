@@ -45,6 +45,12 @@ pub fn builtin_names() -> &'static [(&'static str, &'static str)] {
     SCENES
 }
 
+/// The built-in scenes with exactly one light, in [`builtin_names`]' order (the per-technique
+/// quality tests' scenes; the several-light ones have tests of their own).
+pub fn one_light_names() -> Vec<&'static str> {
+    SCENES.iter().map(|(n, _)| *n).filter(|n| builtin(n).is_some_and(|s| s.lights.len() == 1)).collect()
+}
+
 /// Builds the built-in scene `name`, or `None` if there is no such scene.
 pub fn builtin(name: &str) -> Option<Scene> {
     let desc = SCENES.iter().find(|(n, _)| *n == name)?.1;

@@ -133,10 +133,13 @@ pub fn write_table(dir: &Path, adapter: &str, measured: &str) -> Result<Table> {
     table.rows.sort_by(|a, b| (&a.technique, &a.scene, &a.backend).cmp(&(&b.technique, &b.scene, &b.backend)));
     table.measured = format!("{measured} ({recorded} rows re-measured)");
     table.adapter = adapter.into();
-    let head = "# The quality table (crates/crepuscular-cli/src/quality.rs): each technique at its defaults against\n\
-                # `reference` (512 steps) at 160×90 with 1024² shadow maps; PSNR of the in-scattering (dB), FLIP mean\n\
-                # of the final image. The quality tests' thresholds are each row's PSNR − 2 dB and FLIP × 1.3.\n\
-                # Written by `write_quality_table` (see quality.rs); do not edit the figures by hand.\n\n";
+    let head = format!(
+        "# The quality table (crates/crepuscular-cli/src/quality.rs): each technique at its defaults against\n\
+         # `reference` (512 steps) at 160×90 with 1024² shadow maps; PSNR of the in-scattering (dB), FLIP mean\n\
+         # of the final image. The quality tests' thresholds are each row's PSNR − {PSNR_MARGIN_DB} dB and FLIP × {}.\n\
+         # Written by `write_quality_table` (see quality.rs); do not edit the figures by hand.\n\n",
+        1.0 + FLIP_MARGIN
+    );
     crate::output::write_atomic(&table_path(), format!("{head}{}", toml::to_string(&table)?).as_bytes())?;
     Ok(table)
 }

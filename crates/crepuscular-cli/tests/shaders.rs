@@ -93,7 +93,7 @@ fn frame_uniforms_match_the_wgsl_layout() {
             ("shadow_first_layer", offset_of!(LightUniforms, shadow_first_layer)),
             ("shadow_clear", offset_of!(LightUniforms, shadow_clear)),
             ("texture_layer", offset_of!(LightUniforms, texture_layer)),
-            ("_pad0", offset_of!(LightUniforms, _pad0)),
+            ("slot", offset_of!(LightUniforms, slot)),
             ("texture_size", offset_of!(LightUniforms, texture_size)),
             ("_pad1", offset_of!(LightUniforms, _pad1)),
         ],

@@ -111,8 +111,11 @@ pub struct LightUniforms {
     /// Layer of this spot light's projected texture in the frame's texture array, or
     /// [`NO_TEXTURE`].
     pub texture_layer: u32,
-    /// Padding.
-    pub _pad0: u32,
+    /// This light's own index in the `Lights` block it is bound in (written by
+    /// [`FrameDesc::lights_uniforms_of`]): shaders read the shadow matrix of a run-time layer
+    /// through `lights.items[slot]` instead of indexing a by-value copy (common.wgsl
+    /// `light_view_proj`).
+    pub slot: u32,
     /// Width and height of the projected texture (texels; it sits in the top-left corner of
     /// its layer).
     pub texture_size: [u32; 2],
@@ -201,7 +204,7 @@ impl FrameLight {
             shadow_first_layer: self.shadow_layer,
             shadow_clear: s.depth.far_value(),
             texture_layer: if tex.is_some() { self.texture_layer } else { NO_TEXTURE },
-            _pad0: 0,
+            slot: 0,
             texture_size: tex.map_or([0, 0], |t| [t.width, t.height]),
             _pad1: [0; 2],
         }
@@ -265,6 +268,7 @@ impl FrameDesc {
         let mut u = LightsUniforms::zeroed_lights();
         for (slot, &k) in indices.iter().take(MAX_LIGHTS).enumerate() {
             u.items[slot] = self.lights[k].uniforms();
+            u.items[slot].slot = slot as u32;
         }
         u.count = indices.len().min(MAX_LIGHTS) as u32;
         u

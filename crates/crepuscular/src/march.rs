@@ -215,12 +215,22 @@ impl MarchLights {
         self.cones[i].is_some() && policy != SpotSteps::Fixed
     }
 
-    /// The interval of the view ray o + t·d, t in [0, s], that the shared march covers: the
-    /// smallest interval holding the [`march_interval`] of every light that does not own one
-    /// ((0, s) as soon as one is directional). Empty (0, 0) when none reaches the ray. Mirrors
-    /// `shared_interval` in WGSL.
-    pub fn shared_interval(&self, o: Vec3, d: Vec3, s: f32, policy: SpotSteps, denominator: f32) -> (f32, f32) {
+    /// The shared march of the view ray o + t·d, t in [0, s]: the smallest interval holding
+    /// the [`march_interval`] of every light that does not own one ((0, s) as soon as one is
+    /// directional), and the set of those lights whose interval is not empty on this ray; the
+    /// others are not evaluated at its samples (a local light's reach missed by the ray costs
+    /// nothing there). Empty (0, 0) with no lights when none reaches the ray. Mirrors
+    /// `shared_march` in WGSL.
+    pub fn shared_march(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        s: f32,
+        policy: SpotSteps,
+        denominator: f32,
+    ) -> ((f32, f32), LightSet) {
         let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+        let mut set = LightSet::EMPTY;
         for i in 0..self.indices.len() {
             if self.owns_interval(i, policy) {
                 continue;
@@ -229,9 +239,10 @@ impl MarchLights {
             if iv.1 > iv.0 {
                 lo = lo.min(iv.0);
                 hi = hi.max(iv.1);
+                set = set.with(i);
             }
         }
-        if hi > lo { (lo, hi) } else { (0.0, 0.0) }
+        if hi > lo { ((lo, hi), set) } else { ((0.0, 0.0), LightSet::EMPTY) }
     }
 
     /// Light `i`'s own [`march_interval`].
@@ -240,26 +251,43 @@ impl MarchLights {
     }
 }
 
-/// Which lights one march evaluates: those sharing the march, or one light on its own interval.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Which {
-    /// Every light that does not own an interval under this policy (`SHARED` in WGSL).
-    Shared(SpotSteps),
-    /// Light `i` of [`MarchLights::indices`] alone.
-    One(usize),
+/// Which lights one march evaluates: a set of indices into [`MarchLights::indices`] (at most
+/// [`crate::MAX_LIGHTS`], one bit each; the `u32` light mask in WGSL). The shared march's set
+/// comes from [`MarchLights::shared_march`]; a light marched on its own interval is
+/// [`LightSet::one`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LightSet(pub u32);
+
+impl LightSet {
+    /// No light.
+    pub const EMPTY: LightSet = LightSet(0);
+
+    /// Light `i` alone.
+    pub fn one(i: usize) -> Self {
+        LightSet(1 << i)
+    }
+
+    /// This set and light `i`.
+    pub fn with(self, i: usize) -> Self {
+        LightSet(self.0 | 1 << i)
+    }
+
+    /// The lights of the set in increasing order (the order the shaders sum them in).
+    pub fn iter(self) -> impl Iterator<Item = usize> {
+        (0..u32::BITS as usize).filter(move |&i| self.0 >> i & 1 == 1)
+    }
 }
 
-/// σs·p·L_in·V at `p` of the lights `which` selects. Mirrors `march_density` in WGSL.
-pub fn march_density(frame: &CpuFrame, lights: &MarchLights, which: Which, dir: Vec3, p: Vec3) -> Vec3 {
+/// σs·p·L_in·V at `p`, summed over the lights `which` selects. Mirrors `march_density` in WGSL.
+pub fn march_density(frame: &CpuFrame, lights: &MarchLights, which: LightSet, dir: Vec3, p: Vec3) -> Vec3 {
     let desc = frame.desc;
-    let one = |i: usize| {
-        let k = lights.indices[i];
-        inscatter_density(&desc.lights[k], &desc.medium, &frame.shadow_maps[k], dir, p)
-    };
-    match which {
-        Which::One(i) => one(i),
-        Which::Shared(policy) => (0..lights.indices.len()).filter(|&i| !lights.owns_interval(i, policy)).map(one).sum(),
-    }
+    which
+        .iter()
+        .map(|i| {
+            let k = lights.indices[i];
+            inscatter_density(&desc.lights[k], &desc.medium, &frame.shadow_maps[k], dir, p)
+        })
+        .sum()
 }
 
 /// The part [t₀, t₁] ∩ [a, b] of the ray o + t·d (d unit) inside the sphere (c, r); empty
@@ -354,7 +382,7 @@ pub fn mean_extinction(desc: &FrameDesc) -> f32 {
 pub fn march_steps(
     frame: &CpuFrame,
     lights: &MarchLights,
-    which: Which,
+    which: LightSet,
     dir: Vec3,
     iv: (f32, f32),
     n: u32,
@@ -404,12 +432,12 @@ pub fn march_lights(
     denominator: f32,
 ) -> Vec3 {
     let o = frame.desc.camera.position;
-    let shared = lights.shared_interval(o, dir, s, policy, denominator);
-    let mut sum = march_steps(frame, lights, Which::Shared(policy), dir, shared, n, first, stride, j);
+    let (shared, set) = lights.shared_march(o, dir, s, policy, denominator);
+    let mut sum = march_steps(frame, lights, set, dir, shared, n, first, stride, j);
     for i in 0..lights.indices.len() {
         if lights.owns_interval(i, policy) {
             let iv = lights.own_interval(i, o, dir, s, policy, denominator);
-            sum += march_steps(frame, lights, Which::One(i), dir, iv, n, first, stride, j);
+            sum += march_steps(frame, lights, LightSet::one(i), dir, iv, n, first, stride, j);
         }
     }
     sum
@@ -528,6 +556,15 @@ mod tests {
             assert!(a >= 0.0 && b <= 9.0, "{p:?}: {a} {b}");
         }
         assert_eq!(march_interval(None, None, o, Vec3::X, 9.0, SpotSteps::ExactCone, 0.3), (0.0, 9.0));
+    }
+
+    #[test]
+    fn light_sets_list_their_lights_in_increasing_order() {
+        assert_eq!(LightSet::EMPTY.iter().count(), 0);
+        assert_eq!(LightSet::one(3).iter().collect::<Vec<_>>(), vec![3]);
+        let s = LightSet::EMPTY.with(15).with(0).with(7);
+        assert_eq!(s.iter().collect::<Vec<_>>(), vec![0, 7, 15]);
+        assert_eq!(s, LightSet(1 | 1 << 7 | 1 << 15));
     }
 
     #[test]

@@ -6,7 +6,7 @@ use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
 use crate::integrand::lit_incident;
-use crate::march::{MarchLights, Which, march_lights, mean_extinction, step_offset};
+use crate::march::{LightSet, MarchLights, march_lights, mean_extinction, step_offset};
 use crate::shaders::pixel_jitter;
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
@@ -48,7 +48,7 @@ fn density_lut(frame: &CpuFrame, lut: &PhaseLut, k: usize, dir: Vec3, p: Vec3) -
 pub fn march_steps_lut(
     frame: &CpuFrame,
     lights: &MarchLights,
-    which: Which,
+    which: LightSet,
     lut: &PhaseLut,
     dir: Vec3,
     iv: (f32, f32),
@@ -72,13 +72,7 @@ pub fn march_steps_lut(
     while i < n {
         let t0 = a + i as f32 * delta;
         let p = o + dir * (t0 + off);
-        let d: Vec3 = match which {
-            Which::One(l) => density_lut(frame, lut, lights.indices[l], dir, p),
-            Which::Shared(policy) => (0..lights.indices.len())
-                .filter(|&l| !lights.owns_interval(l, policy))
-                .map(|l| density_lut(frame, lut, lights.indices[l], dir, p))
-                .sum(),
-        };
+        let d: Vec3 = which.iter().map(|l| density_lut(frame, lut, lights.indices[l], dir, p)).sum();
         sum += d * (-st * t0).exp() * seg;
         i += stride;
     }
@@ -100,12 +94,12 @@ fn march_lights_lut(
 ) -> Vec3 {
     let o = frame.desc.camera.position;
     let (policy, den) = (s.spot_steps, s.spot_denominator);
-    let shared = lights.shared_interval(o, dir, dist, policy, den);
-    let mut sum = march_steps_lut(frame, lights, Which::Shared(policy), lut, dir, shared, s.steps, first, stride, j);
+    let (shared, set) = lights.shared_march(o, dir, dist, policy, den);
+    let mut sum = march_steps_lut(frame, lights, set, lut, dir, shared, s.steps, first, stride, j);
     for l in 0..lights.indices.len() {
         if lights.owns_interval(l, policy) {
             let iv = lights.own_interval(l, o, dir, dist, policy, den);
-            sum += march_steps_lut(frame, lights, Which::One(l), lut, dir, iv, s.steps, first, stride, j);
+            sum += march_steps_lut(frame, lights, LightSet::one(l), lut, dir, iv, s.steps, first, stride, j);
         }
     }
     sum

@@ -57,8 +57,8 @@ fn density_lut(l: Light, dir: vec3<f32>, p: vec3<f32>) -> vec3<f32> {
 
 // march_steps (common.wgsl) with the phase function read from the table: eq. 1 over the steps
 // i = first, first + stride, … < n of the interval iv, σs·lut(cos θ)·L_in·V per step, of light
-// `which` or of every light sharing the march (SHARED).
-fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u32, j: f32, which: u32) -> vec3<f32> {
+// the lights of `mask` (march_density in common.wgsl).
+fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u32, j: f32, mask: u32) -> vec3<f32> {
     if iv.y <= iv.x {
         return vec3<f32>(0.0);
     }
@@ -71,15 +71,11 @@ fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u3
         let t0 = iv.x + f32(i) * delta;
         let p = frame.camera_pos.xyz + dir * (t0 + off);
         var d = vec3<f32>(0.0);
-        if which != SHARED {
-            d = density_lut(lights.items[which], dir, p);
-        } else {
-            for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
-                let l = lights.items[k];
-                if !own_interval(l, params.spot_steps) {
-                    d += density_lut(l, dir, p);
-                }
-            }
+        var m = mask;
+        while m != 0u {
+            let k = firstTrailingBit(m);
+            m &= m - 1u;
+            d += density_lut(lights.items[k], dir, p);
         }
         sum += d * exp(-st * t0) * seg;
     }
@@ -90,13 +86,13 @@ fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u3
 fn march_lights_lut(dir: vec3<f32>, s: f32, n: u32, first: u32, stride: u32, j: f32) -> vec3<f32> {
     let o = frame.camera_pos.xyz;
     let policy = params.spot_steps;
-    let shared_iv = shared_interval(frame, o, dir, s, policy, params.spot_denominator);
-    var sum = march_steps_lut(dir, shared_iv, n, first, stride, j, SHARED);
+    let sm = shared_march(frame, o, dir, s, policy, params.spot_denominator);
+    var sum = march_steps_lut(dir, sm.iv, n, first, stride, j, sm.mask);
     for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
         let l = lights.items[k];
         if own_interval(l, policy) {
             let iv = march_interval(frame, l, o, dir, s, policy, params.spot_denominator);
-            sum += march_steps_lut(dir, iv, n, first, stride, j, k);
+            sum += march_steps_lut(dir, iv, n, first, stride, j, 1u << k);
         }
     }
     return sum;

@@ -57,7 +57,7 @@ fn line_occluder(l: Light, pt: vec3<f32>, dir: vec3<f32>, bias: f32) -> Occluder
     if l.shadow_layers == 6u {
         layer = cube_face(dir);
     }
-    let c = l.shadow_view_proj[layer] * vec4<f32>(q, 1.0);
+    let c = light_view_proj(l, layer) * vec4<f32>(q, 1.0);
     if c.w <= 0.0 {
         return r;
     }

@@ -278,3 +278,28 @@ fn wgsl_light_and_phase_kinds_are_the_rust_constants() {
         assert!(common.contains(&decl), "common.wgsl lacks `{decl}`");
     }
 }
+
+#[test]
+fn temporal_uniforms_match_their_wgsl_layout() {
+    use crepuscular::temporal::{MAX_FRAMES, TEMPORAL_WGSL, TemporalUniforms as T};
+    let module = parse("temporal", &crepuscular::shaders::compose(TEMPORAL_WGSL));
+    assert!(module.entry_points.iter().any(|e| e.name == "resolve"), "temporal: no entry point resolve");
+    check_struct(
+        &module,
+        "Temporal",
+        &[
+            ("prev_view_proj", offset_of!(T, prev_view_proj)),
+            ("prev_camera_pos", offset_of!(T, prev_camera_pos)),
+            ("history_weight", offset_of!(T, history_weight)),
+            ("clip_sigma", offset_of!(T, clip_sigma)),
+            ("depth_tolerance", offset_of!(T, depth_tolerance)),
+            ("valid", offset_of!(T, valid)),
+            ("clip", offset_of!(T, clip)),
+            ("_pad0", offset_of!(T, _pad)),
+            ("_pad1", offset_of!(T, _pad) + 4),
+            ("_pad2", offset_of!(T, _pad) + 8),
+        ],
+        std::mem::size_of::<T>(),
+    );
+    assert!(TEMPORAL_WGSL.contains(&format!("const MAX_FRAMES: f32 = {MAX_FRAMES:.1};")));
+}

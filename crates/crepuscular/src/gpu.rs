@@ -395,6 +395,38 @@ impl GpuContext {
         )
     }
 
+    /// An `Rgba32Float` texture holding `img` (sampled and copy source), uploaded through the
+    /// queue: a CPU image given to a GPU pass (the temporal stage's input in the tools).
+    pub fn upload_image(&self, label: &str, img: &crate::Image) -> wgpu::Texture {
+        self.upload(label, wgpu::TextureFormat::Rgba32Float, img.width, img.height, bytemuck::cast_slice(&img.pixels))
+    }
+
+    /// An `R32Float` texture of `width`×`height` values (a depth buffer read back earlier).
+    pub fn upload_f32(&self, label: &str, width: u32, height: u32, values: &[f32]) -> wgpu::Texture {
+        self.upload(label, wgpu::TextureFormat::R32Float, width, height, bytemuck::cast_slice(values))
+    }
+
+    fn upload(&self, label: &str, format: wgpu::TextureFormat, width: u32, height: u32, bytes: &[u8]) -> wgpu::Texture {
+        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let texel = format.block_copy_size(None).unwrap_or(4);
+        self.queue.write_texture(
+            texture.as_image_copy(),
+            bytes,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(width * texel), rows_per_image: Some(height) },
+            wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        );
+        texture
+    }
+
     /// Creates the `Rgba32Float` storage texture a technique writes its in-scattering into.
     pub fn create_output_texture(&self, width: u32, height: u32) -> wgpu::Texture {
         storage_texture(&self.device, "in-scattering", wgpu::TextureFormat::Rgba32Float, width, height)

@@ -23,6 +23,7 @@ pub mod shaders;
 pub mod shadow;
 pub mod stats;
 pub mod techniques;
+pub mod temporal;
 #[doc(hidden)]
 pub mod testing;
 pub mod tonemap;
@@ -37,3 +38,4 @@ pub use model::{Camera, Light, Medium, Phase, RgbTexture};
 pub use scattering::Scattering;
 pub use shadow::{Bounds, ShadowMap, ShadowProjection, ShadowSettings};
 pub use techniques::{AnyGpuTechnique, TechniqueSettings};
+pub use temporal::{CpuTemporal, Temporal, TemporalSettings};

@@ -26,6 +26,7 @@ pub fn all_library_shaders() -> Vec<(&'static str, String)> {
     v.push(("composite", compose(crate::composite::COMPOSITE_WGSL)));
     v.push(("light_sum", compose(include_str!("shaders/light_sum.wgsl"))));
     v.push(("light_clear", compose(include_str!("shaders/light_clear.wgsl"))));
+    v.push(("temporal", compose(crate::temporal::TEMPORAL_WGSL)));
     v
 }
 

@@ -1,0 +1,500 @@
+//! Temporal accumulation after any technique (docs/MODEL.md §7): each frame's in-scattering is
+//! blended with the previous frames' reprojected through the camera's motion, so a technique
+//! whose sample positions change from frame to frame (its `jitter` and `frame_index` settings)
+//! converges towards the mean of those positions instead of showing one of them.
+//!
+//! [`Temporal`] is the GPU stage: it records one compute pass into the caller's encoder after
+//! the technique's, reading the technique's output, the frame's depth and its own history, and
+//! writing the resolved in-scattering to the caller's texture. [`CpuTemporal`] is its CPU
+//! mirror ([`resolve_pixel`] is the shader, line for line), tested against it pixel by pixel.
+//!
+//! What the history is, is the caller's choice: each stage remembers the camera of the frame it
+//! resolved last and reprojects through it; [`Temporal::reset`] forgets it (a camera cut, a
+//! teleport). A new size, or any change of the lights or the medium, resets it by itself.
+
+use crate::error::Error;
+use crate::frame::FrameDesc;
+use crate::image::Image;
+use crate::techniques::pass::{self, BindCache, Bound};
+use glam::{Mat4, Vec3, Vec4};
+use serde::{Deserialize, Serialize};
+use std::hash::{Hash, Hasher};
+use wgpu::util::DeviceExt;
+
+/// The pass shader (composed with common.wgsl).
+pub const TEMPORAL_WGSL: &str = include_str!("temporal.wgsl");
+
+/// The frame count a pixel's history saturates at (`MAX_FRAMES` in temporal.wgsl).
+pub const MAX_FRAMES: f32 = 1024.0;
+
+/// The temporal stage's settings. Cost of the stage: one full-screen compute pass reading 9
+/// current texels, 4 + 1 history texels and one stored distance per pixel, and 48 bytes of
+/// history per pixel (two RGBA32F images, two R32F distances, one R32F weight).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TemporalSettings {
+    /// The largest weight w of the history in out = c + w·(h − c), in [0, 1): the exponential
+    /// average's factor once 1/(1 − w) frames are held (before that, w = n/(n + 1) with n the
+    /// frames the pixel's history holds: the plain mean). Higher: less noise and banding, a
+    /// slower answer to change (about 1/(1 − w) frames). Default 0.9 (Unreal's volumetric
+    /// fog). No cost.
+    pub history_weight: f32,
+    /// Clip the reprojected history to the current frame's 3×3 neighbourhood (its mean ±
+    /// `clip_sigma` standard deviations, inside its min and max; Salvi's variance clipping),
+    /// so a history that no longer fits — a light moved, an occluder crossed a shaft — is
+    /// pulled to what the frame shows instead of ghosting. Default true. Cost: 9 texture reads
+    /// per pixel.
+    pub clip: bool,
+    /// Half-width of the clip box in standard deviations of the neighbourhood (≥ 0): smaller
+    /// rejects more (less ghosting, more of the current frame's noise kept). Default 1.25.
+    pub clip_sigma: f32,
+    /// Disocclusion test: the history is rejected where the previous frame's view distance at
+    /// the reprojected pixel differs from the point's distance to the previous eye by more than
+    /// this fraction of it (the previous frame saw another surface there). Default 0.05.
+    pub depth_tolerance: f32,
+}
+
+impl Default for TemporalSettings {
+    fn default() -> Self {
+        Self { history_weight: 0.9, clip: true, clip_sigma: 1.25, depth_tolerance: 0.05 }
+    }
+}
+
+impl TemporalSettings {
+    /// An error naming the first setting outside its range.
+    pub fn validate(&self) -> Result<(), Error> {
+        let w = self.history_weight;
+        if !(0.0..1.0).contains(&w) {
+            return Err(Error::invalid("temporal.history_weight", w, "must be in [0, 1)"));
+        }
+        if !(self.clip_sigma >= 0.0 && self.clip_sigma.is_finite()) {
+            return Err(Error::invalid("temporal.clip_sigma", self.clip_sigma, "must be finite and ≥ 0"));
+        }
+        if !(self.depth_tolerance >= 0.0 && self.depth_tolerance.is_finite()) {
+            return Err(Error::invalid("temporal.depth_tolerance", self.depth_tolerance, "must be finite and ≥ 0"));
+        }
+        Ok(())
+    }
+}
+
+/// What the history needs of the previous frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Previous {
+    view_proj: Mat4,
+    camera_pos: Vec3,
+    key: u64,
+    size: (u32, u32),
+}
+
+impl Previous {
+    fn of(desc: &FrameDesc) -> Self {
+        Self {
+            view_proj: desc.camera.view_proj(),
+            camera_pos: desc.camera.position,
+            key: light_key(desc),
+            size: (desc.width, desc.height),
+        }
+    }
+
+    /// Whether a history of this previous frame may serve `desc`.
+    fn serves(&self, desc: &FrameDesc) -> bool {
+        self.size == (desc.width, desc.height) && self.key == light_key(desc)
+    }
+}
+
+/// A hash of what the in-scattering depends on besides the camera: each light (kind, position,
+/// direction, colour, intensity, cone, texture, scattering scale) and the medium. Not the shadow
+/// maps' matrices, which may follow the camera (a sun's map fitted to the view). The history is
+/// dropped when it changes.
+fn light_key(desc: &FrameDesc) -> u64 {
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for l in &desc.lights {
+        format!("{:?}", l.light).hash(&mut h);
+        l.scattering.to_bits().hash(&mut h);
+    }
+    format!("{:?}", desc.medium).hash(&mut h);
+    h.finish()
+}
+
+/// The pass uniforms (`struct Temporal` in temporal.wgsl).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TemporalUniforms {
+    /// The previous frame's view-projection.
+    pub prev_view_proj: [[f32; 4]; 4],
+    /// The previous frame's eye (xyz).
+    pub prev_camera_pos: [f32; 4],
+    /// [`TemporalSettings::history_weight`].
+    pub history_weight: f32,
+    /// [`TemporalSettings::clip_sigma`].
+    pub clip_sigma: f32,
+    /// [`TemporalSettings::depth_tolerance`].
+    pub depth_tolerance: f32,
+    /// 1 when the history serves this frame.
+    pub valid: u32,
+    /// 1 to clip ([`TemporalSettings::clip`]).
+    pub clip: u32,
+    /// Padding.
+    pub _pad: [u32; 3],
+}
+
+fn uniforms(s: &TemporalSettings, prev: Option<&Previous>) -> TemporalUniforms {
+    TemporalUniforms {
+        prev_view_proj: prev.map_or(Mat4::IDENTITY, |p| p.view_proj).to_cols_array_2d(),
+        prev_camera_pos: prev.map_or(Vec4::ZERO, |p| p.camera_pos.extend(1.0)).to_array(),
+        history_weight: s.history_weight,
+        clip_sigma: s.clip_sigma,
+        depth_tolerance: s.depth_tolerance,
+        valid: prev.is_some() as u32,
+        clip: s.clip as u32,
+        _pad: [0; 3],
+    }
+}
+
+/// One pixel's resolve: (output rgb, history rgba, stored distance, weight). Mirrors `resolve`
+/// in temporal.wgsl.
+#[allow(clippy::too_many_arguments)]
+pub fn resolve_pixel(
+    desc: &FrameDesc,
+    u: &TemporalUniforms,
+    depth: &[f32],
+    current: &Image,
+    history: &Image,
+    distance: &[f32],
+    x: u32,
+    y: u32,
+) -> ([f32; 3], [f32; 4], f32, f32) {
+    let (w_px, h_px) = (desc.width as i32, desc.height as i32);
+    let rgb = |p: [f32; 4]| Vec3::new(p[0], p[1], p[2]);
+    let at = |x: i32, y: i32| (y.clamp(0, h_px - 1) * w_px + x.clamp(0, w_px - 1)) as usize;
+    let c = rgb(current.pixels[at(x as i32, y as i32)]);
+
+    let d = depth[at(x as i32, y as i32)];
+    let dir = desc.pixel_ray(x, y);
+    let sky = d == desc.camera.depth.far_value();
+    let dist = if sky { -1.0 } else { desc.view_distance(d, dir) };
+
+    let mut w = 0.0f32;
+    let mut n = 0.0f32;
+    let mut h = c;
+    if u.valid == 1 {
+        let x4 = if sky { dir.extend(0.0) } else { (desc.camera.position + dir * dist).extend(1.0) };
+        let clip = Mat4::from_cols_array_2d(&u.prev_view_proj) * x4;
+        if clip.w > 0.0 {
+            let ndc = clip.truncate().truncate() / clip.w;
+            if ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 {
+                let q =
+                    glam::Vec2::new((ndc.x * 0.5 + 0.5) * w_px as f32 - 0.5, (0.5 - ndc.y * 0.5) * h_px as f32 - 0.5);
+                let nx = ((q.x + 0.5).floor() as i32).clamp(0, w_px - 1);
+                let ny = ((q.y + 0.5).floor() as i32).clamp(0, h_px - 1);
+                let stored = distance[at(nx, ny)];
+                let valid = if sky {
+                    stored < 0.0
+                } else {
+                    let expected = (x4.truncate() - Vec3::from_slice(&u.prev_camera_pos[..3])).length();
+                    stored >= 0.0 && (stored - expected).abs() <= u.depth_tolerance * expected
+                };
+                if valid {
+                    let b = q.floor();
+                    let f = q - b;
+                    let (ix, iy) = (b.x as i32, b.y as i32);
+                    let hp = |dx: i32, dy: i32| history.pixels[at(ix + dx, iy + dy)];
+                    let (h00, h10, h01, h11) = (rgb(hp(0, 0)), rgb(hp(1, 0)), rgb(hp(0, 1)), rgb(hp(1, 1)));
+                    h = h00.lerp(h10, f.x).lerp(h01.lerp(h11, f.x), f.y);
+                    n = history.pixels[at(nx, ny)][3];
+                    w = u.history_weight.min(n / (n + 1.0));
+                }
+            }
+        }
+    }
+    if w > 0.0 && u.clip == 1 {
+        let (mut lo, mut hi) = (c, c);
+        let (mut m1, mut m2) = (Vec3::ZERO, Vec3::ZERO);
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let s = rgb(current.pixels[at(x as i32 + dx, y as i32 + dy)]);
+                lo = lo.min(s);
+                hi = hi.max(s);
+                m1 += s;
+                m2 += s * s;
+            }
+        }
+        let mean = m1 / 9.0;
+        let var = (m2 / 9.0 - mean * mean).max(Vec3::ZERO);
+        let sigma = Vec3::new(var.x.sqrt(), var.y.sqrt(), var.z.sqrt());
+        let box_lo = lo.max(mean - u.clip_sigma * sigma);
+        let box_hi = hi.min(mean + u.clip_sigma * sigma);
+        h = h.clamp(box_lo, box_hi);
+    }
+    let res = c + w * (h - c);
+    (res.to_array(), [res.x, res.y, res.z, (n + 1.0).min(MAX_FRAMES)], dist, w)
+}
+
+/// The temporal stage on the CPU: the mirror of [`Temporal`].
+#[derive(Clone, Debug, Default)]
+pub struct CpuTemporal {
+    /// The settings.
+    pub settings: TemporalSettings,
+    history: Option<(Image, Vec<f32>, Previous)>,
+    weights: Vec<f32>,
+}
+
+impl CpuTemporal {
+    /// A stage with no history.
+    pub fn new(settings: TemporalSettings) -> Result<Self, Error> {
+        settings.validate()?;
+        Ok(Self { settings, history: None, weights: Vec::new() })
+    }
+
+    /// Forgets the history: the next frame is taken as it is (a camera cut, a teleport).
+    pub fn reset(&mut self) {
+        self.history = None;
+    }
+
+    /// Resolves `current` (the technique's in-scattering of `desc`, its depth `depth`) against
+    /// the history and keeps the result as the next frame's history.
+    pub fn resolve(&mut self, desc: &FrameDesc, depth: &[f32], current: &Image) -> Result<Image, Error> {
+        let (w, h) = (desc.width, desc.height);
+        let n = (w * h) as usize;
+        if current.width != w || current.height != h || current.pixels.len() != n {
+            let size = format!("{}×{}", current.width, current.height);
+            return Err(Error::invalid("temporal current", size, format!("must be the frame's {w}×{h}")));
+        }
+        if depth.len() != n {
+            return Err(Error::invalid("temporal depth", depth.len(), format!("must hold {w}×{h} values")));
+        }
+        let prev = self.history.as_ref().filter(|(_, _, p)| p.serves(desc));
+        let u = uniforms(&self.settings, prev.map(|(_, _, p)| p));
+        let empty = (Image::new(w, h), vec![-1.0; n]);
+        let (hist, dist) = prev.map_or((&empty.0, &empty.1), |(i, d, _)| (i, d));
+        let mut out = Image::new(w, h);
+        let mut next = Image::new(w, h);
+        let mut next_dist = vec![0.0; n];
+        self.weights = vec![0.0; n];
+        for y in 0..h {
+            for x in 0..w {
+                let i = (y * w + x) as usize;
+                let (rgb, hp, d, wt) = resolve_pixel(desc, &u, depth, current, hist, dist, x, y);
+                out.pixels[i] = [rgb[0], rgb[1], rgb[2], current.pixels[i][3]];
+                next.pixels[i] = hp;
+                next_dist[i] = d;
+                self.weights[i] = wt;
+            }
+        }
+        self.history = Some((next, next_dist, Previous::of(desc)));
+        Ok(out)
+    }
+
+    /// The history weight w of each pixel in the last resolve (0 where the history was
+    /// rejected), row-major.
+    pub fn weights(&self) -> &[f32] {
+        &self.weights
+    }
+}
+
+/// The textures of the history, per size: two of each (read one, write the other).
+struct Sized {
+    size: (u32, u32),
+    history: [wgpu::Texture; 2],
+    distance: [wgpu::Texture; 2],
+    weights: wgpu::Texture,
+}
+
+/// The temporal stage on the GPU: one compute pass recorded into the caller's encoder.
+pub struct Temporal {
+    device: wgpu::Device,
+    settings: TemporalSettings,
+    layout: wgpu::BindGroupLayout,
+    pipelines: std::collections::HashMap<wgpu::TextureFormat, wgpu::ComputePipeline>,
+    frame_buffer: wgpu::Buffer,
+    params_buffer: wgpu::Buffer,
+    sized: Option<Sized>,
+    /// Which of the two histories holds the last frame.
+    latest: usize,
+    prev: Option<Previous>,
+    binds: BindCache<wgpu::BindGroup>,
+}
+
+impl Temporal {
+    /// Builds the stage on the caller's device. Needs nothing beyond wgpu's default limits
+    /// (four storage textures in one compute stage, two of them `R32Float`).
+    pub fn new(device: &wgpu::Device, settings: TemporalSettings) -> Result<Self, Error> {
+        settings.validate()?;
+        use wgpu::TextureFormat::R32Float;
+        let d2 = wgpu::TextureViewDimension::D2;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("temporal"),
+            entries: &[
+                pass::uniform_entry(0),
+                pass::uniform_entry(1),
+                pass::texture_entry(2, d2),
+                pass::texture_entry(3, d2),
+                pass::texture_entry(4, d2),
+                pass::texture_entry(5, d2),
+                pass::storage_texture_entry(6),
+                pass::storage_texture_entry(7),
+                pass::storage_texture_entry_of(8, R32Float),
+                pass::storage_texture_entry_of(9, R32Float),
+            ],
+        });
+        let frame_buffer =
+            pass::uniform_buffer(device, "temporal frame uniforms", size_of::<crate::FrameUniforms>() as u64);
+        let params_buffer = pass::uniform_buffer(device, "temporal uniforms", size_of::<TemporalUniforms>() as u64);
+        Ok(Self {
+            device: device.clone(),
+            settings,
+            layout,
+            pipelines: Default::default(),
+            frame_buffer,
+            params_buffer,
+            sized: None,
+            latest: 0,
+            prev: None,
+            binds: BindCache::default(),
+        })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> TemporalSettings {
+        self.settings
+    }
+
+    /// Changes the settings (the history is kept).
+    pub fn set_settings(&mut self, settings: TemporalSettings) -> Result<(), Error> {
+        settings.validate()?;
+        self.settings = settings;
+        Ok(())
+    }
+
+    /// Forgets the history: the next frame is taken as it is (a camera cut, a teleport).
+    pub fn reset(&mut self) {
+        self.prev = None;
+    }
+
+    /// The history weight w per pixel of the last frame recorded (an `R32Float` texture of the
+    /// frame's size; 0 where the history was rejected): the viewer's debug view.
+    pub fn weights(&self) -> Option<&wgpu::Texture> {
+        self.sized.as_ref().map(|s| &s.weights)
+    }
+
+    /// Bytes of GPU memory the stage holds.
+    pub fn gpu_memory_bytes(&self) -> u64 {
+        self.sized.as_ref().map_or(0, |s| s.size.0 as u64 * s.size.1 as u64 * (2 * 16 + 2 * 4 + 4))
+    }
+
+    /// Records the resolve of `current` (the technique's output for `desc`, a `D2` view of an
+    /// `Rgba32Float` or `Rgba16Float` texture of the frame's size) with the frame's `depth` into
+    /// `output` (a `STORAGE_BINDING` view of the frame's size, `Rgba32Float` or `Rgba16Float`)
+    /// in the caller's `encoder`. No submit, no wait. `current` and `output` must be different
+    /// textures. Errors name an input whose size or format does not fit.
+    pub fn encode(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        desc: &FrameDesc,
+        depth: &wgpu::TextureView,
+        current: &wgpu::TextureView,
+        output: &wgpu::TextureView,
+    ) -> Result<(), Error> {
+        let (w, h) = (desc.width, desc.height);
+        for (key, t) in [("depth", depth.texture()), ("current", current.texture()), ("output", output.texture())] {
+            if (t.width(), t.height()) != (w, h) {
+                return Err(Error::invalid(
+                    format!("temporal {key}"),
+                    format!("{}×{}", t.width(), t.height()),
+                    format!("must be the frame's {w}×{h}"),
+                ));
+            }
+        }
+        let format = output.texture().format();
+        if !pass::OUTPUT_FORMATS.contains(&format) {
+            return Err(Error::invalid("temporal output", format!("{format:?}"), "must be Rgba32Float or Rgba16Float"));
+        }
+        if !output.texture().usage().contains(wgpu::TextureUsages::STORAGE_BINDING) {
+            return Err(Error::invalid("temporal output", format!("{format:?}"), "needs STORAGE_BINDING usage"));
+        }
+        if current.texture() == output.texture() {
+            return Err(Error::invalid("temporal output", "the current texture", "must differ from `current`"));
+        }
+        if self.sized.as_ref().is_none_or(|s| s.size != (w, h)) {
+            self.sized = Some(self.allocate(w, h));
+            self.prev = None;
+            self.binds = BindCache::default();
+        }
+        let prev = self.prev.filter(|p| p.serves(desc));
+        // Uniforms through the encoder (copied from this frame's own staging buffers), so
+        // several frames recorded into one encoder each read their own.
+        for (dst, bytes) in [
+            (&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()).to_vec()),
+            (&self.params_buffer, bytemuck::bytes_of(&uniforms(&self.settings, prev.as_ref())).to_vec()),
+        ] {
+            let staging = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("temporal uniforms upload"),
+                contents: &bytes,
+                usage: wgpu::BufferUsages::COPY_SRC,
+            });
+            encoder.copy_buffer_to_buffer(&staging, 0, dst, 0, bytes.len() as u64);
+        }
+        let read = self.latest;
+        let write = 1 - read;
+        let sized = self.sized.as_ref().expect("allocated above");
+        let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+        let key = vec![
+            Bound::View(depth.clone()),
+            Bound::View(current.clone()),
+            Bound::View(output.clone()),
+            Bound::Choice(read as u32),
+        ];
+        if !self.binds.is_current(&key) {
+            let tv = wgpu::BindingResource::TextureView;
+            let (hr, dr, hw, dw, wt) = (
+                view(&sized.history[read]),
+                view(&sized.distance[read]),
+                view(&sized.history[write]),
+                view(&sized.distance[write]),
+                view(&sized.weights),
+            );
+            let bind = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("temporal"),
+                layout: &self.layout,
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: tv(depth) },
+                    wgpu::BindGroupEntry { binding: 3, resource: tv(current) },
+                    wgpu::BindGroupEntry { binding: 4, resource: tv(&hr) },
+                    wgpu::BindGroupEntry { binding: 5, resource: tv(&dr) },
+                    wgpu::BindGroupEntry { binding: 6, resource: tv(output) },
+                    wgpu::BindGroupEntry { binding: 7, resource: tv(&hw) },
+                    wgpu::BindGroupEntry { binding: 8, resource: tv(&dw) },
+                    wgpu::BindGroupEntry { binding: 9, resource: tv(&wt) },
+                ],
+            });
+            self.binds.store(key, bind);
+        }
+        let (device, layout) = (&self.device, &self.layout);
+        let pipeline = self.pipelines.entry(format).or_insert_with(|| {
+            let src = pass::with_output(TEMPORAL_WGSL, format);
+            pass::compute_pipeline(device, "temporal.wgsl", &src, "resolve", layout)
+        });
+        let mut cpass = encoder
+            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("temporal"), timestamp_writes: None });
+        cpass.set_pipeline(pipeline);
+        cpass.set_bind_group(0, self.binds.value(), &[]);
+        cpass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        drop(cpass);
+        self.latest = write;
+        self.prev = Some(Previous::of(desc));
+        Ok(())
+    }
+
+    fn allocate(&self, w: u32, h: u32) -> Sized {
+        use wgpu::TextureFormat::{R32Float, Rgba32Float};
+        let texture = |label, format| crate::gpu::storage_texture(&self.device, label, format, w, h);
+        Sized {
+            size: (w, h),
+            history: [texture("temporal history a", Rgba32Float), texture("temporal history b", Rgba32Float)],
+            distance: [texture("temporal distance a", R32Float), texture("temporal distance b", R32Float)],
+            weights: texture("temporal weights", R32Float),
+        }
+    }
+}

@@ -14,6 +14,7 @@ use anyhow::{Context, Result, bail};
 use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::GpuContext;
 use crepuscular::stats::TechniqueStats;
+use crepuscular::temporal::{CpuTemporal, Temporal, TemporalSettings};
 use crepuscular::tonemap::{ToneMap, composite};
 use crepuscular::{Camera, CpuFrame, Image, Light, ShadowMap};
 use crepuscular::{Scattering, TechniqueSettings};
@@ -106,6 +107,11 @@ impl MotionPath {
             light_pitch_degrees: 2.0,
             point_offset: [offset; 3],
         }
+    }
+
+    /// This path with the lights held still (only the camera moves).
+    pub fn still_lights(self) -> Self {
+        MotionPath { light_yaw_degrees: 0.0, light_pitch_degrees: 0.0, point_offset: [0.0; 3], ..self }
     }
 
     /// The camera and one light at `t` (period 1), from the scene's own (every light of a
@@ -495,6 +501,13 @@ pub struct AnimateOptions {
     pub flicker: bool,
     /// Steps per pixel of that reference (even, ≥ 2).
     pub reference_steps: u32,
+    /// Run the temporal stage after the technique on every frame ([`crepuscular::Temporal`] on
+    /// the GPU, its CPU mirror on the CPU), with the technique's `jitter` on where it has one
+    /// (unless set otherwise). With `flicker`, each frame's quality is measured with and without
+    /// it ([`TemporalReport`]).
+    pub temporal: Option<TemporalSettings>,
+    /// Hold the lights still: only the camera moves ([`MotionPath::still_lights`]).
+    pub still_lights: bool,
     /// The GIF.
     pub output: PathBuf,
 }
@@ -524,6 +537,9 @@ impl AnimateOptions {
             if self.reference_steps < 2 || self.reference_steps % 2 != 0 || self.reference_steps > 1 << 20 {
                 bail!("--reference-steps {}: must be even and in 2..=1048576", self.reference_steps);
             }
+        }
+        if let Some(t) = &self.temporal {
+            t.validate().map_err(|e| anyhow::anyhow!("--temporal: {e}"))?;
         }
         let parent = match self.output.parent() {
             Some(p) if !p.as_os_str().is_empty() => p,
@@ -564,10 +580,85 @@ pub struct AnimateReport {
     pub frames: u32,
     /// The technique's time per frame, ms, in frame order.
     pub technique_ms: Vec<f64>,
-    /// Flicker vs reference (with `--flicker`).
+    /// Flicker vs reference (with `--flicker`; of the temporal stage's output with
+    /// `--temporal`).
     pub flicker: Option<Flicker>,
+    /// What the temporal stage did (with `--temporal`).
+    pub temporal: Option<TemporalReport>,
     /// Bytes of the GIF.
     pub bytes: u64,
+}
+
+/// One frame's quality against its reference, with and without the temporal stage.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct FrameQuality {
+    /// PSNR of the technique's own in-scattering (dB).
+    #[serde(with = "crate::metrics::psnr_serde")]
+    pub psnr_db_without: f64,
+    /// FLIP mean of its tone-mapped final image.
+    pub flip_without: f64,
+    /// PSNR after the temporal stage (dB).
+    #[serde(with = "crate::metrics::psnr_serde")]
+    pub psnr_db: f64,
+    /// FLIP mean after the temporal stage.
+    pub flip: f64,
+    /// Mean history weight over the frame's pixels (0 where the history was rejected).
+    pub mean_history_weight: f64,
+}
+
+/// What `animate --temporal` measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct TemporalReport {
+    /// The stage's settings.
+    pub settings: TemporalSettings,
+    /// Whether `jitter=true` was added to the technique's settings.
+    pub jitter_added: bool,
+    /// "gpu" or "cpu": where the stage ran.
+    pub backend: String,
+    /// The stage's time per frame, ms (wall clock around its submit and wait on the GPU).
+    pub stage_ms: Vec<f64>,
+    /// Per frame, with `--flicker`.
+    pub frames: Vec<FrameQuality>,
+    /// Flicker of the technique without the stage (with `--flicker`).
+    pub flicker_without: Option<Flicker>,
+}
+
+/// The temporal stage of one `animate` run.
+enum Stage {
+    Gpu(Box<Temporal>),
+    Cpu(CpuTemporal),
+}
+
+impl Stage {
+    /// Resolves one frame; returns the output and the mean history weight.
+    fn resolve(
+        &mut self,
+        gpu: Option<&GpuContext>,
+        desc: &FrameDesc,
+        depth: &[f32],
+        img: &Image,
+    ) -> Result<(Image, f64)> {
+        let mean = |w: &[f32]| w.iter().map(|&x| x as f64).sum::<f64>() / w.len().max(1) as f64;
+        match (self, gpu) {
+            (Stage::Gpu(t), Some(g)) => {
+                let cur = g.upload_image("animate in-scattering", img);
+                let depth_tex = g.upload_f32("animate depth", desc.width, desc.height, depth);
+                let out = g.create_output_texture(desc.width, desc.height);
+                let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+                let mut enc = g.device.create_command_encoder(&Default::default());
+                t.encode(&mut enc, desc, &view(&depth_tex), &view(&cur), &view(&out))?;
+                g.queue.submit([enc.finish()]);
+                let img = g.read_image(&out)?;
+                let w = g.read_texture_f32(t.weights().context("temporal weights")?, 0)?;
+                Ok((img, mean(&w)))
+            }
+            (Stage::Cpu(t), _) => {
+                let img = t.resolve(desc, depth, img)?;
+                Ok((img, mean(t.weights())))
+            }
+            (Stage::Gpu(_), None) => bail!("the temporal stage needs the GPU it was made on (internal error)"),
+        }
+    }
 }
 
 /// A writer that remembers the first error (the GIF encoder writes its trailer on drop, where
@@ -613,7 +704,26 @@ pub fn run(
     if let Some(s) = opts.shadow_map_size {
         scene.render.shadow.size = s;
     }
-    let mut technique = AnimatedTechnique::new(&opts.technique, &scene, &opts.overrides)?;
+    let mut overrides = opts.overrides.clone();
+    let mut jitter_added = false;
+    if opts.temporal.is_some() {
+        let first = parse_technique(&opts.technique, &scene, &opts.overrides)?;
+        let has_jitter = serde_json::to_value(&first)?.get("jitter").is_some();
+        if has_jitter && !opts.overrides.iter().any(|o| o.trim_start().starts_with("jitter")) {
+            overrides.push("jitter=true".into());
+            jitter_added = true;
+        }
+    }
+    let mut technique = AnimatedTechnique::new(&opts.technique, &scene, &overrides)?;
+    let on_gpu = gpu.is_some() && crepuscular::techniques::find(&opts.technique).is_some_and(|t| t.gpu);
+    let mut stage = match (opts.temporal, gpu) {
+        (Some(s), Some(g)) if on_gpu => Some(Stage::Gpu(Box::new(Temporal::new(&g.device, s)?))),
+        (Some(s), _) => Some(Stage::Cpu(CpuTemporal::new(s)?)),
+        (None, _) => None,
+    };
+    let mut meter_without = FlickerMeter::new();
+    let mut stage_ms = Vec::new();
+    let mut qualities = Vec::new();
     let mut reference = if opts.flicker {
         let r = format!("steps={}", opts.reference_steps);
         // Seed fixed: the reference's own noise changes only as the rays move.
@@ -621,7 +731,10 @@ pub fn run(
     } else {
         None
     };
-    let path = MotionPath::for_scene(&opts.scene, &scene);
+    let mut path = MotionPath::for_scene(&opts.scene, &scene);
+    if opts.still_lights {
+        path = path.still_lights();
+    }
     let tone = ToneMap::new(scene.render.exposure);
     let scene_name = scene.name.clone();
     let mut renderer = PathRenderer::new(scene, path.clone(), gpu)?;
@@ -639,12 +752,36 @@ pub fn run(
                 let t = frame_time(i, opts.frames, true);
                 progress(i, opts.frames, &format!("frame {}/{}: {}", i + 1, opts.frames, technique.name()));
                 let mut frame = renderer.frame(t)?;
-                let (img, stats) = technique.render(gpu, &mut frame, i, rows)?;
+                let (raw, stats) = technique.render(gpu, &mut frame, i, rows)?;
                 technique_ms.push(stats.total_ms());
+                let (img, weight) = match &mut stage {
+                    Some(st) => {
+                        let start = std::time::Instant::now();
+                        let r = st.resolve(gpu, &frame.desc, &frame.depth, &raw)?;
+                        stage_ms.push(start.elapsed().as_secs_f64() * 1e3);
+                        r
+                    }
+                    None => (raw.clone(), 0.0),
+                };
                 if let Some(r) = &mut reference {
                     progress(i, opts.frames, &format!("frame {}/{}: reference", i + 1, opts.frames));
                     let (ri, _) = r.render(gpu, &mut frame, 0, rows)?;
                     meter.push(&img, &ri)?;
+                    if stage.is_some() {
+                        meter_without.push(&raw, &ri)?;
+                        let fin = |x: &Image| frame.final_radiance(x);
+                        let without = crate::metrics::compare(&fin(&ri), &fin(&raw), &tone)?;
+                        let with = crate::metrics::compare(&fin(&ri), &fin(&img), &tone)?;
+                        let lin_without = crate::metrics::compare(&ri, &raw, &tone)?;
+                        let lin_with = crate::metrics::compare(&ri, &img, &tone)?;
+                        qualities.push(FrameQuality {
+                            psnr_db_without: lin_without.psnr_db,
+                            flip_without: without.flip_mean,
+                            psnr_db: lin_with.psnr_db,
+                            flip: with.flip_mean,
+                            mean_history_weight: weight,
+                        });
+                    }
                 }
                 let rgb = tone.to_rgb8(&frame.final_radiance(&img));
                 let rgba: Vec<u8> = rgb.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]).collect();
@@ -662,7 +799,19 @@ pub fn run(
         Ok(())
     })?;
     let flicker = if opts.flicker { Some(meter.finish()?) } else { None };
+    let temporal = match (opts.temporal, &stage) {
+        (Some(settings), Some(st)) => Some(TemporalReport {
+            settings,
+            jitter_added,
+            backend: if matches!(st, Stage::Gpu(_)) { "gpu" } else { "cpu" }.into(),
+            stage_ms,
+            frames: qualities,
+            flicker_without: if opts.flicker { Some(meter_without.finish()?) } else { None },
+        }),
+        _ => None,
+    };
     Ok(AnimateReport {
+        temporal,
         scene: scene_name,
         frame_index_advanced: technique.has_frame_index(),
         settings: technique.first,

@@ -82,6 +82,11 @@ struct ViewArgs {
     /// `<stem>-<n>.json` (scene, camera, light, medium, settings, stats) beside it.
     #[arg(long, short, default_value = "crepuscular-view.png")]
     output: PathBuf,
+    /// Start with the temporal stage on (docs/MODEL.md §7; a checkbox in the tools panel,
+    /// with its history-weight view): the technique's samples move every frame and the view
+    /// renders continuously.
+    #[arg(long)]
+    temporal: bool,
 }
 
 fn parse_preset(s: &str) -> Result<crepuscular::techniques::presets::Preset, String> {
@@ -123,6 +128,25 @@ struct AnimateArgs {
     /// (≈ 120 ms per frame at 160x90 and 256 steps on 2 cores).
     #[arg(long, default_value_t = crepuscular_cli::animate::DEFAULT_REFERENCE_STEPS)]
     reference_steps: u32,
+    /// Run the temporal stage (reprojection, history rejection and clipping, exponential
+    /// blend; docs/MODEL.md §7) after the technique on every frame, with the technique's
+    /// `jitter` on where it has one (unless --set jitter=… says otherwise). With --flicker,
+    /// prints each frame's PSNR and FLIP with and without it. Cost: one full-screen pass per
+    /// frame.
+    #[arg(long)]
+    temporal: bool,
+    /// Hold the lights still: only the camera moves along the path.
+    #[arg(long)]
+    still_lights: bool,
+    /// A temporal-stage setting, `key=value` (with --temporal), e.g. `--temporal-set
+    /// history_weight=0.8`; repeatable. Keys: history_weight, clip, clip_sigma,
+    /// depth_tolerance, light_jump_degrees (docs/MODEL.md §7).
+    #[arg(long = "temporal-set", value_name = "KEY=VALUE")]
+    temporal_set: Vec<String>,
+    /// Write the run's report (settings, per-frame times, flicker, the temporal stage's
+    /// per-frame quality) as JSON to this file.
+    #[arg(long)]
+    report: Option<PathBuf>,
     /// The animated GIF (loops forever).
     #[arg(long, short, default_value = "crepuscular.gif")]
     output: PathBuf,
@@ -499,6 +523,12 @@ fn cmd_animate(a: AnimateArgs) -> Result<()> {
         fps: a.fps,
         flicker: a.flicker,
         reference_steps: a.reference_steps,
+        temporal: match (a.temporal, a.temporal_set.is_empty()) {
+            (true, _) => Some(render::parse_temporal(&a.temporal_set)?),
+            (false, true) => None,
+            (false, false) => bail!("--temporal-set needs --temporal"),
+        },
+        still_lights: a.still_lights,
         output: a.output.clone(),
     };
     animate::check(&opts)?;
@@ -509,7 +539,12 @@ fn cmd_animate(a: AnimateArgs) -> Result<()> {
         "animating `{}` with {}{}: {} frames at {}x{} on {on}",
         a.scene,
         a.technique,
-        if a.flicker { " and reference" } else { "" },
+        match (a.temporal, a.flicker) {
+            (true, true) => " + temporal stage, and reference",
+            (true, false) => " + temporal stage",
+            (false, true) => " and reference",
+            (false, false) => "",
+        },
         a.frames,
         a.size.0,
         a.size.1
@@ -546,6 +581,33 @@ fn cmd_animate(a: AnimateArgs) -> Result<()> {
             f.frames - 1
         );
         println!("           (the reference itself changes by {:.6e} per pixel and frame pair)", f.reference_change);
+    }
+    if let Some(t) = &report.temporal {
+        let mut ms = t.stage_ms.clone();
+        ms.sort_by(f64::total_cmp);
+        println!(
+            "temporal   on the {}{}: median {:.1} ms per frame",
+            t.backend,
+            if t.jitter_added { ", jitter=true added to the technique" } else { "" },
+            ms.get(ms.len() / 2).copied().unwrap_or(0.0)
+        );
+        if let Some(f) = t.flicker_without {
+            println!("           flicker without the stage {:.4} %", 100.0 * f.relative);
+        }
+        if !t.frames.is_empty() {
+            println!("frame  PSNR dB without → with   FLIP without → with   mean history weight");
+            for (i, q) in t.frames.iter().enumerate() {
+                println!(
+                    "{:>5}  {:>7.2} → {:>7.2}      {:.4} → {:.4}        {:.3}",
+                    i, q.psnr_db_without, q.psnr_db, q.flip_without, q.flip, q.mean_history_weight
+                );
+            }
+        }
+    }
+    if let Some(path) = &a.report {
+        let json = serde_json::to_string_pretty(&report)?;
+        crepuscular_cli::output::write_atomic(path, json.as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
 }
@@ -586,6 +648,7 @@ fn run() -> Result<()> {
             shadow_map_size: a.shadow_map_size,
             screenshot_after: a.screenshot_after,
             output: a.output,
+            temporal: a.temporal,
         }),
         Command::Adapter => {
             let gpu = crepuscular::GpuContext::new()?;

@@ -26,7 +26,7 @@ pub struct Metrics {
 }
 
 /// `psnr_db`: +∞ (identical images) ↔ JSON `null`; finite values as numbers.
-mod psnr_serde {
+pub(crate) mod psnr_serde {
     use serde::{Deserialize, Deserializer, Serializer};
 
     pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {

@@ -80,6 +80,25 @@ pub fn parse_technique(name: &str, scene: &Scene, overrides: &[String]) -> Resul
     parse().map_err(|e| anyhow::anyhow!("{}", format!("{e:#}").replace('\n', " ")))
 }
 
+/// The temporal stage's settings from `key=value` overrides (`--temporal-set`) over the
+/// defaults; errors name the key and value.
+pub fn parse_temporal(overrides: &[String]) -> Result<crepuscular::TemporalSettings> {
+    let mut table = toml::Table::new();
+    for o in overrides {
+        let (k, v) = o.split_once('=').with_context(|| format!("--temporal-set {o}: expected key=value"))?;
+        let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {v}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(v.to_string()));
+        table.insert(k.trim().to_string(), value);
+    }
+    let settings: crepuscular::TemporalSettings = toml::Value::Table(table)
+        .try_into()
+        .map_err(|e| anyhow::anyhow!("--temporal-set: {}", e.to_string().replace('\n', " ")))?;
+    settings.validate().map_err(|e| anyhow::anyhow!("--temporal-set: {e}"))?;
+    Ok(settings)
+}
+
 /// How the tools measure a GPU technique: synchronised wall clock on software adapters (their
 /// timestamps mean nothing), timestamp queries read back after the frame on hardware.
 pub fn tool_stats_mode(gpu: &GpuContext) -> StatsMode {

@@ -65,6 +65,8 @@ pub struct ViewOptions {
     pub screenshot_after: Option<u32>,
     /// Screenshot path (F12 / P write `<stem>-<n>.png` beside it).
     pub output: PathBuf,
+    /// Start with the temporal stage on (a checkbox in the tools panel).
+    pub temporal: bool,
 }
 
 // The doc comment of every field of every technique's settings struct, collected by build.rs
@@ -260,6 +262,8 @@ struct Targets {
     width: u32,
     height: u32,
     inscatter: wgpu::Texture,
+    /// The temporal stage's output (what the composite reads while the stage is on).
+    resolved: wgpu::Texture,
     display: wgpu::Texture,
 }
 
@@ -291,6 +295,10 @@ struct Viewer {
     scale: f32,
     technique: TechniqueSettings,
     runner: Option<Scattering>,
+    /// The temporal stage (docs/MODEL.md §7), while it is on: the technique then runs with its
+    /// `jitter` on and its `frame_index` advanced every frame, and the view renders
+    /// continuously so the history accumulates.
+    temporal: Option<crepuscular::Temporal>,
     /// How many times a technique's pipelines were built (a settings change does not rebuild
     /// them; a technique switch or a new scene does), and how long the last build took.
     runner_builds: u32,
@@ -328,6 +336,7 @@ enum Action {
     Screenshot,
     Debug(DebugView),
     ErrorView,
+    HistoryWeight,
 }
 
 impl Viewer {
@@ -402,6 +411,11 @@ impl Viewer {
         let runner_build_ms = built.elapsed().as_secs_f64() * 1e3;
         let scale = opts.scale.unwrap_or(if gpu.software { 0.5 } else { 1.0 });
         let fields = settings_fields(&technique);
+        let temporal = if opts.temporal {
+            Some(crepuscular::Temporal::new(&gpu.device, crepuscular::TemporalSettings::default())?)
+        } else {
+            None
+        };
         eprintln!("view: `{}` with {} on {}", scene.name, technique.name(), gpu.describe());
         Ok(Self {
             controls: Controls::of(&scene),
@@ -424,6 +438,7 @@ impl Viewer {
             scale,
             technique,
             runner,
+            temporal,
             runner_builds: 1,
             runner_build_ms,
             shadow_map_size: opts.shadow_map_size,
@@ -450,7 +465,12 @@ impl Viewer {
     }
 
     fn wants_redraw(&self) -> bool {
-        self.dirty || self.continuous || self.screenshot_after.is_some() || self.keys_down || !self.pending.is_empty()
+        self.dirty
+            || self.continuous
+            || self.temporal.is_some()
+            || self.screenshot_after.is_some()
+            || self.keys_down
+            || !self.pending.is_empty()
     }
 
     fn resize(&mut self, w: u32, h: u32) {
@@ -604,6 +624,7 @@ impl Viewer {
         if self.targets.as_ref().is_none_or(|t| t.width != w || t.height != h) {
             self.gpu.check_texture_size("render size", w, h)?;
             let inscatter = self.gpu.create_output_texture(w, h);
+            let resolved = self.gpu.create_output_texture(w, h);
             let display = self.gpu.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("view display"),
                 size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
@@ -629,15 +650,34 @@ impl Viewer {
                         Some(self.renderer.register_native_texture(&self.gpu.device, &view, wgpu::FilterMode::Linear))
                 }
             }
-            self.targets = Some(Targets { width: w, height: h, inscatter, display });
+            self.targets = Some(Targets { width: w, height: h, inscatter, resolved, display });
         }
         let targets = self.targets.as_ref().expect("targets were just created");
         let tex = self.host.render(&self.gpu, &desc)?;
         let runner = self.runner.as_mut().expect("runner was just built");
+        if self.temporal.is_some() {
+            // Each frame's samples elsewhere: jitter on, frame_index advanced (no rebuild).
+            if let Some(jittered) = jittered(&self.technique, self.frames_rendered) {
+                runner.update(&jittered)?;
+            }
+        }
         let out_view = targets.inscatter.create_view(&Default::default());
         let views = tex.views();
         let frame = views.frame(&desc);
-        let stats = render::render_gpu(runner, Some(&self.host), &frame, &out_view)?;
+        let mut stats = render::render_gpu(runner, Some(&self.host), &frame, &out_view)?;
+        let out_view = match &mut self.temporal {
+            Some(t) => {
+                let start = Instant::now();
+                let resolved = targets.resolved.create_view(&Default::default());
+                let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+                t.encode(&mut enc, &desc, frame.depth, &out_view, &resolved)?;
+                self.gpu.queue.submit([enc.finish()]);
+                self.gpu.wait()?;
+                stats.passes.push(PassTime { name: "temporal".into(), ms: start.elapsed().as_secs_f64() * 1e3 });
+                resolved
+            }
+            None => out_view,
+        };
 
         // The library's composite, with the display transform, into the display texture.
         let composite_start = Instant::now();
@@ -745,6 +785,7 @@ impl Viewer {
             "medium": scene.medium,
             "exposure": scene.render.exposure,
             "stats": self.last_stats,
+            "temporal": self.temporal.as_ref().map(|t| t.settings()),
             "adapter": self.gpu.describe(),
         });
         Ok(serde_json::to_string_pretty(&state)?)
@@ -759,7 +800,7 @@ impl Viewer {
     fn read_frame(&self) -> Result<(Image, Image, Vec<f32>)> {
         let (tex, desc) = self.last_host.as_ref().context("nothing rendered yet")?;
         let t = self.targets.as_ref().context("nothing rendered yet")?;
-        let inscatter = self.gpu.read_image(&t.inscatter)?;
+        let inscatter = self.gpu.read_image(if self.temporal.is_some() { &t.resolved } else { &t.inscatter })?;
         let surface = self.gpu.read_image(&tex.surface)?;
         let depth = self.gpu.read_texture_f32(&tex.depth, 0)?;
         let tr = surface_transmittance(desc, &depth);
@@ -784,6 +825,17 @@ impl Viewer {
                 output::write_atomic(&path.with_extension("json"), self.view_state_json()?.as_bytes())?;
                 self.status = format!("wrote {} and its .json", path.display());
                 eprintln!("{}", self.status);
+            }
+            Action::HistoryWeight => {
+                let t = self.temporal.as_ref().context("the temporal stage is off")?;
+                let tex = t.weights().context("nothing rendered with the temporal stage yet")?;
+                let (w, h) = (tex.width(), tex.height());
+                let weights = self.gpu.read_texture_f32(tex, 0)?;
+                // 0 (history rejected) black, the largest weight white.
+                let top = t.settings().history_weight.max(1e-6);
+                let rgb: Vec<u8> =
+                    weights.iter().flat_map(|&x| [((x / top).clamp(0.0, 1.0) * 255.0).round() as u8; 3]).collect();
+                self.show_image("temporal: history weight".into(), format!("{w}×{h}; black: rejected"), w, h, &rgb);
             }
             Action::Debug(view) => {
                 let (_, fin, _) = self.read_frame()?;
@@ -1272,6 +1324,38 @@ impl Viewer {
             }
         });
         ui.horizontal(|ui| {
+            let mut on = self.temporal.is_some();
+            let tip = "temporal accumulation (docs/MODEL.md §7): jitter per frame, the history reprojected, \
+                       rejected where the surface changed, clipped to the neighbourhood and blended; the view \
+                       renders continuously while it is on";
+            if ui.checkbox(&mut on, "temporal").on_hover_text(tip).changed() {
+                self.temporal = if on {
+                    match crepuscular::Temporal::new(&self.gpu.device, crepuscular::TemporalSettings::default()) {
+                        Ok(t) => Some(t),
+                        Err(e) => {
+                            self.status = format!("error: {e}");
+                            None
+                        }
+                    }
+                } else {
+                    // Back to the technique's own settings (jitter as set).
+                    if let Some(r) = self.runner.as_mut() {
+                        let _ = r.update(&self.technique);
+                    }
+                    None
+                };
+                self.dirty = true;
+            }
+            if self.temporal.is_some()
+                && ui
+                    .button("history weight")
+                    .on_hover_text("the temporal stage's history weight per pixel (black: rejected)")
+                    .clicked()
+            {
+                self.pending.push(Action::HistoryWeight);
+            }
+        });
+        ui.horizontal(|ui| {
             if ui
                 .button("error vs reference")
                 .on_hover_text("CPU reference on this frame's depth and shadow map; FLIP heat map (slow: seconds)")
@@ -1473,6 +1557,19 @@ fn settings_fields(t: &TechniqueSettings) -> serde_json::Map<String, serde_json:
         }
         _ => serde_json::Map::new(),
     }
+}
+
+/// `technique` with its `jitter` on and `frame_index` = `frame`, where it has both (the
+/// temporal stage's per-frame sample positions); None where it has neither.
+fn jittered(technique: &TechniqueSettings, frame: u32) -> Option<TechniqueSettings> {
+    let mut v = serde_json::to_value(technique).ok()?;
+    let m = v.as_object_mut()?;
+    if !m.contains_key("jitter") || !m.contains_key("frame_index") {
+        return None;
+    }
+    m.insert("jitter".into(), true.into());
+    m.insert("frame_index".into(), frame.into());
+    serde_json::from_value(v).ok()
 }
 
 /// TOML text for the fields that are not scalars (unset options, arrays).

@@ -101,6 +101,29 @@ fn view_renders_frames_under_xvfb_and_saves_the_scene_image() {
         let lights = crepuscular_scene::builtin::builtin(scene).unwrap().lights.len();
         assert_eq!(state["lights"].as_array().map(|l| l.len()), Some(lights), "{technique} on {scene}: {state}");
     }
+    // The temporal stage on (`--temporal`): the frame goes through its pass, the state names
+    // its settings, and after a few jittered frames the picture is the same scene.
+    let png = d.join("temporal.png");
+    let out = under_xvfb(&xvfb)
+        .args(["view", "colonnade", "--size", "320x180", "--scale", "1", "--temporal", "--screenshot-after", "4"])
+        .arg("--output")
+        .arg(&png)
+        .output()
+        .unwrap();
+    let log = text(&out);
+    assert!(out.status.success(), "{test}: view --temporal failed under xvfb-run: {log}");
+    let state: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(png.with_extension("json")).unwrap()).unwrap();
+    assert_eq!(state["temporal"]["history_weight"].as_f64().map(|w| (w * 100.0).round()), Some(90.0), "{state}");
+    let passes: Vec<&str> =
+        state["stats"]["passes"].as_array().unwrap().iter().filter_map(|p| p["name"].as_str()).collect();
+    assert!(passes.contains(&"temporal"), "no temporal pass in {passes:?}");
+    let (a, b) =
+        (image::open(&png).unwrap().to_rgb8(), image::open(d.join("brute-force-colonnade.png")).unwrap().to_rgb8());
+    let mean = a.as_raw().iter().zip(b.as_raw()).map(|(x, y)| x.abs_diff(*y) as f64).sum::<f64>() / a.len() as f64;
+    eprintln!("view --temporal after 4 frames vs the plain frame: mean {mean:.2} levels");
+    assert!(mean > 0.0 && mean < 3.0, "the temporal view is not the same scene (or not resolved at all): {mean}");
+
     // The scene image is the tone-mapped final image `render` writes for the same frame.
     let r = d.join("render.png");
     let out = bin()

@@ -10,7 +10,8 @@
 //!
 //! What the history is, is the caller's choice: each stage remembers the camera of the frame it
 //! resolved last and reprojects through it; [`Temporal::reset`] forgets it (a camera cut, a
-//! teleport). A new size, or any change of the lights or the medium, resets it by itself.
+//! teleport). A new size, another set of lights (count, kinds, scattering scales), another
+//! medium, or a light that jumps ([`TemporalSettings::light_jump_degrees`]) resets it by itself.
 
 use crate::error::Error;
 use crate::frame::FrameDesc;
@@ -52,11 +53,16 @@ pub struct TemporalSettings {
     /// the reprojected pixel differs from the point's distance to the previous eye by more than
     /// this fraction of it (the previous frame saw another surface there). Default 0.05.
     pub depth_tolerance: f32,
+    /// A light jump, degrees: the whole history is dropped when a light's direction (a sun's
+    /// travel, a spot's aim) or its position as seen from the eye turns by more than this
+    /// between two frames. Slower motion of the lights (and any change of their colour or
+    /// intensity) is left to the neighbourhood clip. Default 5°.
+    pub light_jump_degrees: f32,
 }
 
 impl Default for TemporalSettings {
     fn default() -> Self {
-        Self { history_weight: 0.9, clip: true, clip_sigma: 1.25, depth_tolerance: 0.05 }
+        Self { history_weight: 0.9, clip: true, clip_sigma: 1.25, depth_tolerance: 0.05, light_jump_degrees: 5.0 }
     }
 }
 
@@ -73,43 +79,72 @@ impl TemporalSettings {
         if !(self.depth_tolerance >= 0.0 && self.depth_tolerance.is_finite()) {
             return Err(Error::invalid("temporal.depth_tolerance", self.depth_tolerance, "must be finite and ≥ 0"));
         }
+        if !(self.light_jump_degrees >= 0.0 && self.light_jump_degrees <= 180.0) {
+            return Err(Error::invalid("temporal.light_jump_degrees", self.light_jump_degrees, "must be in [0, 180]"));
+        }
         Ok(())
     }
 }
 
 /// What the history needs of the previous frame.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 struct Previous {
     view_proj: Mat4,
     camera_pos: Vec3,
     key: u64,
+    /// Each light's unit directions that a jump is measured on (its direction of travel or
+    /// aim, and its position as seen from the eye).
+    poses: Vec<[Vec3; 2]>,
     size: (u32, u32),
+}
+
+/// A light's direction (travel or aim; zero for a point light) and the unit vector from the
+/// eye to it (zero for a directional light).
+fn pose(l: &crate::Light, eye: Vec3) -> [Vec3; 2] {
+    match l {
+        crate::Light::Directional { direction, .. } => [direction.normalize_or_zero(), Vec3::ZERO],
+        crate::Light::Spot { position, direction, .. } => {
+            [direction.normalize_or_zero(), (*position - eye).normalize_or_zero()]
+        }
+        crate::Light::Point { position, .. } => [Vec3::ZERO, (*position - eye).normalize_or_zero()],
+    }
 }
 
 impl Previous {
     fn of(desc: &FrameDesc) -> Self {
+        let eye = desc.camera.position;
         Self {
             view_proj: desc.camera.view_proj(),
-            camera_pos: desc.camera.position,
+            camera_pos: eye,
             key: light_key(desc),
+            poses: desc.lights.iter().map(|l| pose(&l.light, eye)).collect(),
             size: (desc.width, desc.height),
         }
     }
 
-    /// Whether a history of this previous frame may serve `desc`.
-    fn serves(&self, desc: &FrameDesc) -> bool {
-        self.size == (desc.width, desc.height) && self.key == light_key(desc)
+    /// Whether a history of this previous frame may serve `desc`: the same size, the same
+    /// lights (count, kinds, scattering scales) and medium, and no light turned by more than
+    /// `jump_degrees`.
+    fn serves(&self, desc: &FrameDesc, jump_degrees: f32) -> bool {
+        if self.size != (desc.width, desc.height) || self.key != light_key(desc) {
+            return false;
+        }
+        let cos_jump = jump_degrees.to_radians().cos();
+        let eye = desc.camera.position;
+        desc.lights.iter().zip(&self.poses).all(|(l, before)| {
+            let now = pose(&l.light, eye);
+            (0..2).all(|i| before[i] == Vec3::ZERO || now[i] == Vec3::ZERO || before[i].dot(now[i]) >= cos_jump)
+        })
     }
 }
 
-/// A hash of what the in-scattering depends on besides the camera: each light (kind, position,
-/// direction, colour, intensity, cone, texture, scattering scale) and the medium. Not the shadow
-/// maps' matrices, which may follow the camera (a sun's map fitted to the view). The history is
-/// dropped when it changes.
+/// A hash of what may not change at all under a history: the number of lights, their kinds
+/// and scattering scales, and the medium. (A light's pose is compared by angle,
+/// [`TemporalSettings::light_jump_degrees`]; its colour and intensity are left to the clip.)
 fn light_key(desc: &FrameDesc) -> u64 {
     let mut h = std::collections::hash_map::DefaultHasher::new();
     for l in &desc.lights {
-        format!("{:?}", l.light).hash(&mut h);
+        l.light.kind_code().hash(&mut h);
         l.scattering.to_bits().hash(&mut h);
     }
     format!("{:?}", desc.medium).hash(&mut h);
@@ -169,10 +204,14 @@ pub fn resolve_pixel(
     let at = |x: i32, y: i32| (y.clamp(0, h_px - 1) * w_px + x.clamp(0, w_px - 1)) as usize;
     let c = rgb(current.pixels[at(x as i32, y as i32)]);
 
-    let d = depth[at(x as i32, y as i32)];
+    // This frame's view distance at a pixel; -1 where nothing was drawn.
+    let current_distance = |x: u32, y: u32| {
+        let d = depth[(y * desc.width + x) as usize];
+        if d == desc.camera.depth.far_value() { -1.0 } else { desc.view_distance(d, desc.pixel_ray(x, y)) }
+    };
     let dir = desc.pixel_ray(x, y);
-    let sky = d == desc.camera.depth.far_value();
-    let dist = if sky { -1.0 } else { desc.view_distance(d, dir) };
+    let dist = current_distance(x, y);
+    let sky = dist < 0.0;
 
     let mut w = 0.0f32;
     let mut n = 0.0f32;
@@ -185,48 +224,69 @@ pub fn resolve_pixel(
             if ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 {
                 let q =
                     glam::Vec2::new((ndc.x * 0.5 + 0.5) * w_px as f32 - 0.5, (0.5 - ndc.y * 0.5) * h_px as f32 - 0.5);
-                let nx = ((q.x + 0.5).floor() as i32).clamp(0, w_px - 1);
-                let ny = ((q.y + 0.5).floor() as i32).clamp(0, h_px - 1);
-                let stored = distance[at(nx, ny)];
-                let valid = if sky {
-                    stored < 0.0
-                } else {
-                    let expected = (x4.truncate() - Vec3::from_slice(&u.prev_camera_pos[..3])).length();
-                    stored >= 0.0 && (stored - expected).abs() <= u.depth_tolerance * expected
-                };
-                if valid {
-                    let b = q.floor();
-                    let f = q - b;
-                    let (ix, iy) = (b.x as i32, b.y as i32);
-                    let hp = |dx: i32, dy: i32| history.pixels[at(ix + dx, iy + dy)];
-                    let (h00, h10, h01, h11) = (rgb(hp(0, 0)), rgb(hp(1, 0)), rgb(hp(0, 1)), rgb(hp(1, 1)));
-                    h = h00.lerp(h10, f.x).lerp(h01.lerp(h11, f.x), f.y);
-                    n = history.pixels[at(nx, ny)][3];
+                let expected = (x4.truncate() - Vec3::from_slice(&u.prev_camera_pos[..3])).length();
+                let b = q.floor();
+                let f = q - b;
+                let (ix, iy) = (b.x as i32, b.y as i32);
+                let mut acc = Vec4::ZERO;
+                let mut total = 0.0f32;
+                for k in 0..4 {
+                    let (ox, oy) = (k & 1, k >> 1);
+                    let t = at(ix + ox, iy + oy);
+                    let stored = distance[t];
+                    let same = if sky {
+                        stored < 0.0
+                    } else {
+                        stored >= 0.0 && (stored - expected).abs() <= u.depth_tolerance * expected
+                    };
+                    let fw = (if ox == 1 { f.x } else { 1.0 - f.x }) * (if oy == 1 { f.y } else { 1.0 - f.y });
+                    if same && fw > 0.0 {
+                        acc += fw * Vec4::from_array(history.pixels[t]);
+                        total += fw;
+                    }
+                }
+                if total > 1e-3 {
+                    h = acc.truncate() / total;
+                    n = acc.w / total;
                     w = u.history_weight.min(n / (n + 1.0));
                 }
             }
         }
     }
-    if w > 0.0 && u.clip == 1 {
+    let rejected = u.valid == 1 && w == 0.0;
+    if (w > 0.0 && u.clip == 1) || rejected {
         let (mut lo, mut hi) = (c, c);
         let (mut m1, mut m2) = (Vec3::ZERO, Vec3::ZERO);
+        let mut count = 0.0f32;
         for dy in -1..=1 {
             for dx in -1..=1 {
-                let s = rgb(current.pixels[at(x as i32 + dx, y as i32 + dy)]);
-                lo = lo.min(s);
-                hi = hi.max(s);
-                m1 += s;
-                m2 += s * s;
+                let px = (x as i32 + dx).clamp(0, w_px - 1) as u32;
+                let py = (y as i32 + dy).clamp(0, h_px - 1) as u32;
+                let dn = current_distance(px, py);
+                let same = if sky { dn < 0.0 } else { dn >= 0.0 && (dn - dist).abs() <= u.depth_tolerance * dist };
+                if same {
+                    let s = rgb(current.pixels[(py * desc.width + px) as usize]);
+                    lo = lo.min(s);
+                    hi = hi.max(s);
+                    m1 += s;
+                    m2 += s * s;
+                    count += 1.0;
+                }
             }
         }
-        let mean = m1 / 9.0;
-        let var = (m2 / 9.0 - mean * mean).max(Vec3::ZERO);
-        let sigma = Vec3::new(var.x.sqrt(), var.y.sqrt(), var.z.sqrt());
-        let box_lo = lo.max(mean - u.clip_sigma * sigma);
-        let box_hi = hi.min(mean + u.clip_sigma * sigma);
-        h = h.clamp(box_lo, box_hi);
+        let mean = m1 / count;
+        if rejected {
+            h = mean;
+            w = 0.0;
+        } else {
+            let var = (m2 / count - mean * mean).max(Vec3::ZERO);
+            let sigma = Vec3::new(var.x.sqrt(), var.y.sqrt(), var.z.sqrt());
+            let box_lo = lo.max(mean - u.clip_sigma * sigma);
+            let box_hi = hi.min(mean + u.clip_sigma * sigma);
+            h = h.clamp(box_lo, box_hi);
+        }
     }
-    let res = c + w * (h - c);
+    let res = if rejected { h } else { c + w * (h - c) };
     (res.to_array(), [res.x, res.y, res.z, (n + 1.0).min(MAX_FRAMES)], dist, w)
 }
 
@@ -263,7 +323,8 @@ impl CpuTemporal {
         if depth.len() != n {
             return Err(Error::invalid("temporal depth", depth.len(), format!("must hold {w}×{h} values")));
         }
-        let prev = self.history.as_ref().filter(|(_, _, p)| p.serves(desc));
+        let jump = self.settings.light_jump_degrees;
+        let prev = self.history.as_ref().filter(|(_, _, p)| p.serves(desc, jump));
         let u = uniforms(&self.settings, prev.map(|(_, _, p)| p));
         let empty = (Image::new(w, h), vec![-1.0; n]);
         let (hist, dist) = prev.map_or((&empty.0, &empty.1), |(i, d, _)| (i, d));
@@ -420,7 +481,7 @@ impl Temporal {
             self.prev = None;
             self.binds = BindCache::default();
         }
-        let prev = self.prev.filter(|p| p.serves(desc));
+        let prev = self.prev.take().filter(|p| p.serves(desc, self.settings.light_jump_degrees));
         // Uniforms through the encoder (copied from this frame's own staging buffers), so
         // several frames recorded into one encoder each read their own.
         for (dst, bytes) in [

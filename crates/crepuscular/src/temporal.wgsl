@@ -1,13 +1,15 @@
 // Temporal accumulation after any technique (docs/MODEL.md §7; temporal.rs, whose `resolve_pixel`
 // is this pass's CPU mirror, line for line). Per pixel: the current in-scattering c; the
 // surface point (or, where nothing was drawn, the view direction) reprojected into the previous
-// frame through its view-projection; the history there rejected where it is outside the
-// previous image, where the previous frame saw another surface at that spot (its stored view
-// distance differs from the point's distance to the previous eye by more than the tolerance) or
-// sky where this frame sees a surface (or the reverse); the history, read bilinearly, clipped to
-// the current frame's 3×3 neighbourhood (mean ± clip_sigma standard deviations, inside its min
-// and max); and the blend out = c + w·(h − c) with w = min(history_weight, n / (n + 1)), n the
-// frames the history holds: the plain mean of the first frames, then an exponential average.
+// frame through its view-projection; the history there read bilinearly from the texels where
+// the previous frame saw the same surface (its stored view distance within the tolerance of the
+// point's distance to the previous eye; sky for sky), renormalised, and rejected where none
+// did or the point is outside the previous image; the history clipped to
+// the current frame's 3×3 neighbourhood on the same surface (mean ± clip_sigma standard
+// deviations, inside its min and max); and the blend out = c + w·(h − c) with
+// w = min(history_weight, n / (n + 1)), n the frames the history holds: the plain mean of the
+// first frames, then an exponential average. Where a history exists but was rejected, the
+// neighbourhood's mean.
 
 struct Temporal {
     prev_view_proj: mat4x4<f32>,
@@ -38,12 +40,13 @@ const MAX_FRAMES: f32 = 1024.0;
 @group(0) @binding(8) var distance_out: texture_storage_2d<r32float, write>;
 @group(0) @binding(9) var weight_out: texture_storage_2d<r32float, write>;
 
-fn load_current(p: vec2<i32>, size: vec2<i32>) -> vec3<f32> {
-    return textureLoad(current_tex, clamp(p, vec2<i32>(0), size - 1), 0).rgb;
-}
-
-fn load_history(p: vec2<i32>, size: vec2<i32>) -> vec4<f32> {
-    return textureLoad(history_tex, clamp(p, vec2<i32>(0), size - 1), 0);
+// This frame's view distance at pixel p; -1 where nothing was drawn.
+fn current_distance(p: vec2<u32>) -> f32 {
+    let d = textureLoad(depth_tex, vec2<i32>(p), 0).r;
+    if d == frame.depth_params.z {
+        return -1.0;
+    }
+    return view_distance(frame, d, pixel_ray(frame, p));
 }
 
 @compute @workgroup_size(8, 8)
@@ -57,13 +60,9 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
     let c = cur.rgb;
 
     // This frame's view distance (negative: nothing drawn), stored for the next frame.
-    let d = textureLoad(depth_tex, px, 0).r;
     let dir = pixel_ray(frame, gid.xy);
-    let sky = d == frame.depth_params.z;
-    var dist = -1.0;
-    if !sky {
-        dist = view_distance(frame, d, dir);
-    }
+    let dist = current_distance(gid.xy);
+    let sky = dist < 0.0;
     textureStore(distance_out, px, vec4<f32>(dist, 0.0, 0.0, 0.0));
 
     var w = 0.0;
@@ -80,52 +79,82 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
             let ndc = clip.xy / clip.w;
             if abs(ndc.x) <= 1.0 && abs(ndc.y) <= 1.0 {
                 let q = vec2<f32>((ndc.x * 0.5 + 0.5) * f32(size.x) - 0.5, (0.5 - ndc.y * 0.5) * f32(size.y) - 0.5);
-                let nearest = clamp(vec2<i32>(floor(q + 0.5)), vec2<i32>(0), size - 1);
-                let stored = textureLoad(distance_tex, nearest, 0).r;
-                var valid = false;
-                if sky {
-                    valid = stored < 0.0;
-                } else {
-                    let expected = length(x4.xyz - params.prev_camera_pos.xyz);
-                    valid = stored >= 0.0 && abs(stored - expected) <= params.depth_tolerance * expected;
+                let expected = length(x4.xyz - params.prev_camera_pos.xyz);
+                // Bilinear over the four history texels around q, each kept only where the
+                // previous frame saw the same surface (or sky) there.
+                let b = floor(q);
+                let f = q - b;
+                let i = vec2<i32>(b);
+                var acc = vec4<f32>(0.0);
+                var total = 0.0;
+                for (var k = 0; k < 4; k++) {
+                    let o = vec2<i32>(k & 1, k >> 1u);
+                    let t = clamp(i + o, vec2<i32>(0), size - 1);
+                    let stored = textureLoad(distance_tex, t, 0).r;
+                    var same = stored < 0.0;
+                    if !sky {
+                        same = stored >= 0.0 && abs(stored - expected) <= params.depth_tolerance * expected;
+                    }
+                    let fw = select(1.0 - f.x, f.x, o.x == 1) * select(1.0 - f.y, f.y, o.y == 1);
+                    if same && fw > 0.0 {
+                        acc += fw * textureLoad(history_tex, t, 0);
+                        total += fw;
+                    }
                 }
-                if valid {
-                    let b = floor(q);
-                    let f = q - b;
-                    let i = vec2<i32>(b);
-                    let h00 = load_history(i, size);
-                    let h10 = load_history(i + vec2<i32>(1, 0), size);
-                    let h01 = load_history(i + vec2<i32>(0, 1), size);
-                    let h11 = load_history(i + vec2<i32>(1, 1), size);
-                    h = mix(mix(h00.rgb, h10.rgb, f.x), mix(h01.rgb, h11.rgb, f.x), f.y);
-                    n = load_history(nearest, size).a;
+                if total > 1e-3 {
+                    h = acc.rgb / total;
+                    n = acc.a / total;
                     w = min(params.history_weight, n / (n + 1.0));
                 }
             }
         }
     }
-    if w > 0.0 && params.clip == 1u {
-        // Variance clip (neighbourhood mean ± clip_sigma·σ), inside the neighbourhood's range.
+    // The current frame's neighbourhood on the same surface as this pixel (the 3×3 pixels
+    // whose view distance is within the tolerance of this one's, or sky with sky): its mean
+    // and spread clip the history; where the history was rejected, its mean replaces the
+    // single current sample (a disoccluded strip would otherwise keep one frame's noise
+    // beside accumulated pixels).
+    let rejected = params.valid == 1u && w == 0.0;
+    if (w > 0.0 && params.clip == 1u) || rejected {
         var lo = c;
         var hi = c;
         var m1 = vec3<f32>(0.0);
         var m2 = vec3<f32>(0.0);
+        var count = 0.0;
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
-                let s = load_current(px + vec2<i32>(dx, dy), size);
-                lo = min(lo, s);
-                hi = max(hi, s);
-                m1 += s;
-                m2 += s * s;
+                let p = clamp(px + vec2<i32>(dx, dy), vec2<i32>(0), size - 1);
+                let dn = current_distance(vec2<u32>(p));
+                var same = dn < 0.0 && sky;
+                if !sky {
+                    same = dn >= 0.0 && abs(dn - dist) <= params.depth_tolerance * dist;
+                }
+                if same {
+                    let s = textureLoad(current_tex, p, 0).rgb;
+                    lo = min(lo, s);
+                    hi = max(hi, s);
+                    m1 += s;
+                    m2 += s * s;
+                    count += 1.0;
+                }
             }
         }
-        let mean = m1 / 9.0;
-        let sigma = sqrt(max(m2 / 9.0 - mean * mean, vec3<f32>(0.0)));
-        let box_lo = max(lo, mean - params.clip_sigma * sigma);
-        let box_hi = min(hi, mean + params.clip_sigma * sigma);
-        h = clamp(h, box_lo, box_hi);
+        let mean = m1 / count;
+        if rejected {
+            h = mean;
+            w = 0.0;
+        } else {
+            // Variance clip (mean ± clip_sigma·σ), inside the neighbourhood's range.
+            let sigma = sqrt(max(m2 / count - mean * mean, vec3<f32>(0.0)));
+            let box_lo = max(lo, mean - params.clip_sigma * sigma);
+            let box_hi = min(hi, mean + params.clip_sigma * sigma);
+            h = clamp(h, box_lo, box_hi);
+        }
     }
-    let res = c + w * (h - c);
+    var res = c + w * (h - c);
+    if rejected {
+        res = h;
+    }
     textureStore(out_tex, px, vec4<f32>(res, cur.a));
     textureStore(history_out, px, vec4<f32>(res, min(n + 1.0, MAX_FRAMES)));
     textureStore(weight_out, px, vec4<f32>(w, 0.0, 0.0, 0.0));

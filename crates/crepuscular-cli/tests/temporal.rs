@@ -255,7 +255,12 @@ fn gpu_temporal_matches_its_cpu_mirror_frame_by_frame() {
                 continue;
             }
             // The weight follows the bilinear mean of the texels' frame counts: f32 rounding.
-            assert!((gw[i] - cw[i]).abs() < 1e-5, "frame {k}, pixel {i}: weight {} on the GPU, {} on the CPU", gw[i], cw[i]);
+            assert!(
+                (gw[i] - cw[i]).abs() < 1e-5,
+                "frame {k}, pixel {i}: weight {} on the GPU, {} on the CPU",
+                gw[i],
+                cw[i]
+            );
             for c in 0..3 {
                 worst = worst.max((got.pixels[i][c] - want.pixels[i][c]).abs() / want.pixels[i][c].abs().max(1e-3));
             }

@@ -201,6 +201,28 @@ pub struct PathRenderer<'g> {
     lights: Vec<crepuscular_scene::SceneLight>,
     /// The path.
     pub path: MotionPath,
+    /// Lights turned by this angle (degrees) about the vertical axis through the camera's
+    /// `look_at`, on top of the path: a light jump ([`LIGHT_JUMP_DEGREES`]).
+    pub light_turn_degrees: f32,
+}
+
+/// How far `animate --light-jump` turns the lights, degrees about the vertical axis through
+/// the camera's `look_at` (a sun's travel, a spot's position and aim, a point light's position).
+pub const LIGHT_JUMP_DEGREES: f32 = 20.0;
+
+/// `l` turned by `degrees` about the vertical axis through `pivot`.
+fn turn_light(l: &Light, degrees: f32, pivot: Vec3) -> Light {
+    let q = Quat::from_rotation_y(degrees.to_radians());
+    let mut l = l.clone();
+    match &mut l {
+        Light::Directional { direction, .. } => *direction = q * *direction,
+        Light::Spot { position, direction, .. } => {
+            *position = pivot + q * (*position - pivot);
+            *direction = q * *direction;
+        }
+        Light::Point { position, .. } => *position = pivot + q * (*position - pivot),
+    }
+    l
 }
 
 impl<'g> PathRenderer<'g> {
@@ -213,7 +235,15 @@ impl<'g> PathRenderer<'g> {
             }
             None => None,
         };
-        Ok(PathRenderer { gpu, host, camera: scene.camera.clone(), lights: scene.lights.clone(), scene, path })
+        Ok(PathRenderer {
+            gpu,
+            host,
+            camera: scene.camera.clone(),
+            lights: scene.lights.clone(),
+            scene,
+            path,
+            light_turn_degrees: 0.0,
+        })
     }
 
     /// The scene (at t = 0).
@@ -225,6 +255,9 @@ impl<'g> PathRenderer<'g> {
     pub fn frame(&mut self, t: f64) -> Result<HostFrame> {
         for (posed, own) in self.scene.lights.iter_mut().zip(&self.lights) {
             posed.light = self.path.pose(&self.camera, &own.light, t).1;
+            if self.light_turn_degrees != 0.0 {
+                posed.light = turn_light(&posed.light, self.light_turn_degrees, self.camera.look_at);
+            }
         }
         self.scene.camera = self.path.pose(&self.camera, &self.lights[0].light, t).0;
         let desc = frame_desc(&self.scene);
@@ -508,11 +541,22 @@ pub struct AnimateOptions {
     pub temporal: Option<TemporalSettings>,
     /// Hold the lights still: only the camera moves ([`MotionPath::still_lights`]).
     pub still_lights: bool,
+    /// Render only the first this many frames of the `frames`-frame path (a slow move over a
+    /// few frames; the GIF then does not loop back). None: all.
+    pub stop_after: Option<u32>,
+    /// Turn every light by [`LIGHT_JUMP_DEGREES`] from this frame on (a light jump); with
+    /// `--temporal --flicker` the report gives the frames the stage takes to recover.
+    pub light_jump: Option<u32>,
     /// The GIF.
     pub output: PathBuf,
 }
 
 impl AnimateOptions {
+    /// Frames rendered: `frames`, or `stop_after` when it is smaller.
+    pub fn rendered(&self) -> u32 {
+        self.stop_after.map_or(self.frames, |s| s.min(self.frames))
+    }
+
     /// Checks every value before any work; errors name the option and value.
     pub fn validate(&self) -> Result<()> {
         if !(1..=MAX_FRAMES).contains(&self.frames) {
@@ -540,6 +584,14 @@ impl AnimateOptions {
         }
         if let Some(t) = &self.temporal {
             t.validate().map_err(|e| anyhow::anyhow!("--temporal: {e}"))?;
+        }
+        if self.stop_after == Some(0) {
+            bail!("--stop-after 0: must render at least one frame");
+        }
+        if let Some(k) = self.light_jump
+            && (k == 0 || k >= self.rendered())
+        {
+            bail!("--light-jump {k}: must be a frame after the first and before the last ({})", self.rendered());
         }
         let parent = match self.output.parent() {
             Some(p) if !p.as_os_str().is_empty() => p,
@@ -621,6 +673,23 @@ pub struct TemporalReport {
     pub frames: Vec<FrameQuality>,
     /// Flicker of the technique without the stage (with `--flicker`).
     pub flicker_without: Option<Flicker>,
+    /// The frame the lights jumped at (`--light-jump`).
+    pub light_jump: Option<u32>,
+    /// Ghosting after that jump (with `--flicker`): frames from the jump until the stage's PSNR
+    /// is within 1 dB of its new steady state (the mean of the last 4 frames rendered, which
+    /// must be at least 8 frames after the jump); 0 when the jump frame itself is; None when
+    /// it is not within the frames rendered or too few follow the jump.
+    pub recovery_frames: Option<u32>,
+}
+
+/// Frames from `jump` until `psnr` is within 1 dB of its mean over the last 4 frames (at least
+/// 8 frames must follow the jump). See [`TemporalReport::recovery_frames`].
+pub fn recovery_frames(psnr: &[f64], jump: usize) -> Option<u32> {
+    if psnr.len() < jump + 8 {
+        return None;
+    }
+    let steady = psnr[psnr.len() - 4..].iter().sum::<f64>() / 4.0;
+    psnr.iter().skip(jump).position(|&p| p >= steady - 1.0).map(|r| r as u32)
 }
 
 /// The temporal stage of one `animate` run.
@@ -748,9 +817,13 @@ pub fn run(
         {
             let mut enc = image::codecs::gif::GifEncoder::new_with_speed(&mut sink, GIF_SPEED);
             enc.set_repeat(image::codecs::gif::Repeat::Infinite).context("GIF")?;
-            for i in 0..opts.frames {
+            let rendered = opts.rendered();
+            for i in 0..rendered {
                 let t = frame_time(i, opts.frames, true);
-                progress(i, opts.frames, &format!("frame {}/{}: {}", i + 1, opts.frames, technique.name()));
+                progress(i, rendered, &format!("frame {}/{}: {}", i + 1, rendered, technique.name()));
+                if opts.light_jump == Some(i) {
+                    renderer.light_turn_degrees = LIGHT_JUMP_DEGREES;
+                }
                 let mut frame = renderer.frame(t)?;
                 let (raw, stats) = technique.render(gpu, &mut frame, i, rows)?;
                 technique_ms.push(stats.total_ms());
@@ -764,7 +837,7 @@ pub fn run(
                     None => (raw.clone(), 0.0),
                 };
                 if let Some(r) = &mut reference {
-                    progress(i, opts.frames, &format!("frame {}/{}: reference", i + 1, opts.frames));
+                    progress(i, rendered, &format!("frame {}/{}: reference", i + 1, rendered));
                     let (ri, _) = r.render(gpu, &mut frame, 0, rows)?;
                     meter.push(&img, &ri)?;
                     if stage.is_some() {
@@ -789,7 +862,7 @@ pub fn run(
                 enc.encode_frame(image::Frame::from_parts(buf, 0, 0, delay))
                     .with_context(|| format!("cannot encode GIF frame {i}"))?;
             }
-            progress(opts.frames, opts.frames, "done");
+            progress(rendered, rendered, "done");
         }
         if let Some(e) = &sink.error {
             bail!("{e}");
@@ -799,6 +872,7 @@ pub fn run(
         Ok(())
     })?;
     let flicker = if opts.flicker { Some(meter.finish()?) } else { None };
+    let psnr: Vec<f64> = qualities.iter().map(|q| q.psnr_db).collect();
     let temporal = match (opts.temporal, &stage) {
         (Some(settings), Some(st)) => Some(TemporalReport {
             settings,
@@ -807,6 +881,10 @@ pub fn run(
             stage_ms,
             frames: qualities,
             flicker_without: if opts.flicker { Some(meter_without.finish()?) } else { None },
+            light_jump: opts.light_jump,
+            recovery_frames: opts
+                .light_jump
+                .and_then(|k| if psnr.len() > k as usize { recovery_frames(&psnr, k as usize) } else { None }),
         }),
         _ => None,
     };
@@ -816,7 +894,7 @@ pub fn run(
         frame_index_advanced: technique.has_frame_index(),
         settings: technique.first,
         path,
-        frames: opts.frames,
+        frames: opts.rendered(),
         technique_ms,
         flicker,
         bytes,

@@ -138,6 +138,15 @@ struct AnimateArgs {
     /// Hold the lights still: only the camera moves along the path.
     #[arg(long)]
     still_lights: bool,
+    /// Render only the first N frames of the --frames path: a slow move (a large --frames)
+    /// over a few frames. The GIF then does not loop back.
+    #[arg(long, value_name = "N")]
+    stop_after: Option<u32>,
+    /// From frame K on, every light is turned by 20° about the vertical axis through the
+    /// camera's target (a light jump). With --temporal --flicker, prints how many frames the
+    /// temporal stage takes to recover (its ghosting).
+    #[arg(long, value_name = "K")]
+    light_jump: Option<u32>,
     /// A temporal-stage setting, `key=value` (with --temporal), e.g. `--temporal-set
     /// history_weight=0.8`; repeatable. Keys: history_weight, clip, clip_sigma,
     /// depth_tolerance, light_jump_degrees (docs/MODEL.md §7).
@@ -529,6 +538,8 @@ fn cmd_animate(a: AnimateArgs) -> Result<()> {
             (false, false) => bail!("--temporal-set needs --temporal"),
         },
         still_lights: a.still_lights,
+        stop_after: a.stop_after,
+        light_jump: a.light_jump,
         output: a.output.clone(),
     };
     animate::check(&opts)?;
@@ -545,7 +556,7 @@ fn cmd_animate(a: AnimateArgs) -> Result<()> {
             (false, true) => " and reference",
             (false, false) => "",
         },
-        a.frames,
+        a.stop_after.map_or(a.frames, |s| s.min(a.frames)),
         a.size.0,
         a.size.1
     );
@@ -593,6 +604,17 @@ fn cmd_animate(a: AnimateArgs) -> Result<()> {
         );
         if let Some(f) = t.flicker_without {
             println!("           flicker without the stage {:.4} %", 100.0 * f.relative);
+        }
+        if let (Some(k), true) = (t.light_jump, a.flicker) {
+            match t.recovery_frames {
+                Some(r) => {
+                    println!("           light jump at frame {k}: within 1 dB of the new steady state after {r} frames")
+                }
+                None => println!(
+                    "           light jump at frame {k}: not within 1 dB of the new steady state (the mean of the last 4 \
+                     frames; at least 8 frames must follow the jump)"
+                ),
+            }
         }
         if !t.frames.is_empty() {
             println!("frame  PSNR dB without → with   FLIP without → with   mean history weight");

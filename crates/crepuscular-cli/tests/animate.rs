@@ -364,10 +364,10 @@ fn animate_temporal_beats_the_technique_alone_on_a_slow_camera_move() {
     let without = t["flicker_without"]["relative"].as_f64().unwrap();
     eprintln!("mean PSNR gain over frames 4-11: {gain:.2} dB; flicker {flicker:.4} vs {without:.4} without the stage");
     assert!(gain > MEASURED_TEMPORAL_GAIN_DB - 2.0, "the temporal stage gained {gain:.2} dB");
-    assert!(flicker < 0.9 * without, "the temporal stage did not reduce flicker: {flicker} vs {without}");
+    assert!(flicker < 0.75 * without, "the temporal stage did not reduce flicker: {flicker} vs {without}");
 }
 
-/// Measured 2026-12-02 on llvmpipe by the test above: a mean gain of 2.97 dB over frames 4–11,
-/// flicker 0.0393 against 0.0506 without the stage (0.78×; at 320×180 the same path gains
-/// 8–10 dB and halves the flicker: docs/RESULTS.md).
-const MEASURED_TEMPORAL_GAIN_DB: f64 = 2.97;
+/// Measured 2026-12-02 on llvmpipe by the test above: a mean gain of 5.15 dB over frames 4–11,
+/// flicker 0.0291 against 0.0506 without the stage (0.58×; at 320×180 the same path gains
+/// about 10 dB and halves the flicker: docs/RESULTS.md).
+const MEASURED_TEMPORAL_GAIN_DB: f64 = 5.15;

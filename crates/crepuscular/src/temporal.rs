@@ -47,7 +47,10 @@ pub struct TemporalSettings {
     /// per pixel.
     pub clip: bool,
     /// Half-width of the clip box in standard deviations of the neighbourhood (≥ 0): smaller
-    /// rejects more (less ghosting, more of the current frame's noise kept). Default 1.25.
+    /// rejects more (less ghosting and lag, more of the current frame's noise kept). Default
+    /// 0.5, measured (docs/RESULTS.md, "Temporal accumulation"): on a slow camera move over
+    /// colonnade 0.35–0.5 gave the lowest FLIP and flicker at the same PSNR; 1.25 and 2 let
+    /// the history lag (FLIP 0.029–0.031 instead of 0.020 after 8 frames).
     pub clip_sigma: f32,
     /// Disocclusion test: the history is rejected where the previous frame's view distance at
     /// the reprojected pixel differs from the point's distance to the previous eye by more than
@@ -62,7 +65,7 @@ pub struct TemporalSettings {
 
 impl Default for TemporalSettings {
     fn default() -> Self {
-        Self { history_weight: 0.9, clip: true, clip_sigma: 1.25, depth_tolerance: 0.05, light_jump_degrees: 5.0 }
+        Self { history_weight: 0.9, clip: true, clip_sigma: 0.5, depth_tolerance: 0.05, light_jump_degrees: 5.0 }
     }
 }
 

@@ -60,15 +60,7 @@ pub fn load_scene(name_or_path: &str) -> Result<Scene> {
 /// A technique's settings from the scene's `[render.<name>]` table and `key=value` overrides
 /// (values in TOML syntax). Errors name the source, key and value.
 pub fn parse_technique(name: &str, scene: &Scene, overrides: &[String]) -> Result<TechniqueSettings> {
-    let mut table = scene.render.techniques.get(name).cloned().unwrap_or_default();
-    for o in overrides {
-        let (k, v) = o.split_once('=').with_context(|| format!("--set {o}: expected key=value"))?;
-        let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {v}"))
-            .ok()
-            .and_then(|mut t| t.remove("v"))
-            .unwrap_or_else(|| toml::Value::String(v.to_string()));
-        table.insert(k.trim().to_string(), value);
-    }
+    let table = with_overrides("--set", scene.render.techniques.get(name).cloned().unwrap_or_default(), overrides)?;
     let src = format!("{} [render.{name}]", scene.name);
     let parse = || -> Result<TechniqueSettings> {
         let settings = TechniqueSettings::deserialize_named(name, toml::Value::Table(table))
@@ -80,18 +72,24 @@ pub fn parse_technique(name: &str, scene: &Scene, overrides: &[String]) -> Resul
     parse().map_err(|e| anyhow::anyhow!("{}", format!("{e:#}").replace('\n', " ")))
 }
 
-/// The temporal stage's settings from `key=value` overrides (`--temporal-set`) over the
-/// defaults; errors name the key and value.
-pub fn parse_temporal(overrides: &[String]) -> Result<crepuscular::TemporalSettings> {
-    let mut table = toml::Table::new();
+/// `table` with each `key=value` of `overrides` set (the value read as a TOML value, else as a
+/// string); `flag` names the option in errors.
+fn with_overrides(flag: &str, mut table: toml::Table, overrides: &[String]) -> Result<toml::Table> {
     for o in overrides {
-        let (k, v) = o.split_once('=').with_context(|| format!("--temporal-set {o}: expected key=value"))?;
+        let (k, v) = o.split_once('=').with_context(|| format!("{flag} {o}: expected key=value"))?;
         let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {v}"))
             .ok()
             .and_then(|mut t| t.remove("v"))
             .unwrap_or_else(|| toml::Value::String(v.to_string()));
         table.insert(k.trim().to_string(), value);
     }
+    Ok(table)
+}
+
+/// The temporal stage's settings from `key=value` overrides (`--temporal-set`) over the
+/// defaults; errors name the key and value.
+pub fn parse_temporal(overrides: &[String]) -> Result<crepuscular::TemporalSettings> {
+    let table = with_overrides("--temporal-set", toml::Table::new(), overrides)?;
     let settings: crepuscular::TemporalSettings = toml::Value::Table(table)
         .try_into()
         .map_err(|e| anyhow::anyhow!("--temporal-set: {}", e.to_string().replace('\n', " ")))?;

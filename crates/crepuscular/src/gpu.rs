@@ -407,16 +407,9 @@ impl GpuContext {
     }
 
     fn upload(&self, label: &str, format: wgpu::TextureFormat, width: u32, height: u32, bytes: &[u8]) -> wgpu::Texture {
-        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
+        use wgpu::TextureUsages as U;
+        let texture =
+            texture_2d(&self.device, label, format, width, height, U::TEXTURE_BINDING | U::COPY_DST | U::COPY_SRC);
         let texel = format.block_copy_size(None).unwrap_or(4);
         self.queue.write_texture(
             texture.as_image_copy(),
@@ -442,6 +435,19 @@ pub fn storage_texture(
     width: u32,
     height: u32,
 ) -> wgpu::Texture {
+    use wgpu::TextureUsages as U;
+    texture_2d(device, label, format, width, height, U::STORAGE_BINDING | U::TEXTURE_BINDING | U::COPY_SRC)
+}
+
+/// A `width`×`height` single-level 2D texture of `format` with `usage`.
+fn texture_2d(
+    device: &wgpu::Device,
+    label: &str,
+    format: wgpu::TextureFormat,
+    width: u32,
+    height: u32,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
     device.create_texture(&wgpu::TextureDescriptor {
         label: Some(label),
         size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
@@ -449,9 +455,7 @@ pub fn storage_texture(
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
         format,
-        usage: wgpu::TextureUsages::STORAGE_BINDING
-            | wgpu::TextureUsages::TEXTURE_BINDING
-            | wgpu::TextureUsages::COPY_SRC,
+        usage,
         view_formats: &[],
     })
 }

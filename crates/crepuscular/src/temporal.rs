@@ -28,9 +28,10 @@ pub const TEMPORAL_WGSL: &str = include_str!("temporal.wgsl");
 /// The frame count a pixel's history saturates at (`MAX_FRAMES` in temporal.wgsl).
 pub const MAX_FRAMES: f32 = 1024.0;
 
-/// The temporal stage's settings. Cost of the stage: one full-screen compute pass reading 9
-/// current texels, 4 + 1 history texels and one stored distance per pixel, and 48 bytes of
-/// history per pixel (two RGBA32F images, two R32F distances, one R32F weight).
+/// The temporal stage's settings. Cost of the stage: one full-screen compute pass reading, per
+/// pixel, 4 history texels and their 4 stored distances, and (where the history is clipped or
+/// rejected) 9 current texels and their depths; 44 bytes of history per pixel (two RGBA32F
+/// images, two R32F distances, one R32F weight).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TemporalSettings {

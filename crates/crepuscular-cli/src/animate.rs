@@ -9,6 +9,7 @@
 //! dollies towards it, the light sweeps (directional: travel direction; spot: aim; point:
 //! position). t = 0 is the scene exactly as `render` draws it.
 
+use crate::metrics::Quality;
 use crate::render::{self, frame_desc, load_scene, parse_technique};
 use anyhow::{Context, Result, bail};
 use crepuscular::frame::{FrameDesc, surface_transmittance};
@@ -842,16 +843,19 @@ pub fn run(
                     meter.push(&img, &ri)?;
                     if stage.is_some() {
                         meter_without.push(&raw, &ri)?;
-                        let fin = |x: &Image| frame.final_radiance(x);
-                        let without = crate::metrics::compare(&fin(&ri), &fin(&raw), &tone)?;
-                        let with = crate::metrics::compare(&fin(&ri), &fin(&img), &tone)?;
-                        let lin_without = crate::metrics::compare(&ri, &raw, &tone)?;
-                        let lin_with = crate::metrics::compare(&ri, &img, &tone)?;
+                        let q = Quality {
+                            final_radiance: frame.final_radiance(&ri),
+                            inscatter: ri,
+                            transmittance: frame.transmittance.clone(),
+                            tone,
+                        };
+                        let (psnr_db_without, flip_without) = q.measure(&raw, &frame.surface)?;
+                        let (psnr_db, flip) = q.measure(&img, &frame.surface)?;
                         qualities.push(FrameQuality {
-                            psnr_db_without: lin_without.psnr_db,
-                            flip_without: without.flip_mean,
-                            psnr_db: lin_with.psnr_db,
-                            flip: with.flip_mean,
+                            psnr_db_without,
+                            flip_without,
+                            psnr_db,
+                            flip,
                             mean_history_weight: weight,
                         });
                     }

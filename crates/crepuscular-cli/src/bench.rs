@@ -11,7 +11,7 @@
 //! one run on one device: the device is recorded in every output.
 
 use crate::animate::{AnimatedTechnique, Flicker, FlickerMeter, MotionPath, PathRenderer, frame_time};
-use crate::metrics::compare;
+use crate::metrics::Quality;
 use crate::render::{self, AdapterStats, adapter_stats, frame_desc, load_scene, parse_technique};
 use anyhow::{Context, Result, bail};
 use crepuscular::TechniqueSettings;
@@ -607,22 +607,6 @@ pub fn utc_date() -> String {
     let m = if mp < 10 { mp + 3 } else { mp - 9 };
     let y = yoe + era * 400 + i64::from(m <= 2);
     format!("{y:04}-{m:02}-{d:02}")
-}
-
-/// The reference in-scattering and final image of a frame, for quality.
-struct Quality {
-    inscatter: Image,
-    final_radiance: Image,
-    transmittance: Vec<[f32; 3]>,
-    tone: ToneMap,
-}
-
-impl Quality {
-    fn measure(&self, inscatter: &Image, surface: &Image) -> Result<(f64, f64)> {
-        let lin = compare(&self.inscatter, inscatter, &self.tone)?;
-        let fin = compare(&self.final_radiance, &composite(surface, inscatter, &self.transmittance), &self.tone)?;
-        Ok((lin.psnr_db, fin.flip_mean))
-    }
 }
 
 /// Images of one row, kept when asked (for `compare`'s contact sheet).

@@ -3,7 +3,7 @@
 
 use anyhow::{Result, bail};
 use crepuscular::Image;
-use crepuscular::tonemap::ToneMap;
+use crepuscular::tonemap::{ToneMap, composite};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -112,6 +112,29 @@ pub fn compare(reference: &Image, test: &Image, tone: &ToneMap) -> Result<Metric
     let error_map = flip_error_map(reference, test, tone);
     let flip_mean = nv_flip::FlipPool::from_image(&error_map).mean() as f64;
     Ok(Metrics { rmse, psnr_db, flip_mean, max_abs })
+}
+
+/// A frame's reference, for the quality figures `bench` and `animate` report: PSNR of the
+/// linear in-scattering, FLIP of the tone-mapped final image.
+pub struct Quality {
+    /// The reference in-scattering.
+    pub inscatter: Image,
+    /// The reference final image (`composite` of the frame's surface and `inscatter`).
+    pub final_radiance: Image,
+    /// The frame's transmittance to the visible surface, per pixel.
+    pub transmittance: Vec<[f32; 3]>,
+    /// The display transform FLIP compares under.
+    pub tone: ToneMap,
+}
+
+impl Quality {
+    /// (PSNR of `inscatter` against the reference's in dB, FLIP mean of the final image it
+    /// composites over `surface`).
+    pub fn measure(&self, inscatter: &Image, surface: &Image) -> Result<(f64, f64)> {
+        let lin = compare(&self.inscatter, inscatter, &self.tone)?;
+        let fin = compare(&self.final_radiance, &composite(surface, inscatter, &self.transmittance), &self.tone)?;
+        Ok((lin.psnr_db, fin.flip_mean))
+    }
 }
 
 /// `max` that returns NaN when either operand is NaN.

@@ -280,6 +280,27 @@ fn gpu_temporal_matches_its_cpu_mirror_frame_by_frame() {
 }
 
 #[test]
+fn gpu_temporal_builds_its_bind_groups_once_for_the_same_views() {
+    let Some(gpu) = test_gpu("gpu_temporal_builds_its_bind_groups_once_for_the_same_views") else { return };
+    let (desc, depth, _) = posed(&scene(), Vec3::ZERO);
+    let cur = gpu.upload_image("temporal test current", &noise(0));
+    let depth_tex = gpu.upload_f32("temporal test depth", W, H, &depth);
+    let out = gpu.create_output_texture(W, H);
+    let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+    let (d, c, o) = (view(&depth_tex), view(&cur), view(&out));
+    let mut t = Temporal::new(&gpu.device, TemporalSettings::default()).unwrap();
+    for _ in 0..4 {
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        t.encode(&mut enc, &desc, &d, &c, &o).unwrap();
+        gpu.queue.submit([enc.finish()]);
+    }
+    // Four frames read both histories in turn: one build.
+    assert_eq!(t.bind_group_builds(), 1);
+    let weights = gpu.read_texture_f32(t.weights().unwrap(), 0).unwrap();
+    assert!(weights.iter().all(|&w| w > 0.0), "the fourth frame did not use its history");
+}
+
+#[test]
 fn jittered_brute_force_accumulated_over_8_frames_is_closer_to_the_reference() {
     // Measured 2026-12-02 (CPU backend, colonnade 96×54, still camera, reference 512 steps):
     // brute-force 16 steps, one frame at step midpoints 24.01 dB (FLIP 0.0927); jittered and

@@ -190,31 +190,47 @@ fn uniforms(s: &TemporalSettings, prev: Option<&Previous>) -> TemporalUniforms {
     }
 }
 
-/// One pixel's resolve: (output rgb, history rgba, stored distance, weight). Mirrors `resolve`
-/// in temporal.wgsl.
+/// This frame's view distance per pixel, row-major; -1 where nothing was drawn. Mirrors
+/// `current_distance` in temporal.wgsl (which computes it per read; the CPU once per frame).
+pub fn view_distances(desc: &FrameDesc, depth: &[f32]) -> Vec<f32> {
+    let far = desc.camera.depth.far_value();
+    (0..desc.height)
+        .flat_map(|y| (0..desc.width).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let d = depth[(y * desc.width + x) as usize];
+            if d == far { -1.0 } else { desc.view_distance(d, desc.pixel_ray(x, y)) }
+        })
+        .collect()
+}
+
+/// Whether a pixel whose view distance is `stored` shows the surface at `reference` (both -1
+/// where nothing was drawn): sky with sky, else within `tolerance` of `reference`. Mirrors
+/// `same_surface` in temporal.wgsl.
+pub fn same_surface(stored: f32, reference: f32, tolerance: f32) -> bool {
+    if reference < 0.0 { stored < 0.0 } else { stored >= 0.0 && (stored - reference).abs() <= tolerance * reference }
+}
+
+/// One pixel's resolve: (output rgb, history rgba, weight). `distances`: this frame's
+/// ([`view_distances`]); `history` and `history_distances`: the previous frame's (read only
+/// when `u.valid`). Mirrors `resolve` in temporal.wgsl.
 #[allow(clippy::too_many_arguments)]
 pub fn resolve_pixel(
     desc: &FrameDesc,
     u: &TemporalUniforms,
-    depth: &[f32],
+    distances: &[f32],
     current: &Image,
     history: &Image,
-    distance: &[f32],
+    history_distances: &[f32],
     x: u32,
     y: u32,
-) -> ([f32; 3], [f32; 4], f32, f32) {
+) -> ([f32; 3], [f32; 4], f32) {
     let (w_px, h_px) = (desc.width as i32, desc.height as i32);
     let rgb = |p: [f32; 4]| Vec3::new(p[0], p[1], p[2]);
     let at = |x: i32, y: i32| (y.clamp(0, h_px - 1) * w_px + x.clamp(0, w_px - 1)) as usize;
     let c = rgb(current.pixels[at(x as i32, y as i32)]);
 
-    // This frame's view distance at a pixel; -1 where nothing was drawn.
-    let current_distance = |x: u32, y: u32| {
-        let d = depth[(y * desc.width + x) as usize];
-        if d == desc.camera.depth.far_value() { -1.0 } else { desc.view_distance(d, desc.pixel_ray(x, y)) }
-    };
     let dir = desc.pixel_ray(x, y);
-    let dist = current_distance(x, y);
+    let dist = distances[at(x as i32, y as i32)];
     let sky = dist < 0.0;
 
     let mut w = 0.0f32;
@@ -237,12 +253,8 @@ pub fn resolve_pixel(
                 for k in 0..4 {
                     let (ox, oy) = (k & 1, k >> 1);
                     let t = at(ix + ox, iy + oy);
-                    let stored = distance[t];
-                    let same = if sky {
-                        stored < 0.0
-                    } else {
-                        stored >= 0.0 && (stored - expected).abs() <= u.depth_tolerance * expected
-                    };
+                    // `expected` stands for this point's distance, -1 for sky.
+                    let same = same_surface(history_distances[t], if sky { -1.0 } else { expected }, u.depth_tolerance);
                     let fw = (if ox == 1 { f.x } else { 1.0 - f.x }) * (if oy == 1 { f.y } else { 1.0 - f.y });
                     if same && fw > 0.0 {
                         acc += fw * Vec4::from_array(history.pixels[t]);
@@ -264,12 +276,9 @@ pub fn resolve_pixel(
         let mut count = 0.0f32;
         for dy in -1..=1 {
             for dx in -1..=1 {
-                let px = (x as i32 + dx).clamp(0, w_px - 1) as u32;
-                let py = (y as i32 + dy).clamp(0, h_px - 1) as u32;
-                let dn = current_distance(px, py);
-                let same = if sky { dn < 0.0 } else { dn >= 0.0 && (dn - dist).abs() <= u.depth_tolerance * dist };
-                if same {
-                    let s = rgb(current.pixels[(py * desc.width + px) as usize]);
+                let p = at(x as i32 + dx, y as i32 + dy);
+                if same_surface(distances[p], dist, u.depth_tolerance) {
+                    let s = rgb(current.pixels[p]);
                     lo = lo.min(s);
                     hi = hi.max(s);
                     m1 += s;
@@ -281,7 +290,6 @@ pub fn resolve_pixel(
         let mean = m1 / count;
         if rejected {
             h = mean;
-            w = 0.0;
         } else {
             let var = (m2 / count - mean * mean).max(Vec3::ZERO);
             let sigma = Vec3::new(var.x.sqrt(), var.y.sqrt(), var.z.sqrt());
@@ -291,7 +299,7 @@ pub fn resolve_pixel(
         }
     }
     let res = if rejected { h } else { c + w * (h - c) };
-    (res.to_array(), [res.x, res.y, res.z, (n + 1.0).min(MAX_FRAMES)], dist, w)
+    (res.to_array(), [res.x, res.y, res.z, (n + 1.0).min(MAX_FRAMES)], w)
 }
 
 /// The temporal stage on the CPU: the mirror of [`Temporal`].
@@ -330,23 +338,25 @@ impl CpuTemporal {
         let jump = self.settings.light_jump_degrees;
         let prev = self.history.as_ref().filter(|(_, _, p)| p.serves(desc, jump));
         let u = uniforms(&self.settings, prev.map(|(_, _, p)| p));
-        let empty = (Image::new(w, h), vec![-1.0; n]);
-        let (hist, dist) = prev.map_or((&empty.0, &empty.1), |(i, d, _)| (i, d));
+        // Without a history (u.valid = 0) resolve_pixel reads none: empty stand-ins.
+        let (hist, hist_dist): (&Image, &[f32]) = match prev {
+            Some((i, d, _)) => (i, d),
+            None => (current, &[]),
+        };
+        let distances = view_distances(desc, depth);
         let mut out = Image::new(w, h);
         let mut next = Image::new(w, h);
-        let mut next_dist = vec![0.0; n];
         self.weights = vec![0.0; n];
         for y in 0..h {
             for x in 0..w {
                 let i = (y * w + x) as usize;
-                let (rgb, hp, d, wt) = resolve_pixel(desc, &u, depth, current, hist, dist, x, y);
+                let (rgb, hp, wt) = resolve_pixel(desc, &u, &distances, current, hist, hist_dist, x, y);
                 out.pixels[i] = [rgb[0], rgb[1], rgb[2], current.pixels[i][3]];
                 next.pixels[i] = hp;
-                next_dist[i] = d;
                 self.weights[i] = wt;
             }
         }
-        self.history = Some((next, next_dist, Previous::of(desc)));
+        self.history = Some((next, distances, Previous::of(desc)));
         Ok(out)
     }
 
@@ -377,7 +387,8 @@ pub struct Temporal {
     /// Which of the two histories holds the last frame.
     latest: usize,
     prev: Option<Previous>,
-    binds: BindCache<wgpu::BindGroup>,
+    /// The bind groups reading history 0 and history 1.
+    binds: BindCache<[wgpu::BindGroup; 2]>,
 }
 
 impl Temporal {
@@ -442,6 +453,12 @@ impl Temporal {
         self.sized.as_ref().map(|s| &s.weights)
     }
 
+    /// How many times the stage built its bind groups (on new views from the caller or a new
+    /// size, not per frame).
+    pub fn bind_group_builds(&self) -> u64 {
+        self.binds.builds()
+    }
+
     /// Bytes of GPU memory the stage holds.
     pub fn gpu_memory_bytes(&self) -> u64 {
         self.sized.as_ref().map_or(0, |s| s.size.0 as u64 * s.size.1 as u64 * (2 * 16 + 2 * 4 + 4))
@@ -501,40 +518,40 @@ impl Temporal {
         }
         let read = self.latest;
         let write = 1 - read;
-        let sized = self.sized.as_ref().expect("allocated above");
-        let view = |t: &wgpu::Texture| t.create_view(&Default::default());
-        let key = vec![
-            Bound::View(depth.clone()),
-            Bound::View(current.clone()),
-            Bound::View(output.clone()),
-            Bound::Choice(read as u32),
-        ];
+        // One bind group per direction of the ping-pong (read history a, write b; and back),
+        // both built when the caller's views or the size change, not every frame.
+        let key = vec![Bound::View(depth.clone()), Bound::View(current.clone()), Bound::View(output.clone())];
         if !self.binds.is_current(&key) {
-            let tv = wgpu::BindingResource::TextureView;
-            let (hr, dr, hw, dw, wt) = (
-                view(&sized.history[read]),
-                view(&sized.distance[read]),
-                view(&sized.history[write]),
-                view(&sized.distance[write]),
-                view(&sized.weights),
-            );
-            let bind = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("temporal"),
-                layout: &self.layout,
-                entries: &[
-                    wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: tv(depth) },
-                    wgpu::BindGroupEntry { binding: 3, resource: tv(current) },
-                    wgpu::BindGroupEntry { binding: 4, resource: tv(&hr) },
-                    wgpu::BindGroupEntry { binding: 5, resource: tv(&dr) },
-                    wgpu::BindGroupEntry { binding: 6, resource: tv(output) },
-                    wgpu::BindGroupEntry { binding: 7, resource: tv(&hw) },
-                    wgpu::BindGroupEntry { binding: 8, resource: tv(&dw) },
-                    wgpu::BindGroupEntry { binding: 9, resource: tv(&wt) },
-                ],
-            });
-            self.binds.store(key, bind);
+            let sized = self.sized.as_ref().expect("allocated above");
+            let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+            let bind = |read: usize| {
+                let tv = wgpu::BindingResource::TextureView;
+                let (hr, dr, hw, dw, wt) = (
+                    view(&sized.history[read]),
+                    view(&sized.distance[read]),
+                    view(&sized.history[1 - read]),
+                    view(&sized.distance[1 - read]),
+                    view(&sized.weights),
+                );
+                self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("temporal"),
+                    layout: &self.layout,
+                    entries: &[
+                        wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 2, resource: tv(depth) },
+                        wgpu::BindGroupEntry { binding: 3, resource: tv(current) },
+                        wgpu::BindGroupEntry { binding: 4, resource: tv(&hr) },
+                        wgpu::BindGroupEntry { binding: 5, resource: tv(&dr) },
+                        wgpu::BindGroupEntry { binding: 6, resource: tv(output) },
+                        wgpu::BindGroupEntry { binding: 7, resource: tv(&hw) },
+                        wgpu::BindGroupEntry { binding: 8, resource: tv(&dw) },
+                        wgpu::BindGroupEntry { binding: 9, resource: tv(&wt) },
+                    ],
+                })
+            };
+            let binds = [bind(0), bind(1)];
+            self.binds.store(key, binds);
         }
         let (device, layout) = (&self.device, &self.layout);
         let pipeline = self.pipelines.entry(format).or_insert_with(|| {
@@ -544,7 +561,7 @@ impl Temporal {
         let mut cpass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("temporal"), timestamp_writes: None });
         cpass.set_pipeline(pipeline);
-        cpass.set_bind_group(0, self.binds.value(), &[]);
+        cpass.set_bind_group(0, &self.binds.value()[read], &[]);
         cpass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         drop(cpass);
         self.latest = write;

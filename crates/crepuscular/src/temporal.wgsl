@@ -40,13 +40,22 @@ const MAX_FRAMES: f32 = 1024.0;
 @group(0) @binding(8) var distance_out: texture_storage_2d<r32float, write>;
 @group(0) @binding(9) var weight_out: texture_storage_2d<r32float, write>;
 
-// This frame's view distance at pixel p; -1 where nothing was drawn.
+// This frame's view distance at pixel p; -1 where nothing was drawn (temporal.rs
+// view_distances; one pass, so each read recomputes it).
 fn current_distance(p: vec2<u32>) -> f32 {
     let d = textureLoad(depth_tex, vec2<i32>(p), 0).r;
     if d == frame.depth_params.z {
         return -1.0;
     }
     return view_distance(frame, d, pixel_ray(frame, p));
+}
+
+// temporal.rs same_surface: sky with sky, else within the tolerance of `reference`.
+fn same_surface(stored: f32, reference: f32) -> bool {
+    if reference < 0.0 {
+        return stored < 0.0;
+    }
+    return stored >= 0.0 && abs(stored - reference) <= params.depth_tolerance * reference;
 }
 
 @compute @workgroup_size(8, 8)
@@ -90,11 +99,8 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
                 for (var k = 0; k < 4; k++) {
                     let o = vec2<i32>(k & 1, k >> 1u);
                     let t = clamp(i + o, vec2<i32>(0), size - 1);
-                    let stored = textureLoad(distance_tex, t, 0).r;
-                    var same = stored < 0.0;
-                    if !sky {
-                        same = stored >= 0.0 && abs(stored - expected) <= params.depth_tolerance * expected;
-                    }
+                    // `expected` stands for this point's distance, -1 for sky.
+                    let same = same_surface(textureLoad(distance_tex, t, 0).r, select(expected, -1.0, sky));
                     let fw = select(1.0 - f.x, f.x, o.x == 1) * select(1.0 - f.y, f.y, o.y == 1);
                     if same && fw > 0.0 {
                         acc += fw * textureLoad(history_tex, t, 0);
@@ -124,12 +130,7 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
                 let p = clamp(px + vec2<i32>(dx, dy), vec2<i32>(0), size - 1);
-                let dn = current_distance(vec2<u32>(p));
-                var same = dn < 0.0 && sky;
-                if !sky {
-                    same = dn >= 0.0 && abs(dn - dist) <= params.depth_tolerance * dist;
-                }
-                if same {
+                if same_surface(current_distance(vec2<u32>(p)), dist) {
                     let s = textureLoad(current_tex, p, 0).rgb;
                     lo = min(lo, s);
                     hi = max(hi, s);
@@ -142,7 +143,6 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
         let mean = m1 / count;
         if rejected {
             h = mean;
-            w = 0.0;
         } else {
             // Variance clip (mean ± clip_sigma·σ), inside the neighbourhood's range.
             let sigma = sqrt(max(m2 / count - mean * mean, vec3<f32>(0.0)));

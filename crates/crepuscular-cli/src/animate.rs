@@ -779,7 +779,8 @@ pub fn run(
     if opts.temporal.is_some() {
         let first = parse_technique(&opts.technique, &scene, &opts.overrides)?;
         let has_jitter = serde_json::to_value(&first)?.get("jitter").is_some();
-        if has_jitter && !opts.overrides.iter().any(|o| o.trim_start().starts_with("jitter")) {
+        let set_by_user = opts.overrides.iter().any(|o| o.split_once('=').is_some_and(|(k, _)| k.trim() == "jitter"));
+        if has_jitter && !set_by_user {
             overrides.push("jitter=true".into());
             jitter_added = true;
         }

@@ -1338,9 +1338,10 @@ impl Viewer {
                         }
                     }
                 } else {
-                    // Back to the technique's own settings (jitter as set).
-                    if let Some(r) = self.runner.as_mut() {
-                        let _ = r.update(&self.technique);
+                    // Back to the technique's own settings (jitter as set): in place, or a
+                    // new runner on the next frame, as for any settings change.
+                    if !self.runner.as_mut().is_some_and(|r| r.update(&self.technique).unwrap_or(false)) {
+                        self.runner = None;
                     }
                     None
                 };

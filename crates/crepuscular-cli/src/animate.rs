@@ -327,6 +327,11 @@ impl AnimatedTechnique {
         &self.name
     }
 
+    /// The GPU texture the last frame's in-scattering was rendered into (when it ran on the GPU).
+    fn gpu_output(&self) -> Option<&wgpu::Texture> {
+        self.gpu.as_ref().map(|(_, _, out)| out)
+    }
+
     /// Whether frames advance the technique's `frame_index` setting.
     pub fn has_frame_index(&self) -> bool {
         self.frame_index.is_some()
@@ -700,33 +705,36 @@ enum Stage {
 }
 
 impl Stage {
-    /// Resolves one frame; returns the output and the mean history weight.
+    /// Resolves one frame: `img` is the technique's in-scattering on `frame`, which on the GPU
+    /// is still in `gpu_output` (read there, with the host's depth, not uploaded again).
+    /// Returns the output and the mean history weight.
     fn resolve(
         &mut self,
         gpu: Option<&GpuContext>,
-        desc: &FrameDesc,
-        depth: &[f32],
+        frame: &HostFrame,
+        gpu_output: Option<&wgpu::Texture>,
         img: &Image,
     ) -> Result<(Image, f64)> {
         let mean = |w: &[f32]| w.iter().map(|&x| x as f64).sum::<f64>() / w.len().max(1) as f64;
-        match (self, gpu) {
-            (Stage::Gpu(t), Some(g)) => {
-                let cur = g.upload_image("animate in-scattering", img);
-                let depth_tex = g.upload_f32("animate depth", desc.width, desc.height, depth);
-                let out = g.create_output_texture(desc.width, desc.height);
+        match (self, gpu, gpu_output, &frame.textures) {
+            (Stage::Gpu(t), Some(g), Some(current), Some(host)) => {
+                let (w, h) = (frame.desc.width, frame.desc.height);
+                let out = g.create_output_texture(w, h);
                 let view = |t: &wgpu::Texture| t.create_view(&Default::default());
                 let mut enc = g.device.create_command_encoder(&Default::default());
-                t.encode(&mut enc, desc, &view(&depth_tex), &view(&cur), &view(&out))?;
+                t.encode(&mut enc, &frame.desc, &host.depth_view(), &view(current), &view(&out))?;
                 g.queue.submit([enc.finish()]);
                 let img = g.read_image(&out)?;
                 let w = g.read_texture_f32(t.weights().context("temporal weights")?, 0)?;
                 Ok((img, mean(&w)))
             }
-            (Stage::Cpu(t), _) => {
-                let img = t.resolve(desc, depth, img)?;
+            (Stage::Cpu(t), ..) => {
+                let img = t.resolve(&frame.desc, &frame.depth, img)?;
                 Ok((img, mean(t.weights())))
             }
-            (Stage::Gpu(_), None) => bail!("the temporal stage needs the GPU it was made on (internal error)"),
+            (Stage::Gpu(_), ..) => {
+                bail!("the GPU temporal stage needs the frame and the technique on the GPU (internal error)")
+            }
         }
     }
 }
@@ -832,7 +840,7 @@ pub fn run(
                 let (img, weight) = match &mut stage {
                     Some(st) => {
                         let start = std::time::Instant::now();
-                        let r = st.resolve(gpu, &frame.desc, &frame.depth, &raw)?;
+                        let r = st.resolve(gpu, &frame, technique.gpu_output(), &raw)?;
                         stage_ms.push(start.elapsed().as_secs_f64() * 1e3);
                         r
                     }

@@ -44,6 +44,7 @@ macro_rules! gpu_technique {
 pub mod brute_force;
 pub mod epipolar;
 pub mod interleaved;
+pub mod minmax;
 pub mod pass;
 pub mod prefiltered;
 pub mod presets;
@@ -315,6 +316,7 @@ registry! {
         Subsampled(subsampled::SubsampledSettings) => Subsampled,
         Epipolar(epipolar::EpipolarSettings) => Epipolar,
         Prefiltered(prefiltered::PrefilteredSettings) => Prefiltered,
+        Minmax(minmax::MinMaxSettings) => MinMax,
     ],
     cpu: [
         Reference(reference::ReferenceSettings),

@@ -14,6 +14,8 @@
 //! | `interleaved` | M = 4, 32 steps (2 per pixel) | M = 4, 64 steps (the default, 4 per pixel) | M = 2, 256 steps (64 per pixel) |
 //! | `subsampled` | factor 4, 32 steps | factor 4, 64 steps (the default) | factor 2, 256 steps |
 //! | `epipolar` | K = 16, 32 steps | K = 32, 64 steps (the default) | K = 64, 256 steps, growth 0.02, 5 taps |
+//! | `prefiltered` | 512² map, M = 16, 1 band | 1024² map, M = 32, 4 bands (the default) | 2048² map, M = 64, 8 bands |
+//! | `minmax` | 512² map, 16 light segments | 1024² map, 32 light segments (the default) | 2048² map, 128 light segments |
 //! | `reference` | 64 steps | 256 steps | 1024 steps (the default) |
 //!
 //! - **Fast** halves the steps of the defaults: visible banding in thin shafts, about half the
@@ -35,6 +37,7 @@ use crate::techniques::TechniqueSettings;
 use crate::techniques::brute_force::BruteForceSettings;
 use crate::techniques::epipolar::EpipolarSettings;
 use crate::techniques::interleaved::InterleavedSettings;
+use crate::techniques::minmax::MinMaxSettings;
 use crate::techniques::prefiltered::PrefilteredSettings;
 use crate::techniques::reference::ReferenceSettings;
 use crate::techniques::subsampled::SubsampledSettings;
@@ -83,6 +86,7 @@ impl Preset {
             "subsampled" => TechniqueSettings::Subsampled(self.subsampled()),
             "epipolar" => TechniqueSettings::Epipolar(self.epipolar()),
             "prefiltered" => TechniqueSettings::Prefiltered(self.prefiltered()),
+            "minmax" => TechniqueSettings::Minmax(self.minmax()),
             "reference" => TechniqueSettings::Reference(self.reference()),
             _ => return None,
         })
@@ -163,6 +167,26 @@ impl Preset {
         }
     }
 
+    /// `minmax`: a 512² / 1024² (the default) / 2048² rectified map — its resolution is what the
+    /// result is exact at —, 16 / 32 / 128 quadrature segments for spot and point lights, and the
+    /// epipole disc as `prefiltered`'s (32 / 64 / 256 steps, 16 pixels for `reference-like`).
+    pub fn minmax(self) -> MinMaxSettings {
+        let d = MinMaxSettings::default();
+        let (map, light_steps, radius) = match self {
+            Preset::Fast => (512, 16, d.epipole_radius),
+            Preset::Balanced => (d.map_size[0], d.light_steps, d.epipole_radius),
+            Preset::ReferenceLike => (2048, 128, 16),
+        };
+        MinMaxSettings {
+            map_size: [map, map],
+            light_steps,
+            epipole_radius: radius,
+            epipole_steps: self.steps(),
+            spot_steps: SpotSteps::ExactCone,
+            ..d
+        }
+    }
+
     /// `reference`: 64 / 256 / 1024 stratified steps (a quick look, a fair comparison, the
     /// default ground truth).
     pub fn reference(self) -> ReferenceSettings {
@@ -187,6 +211,7 @@ mod tests {
             TechniqueSettings::Subsampled(s) => s.steps,
             TechniqueSettings::Epipolar(s) => s.steps,
             TechniqueSettings::Prefiltered(s) => s.epipole_steps,
+            TechniqueSettings::Minmax(s) => s.epipole_steps,
             TechniqueSettings::Reference(s) => s.steps,
         }
     }
@@ -217,6 +242,7 @@ mod tests {
         assert_eq!(Preset::Balanced.interleaved(), InterleavedSettings::default());
         assert_eq!(Preset::Balanced.subsampled(), SubsampledSettings::default());
         assert_eq!(Preset::Balanced.epipolar(), EpipolarSettings::default());
+        assert_eq!(Preset::Balanced.minmax(), MinMaxSettings::default());
     }
 
     #[test]

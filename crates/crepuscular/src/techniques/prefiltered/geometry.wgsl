@@ -93,6 +93,16 @@ fn line_of_column(p: Params, col: f32) -> f32 {
     return column_unwarp(col / f32(p.ints.z), region_x(p, 1u), region_x(p, 2u));
 }
 
+// cpu.rs texel_depth: a texel's depth, with the volume bias added where the host rasterized
+// the projective map (the bias in world units along the light is bias/(x·(r₁ − r₀)) in depth).
+fn texel_depth(p: Params, stored: f32, col: u32) -> f32 {
+    if (p.ints2.w & 4u) != 0u && p.ints.x == 0u {
+        let x = line_of_column(p, f32(col) + 0.5);
+        return stored + p.epipole.z / (x * (p.ranges.w - p.ranges.z));
+    }
+    return stored;
+}
+
 const INF: f32 = 3.0e38;
 
 fn reference_distance(p: Params, rr: f32, row: u32, col: f32) -> f32 {

@@ -42,16 +42,23 @@ pub const GEOMETRY_WGSL: &str = include_str!("geometry.wgsl");
 pub const RECTIFY_WGSL: &str = include_str!("rectify.wgsl");
 /// Pass `prefilter` (its storage format is the `BASIS_FORMAT` placeholder).
 pub const PREFILTER_WGSL: &str = include_str!("prefilter.wgsl");
-/// Pass `evaluate`.
+/// Pass `evaluate` (without its `epipole` entry, [`EPIPOLE_WGSL`]).
 pub const EVALUATE_WGSL: &str = include_str!("evaluate.wgsl");
+/// Pass `epipole`, appended to the per-pixel pass of `prefiltered` and of `minmax`.
+pub const EPIPOLE_WGSL: &str = include_str!("epipole.wgsl");
+
+/// The per-pixel pass `evaluate` with the `epipole` entry appended.
+fn evaluate_wgsl() -> String {
+    format!("{EVALUATE_WGSL}\n{EPIPOLE_WGSL}")
+}
 
 /// The pass shaders: (name, source with the geometry prepended and the 8-bit format, entry).
 pub fn shaders() -> [(&'static str, String, &'static str); 4] {
     [
         ("prefiltered/rectify", pass_source(RECTIFY_WGSL, BasisPrecision::Unorm8), "rectify"),
         ("prefiltered/prefilter", pass_source(PREFILTER_WGSL, BasisPrecision::Unorm8), "prefilter"),
-        ("prefiltered/evaluate", pass_source(EVALUATE_WGSL, BasisPrecision::Unorm8), "evaluate"),
-        ("prefiltered/epipole", pass_source(EVALUATE_WGSL, BasisPrecision::Unorm8), "epipole"),
+        ("prefiltered/evaluate", pass_source(&evaluate_wgsl(), BasisPrecision::Unorm8), "evaluate"),
+        ("prefiltered/epipole", pass_source(&evaluate_wgsl(), BasisPrecision::Unorm8), "epipole"),
     ]
 }
 
@@ -180,6 +187,23 @@ fn storage_entry(
     }
 }
 
+/// The layout of pass `rectify` (also `minmax`'s): frame and pass uniforms, the shadow maps,
+/// the per-row reference rays, the rectified depth (storage), the lights.
+pub(crate) fn rectify_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    use wgpu::TextureViewDimension as D;
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("prefiltered rectify"),
+        entries: &[
+            pass::uniform_entry(0),
+            pass::uniform_entry(1),
+            pass::texture_entry(2, D::D2Array),
+            pass::storage_buffer_entry(3, true, None),
+            storage_entry(4, wgpu::TextureFormat::R32Float, D::D2),
+            pass::lights_entry(),
+        ],
+    })
+}
+
 fn prefilter_layout(device: &wgpu::Device, precision: BasisPrecision) -> wgpu::BindGroupLayout {
     use wgpu::TextureViewDimension as D;
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -204,17 +228,7 @@ impl Prefiltered {
         gpu.scoped("creating the prefiltered pipelines", || {
             use wgpu::TextureViewDimension as D;
             let device = &gpu.device;
-            let rectify_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("prefiltered rectify"),
-                entries: &[
-                    pass::uniform_entry(0),
-                    pass::uniform_entry(1),
-                    pass::texture_entry(2, D::D2Array),
-                    pass::storage_buffer_entry(3, true, None),
-                    storage_entry(4, wgpu::TextureFormat::R32Float, D::D2),
-                    pass::lights_entry(),
-                ],
-            });
+            let rectify_layout = rectify_layout(device);
             let prefilter_layout = prefilter_layout(device, settings.precision);
             let evaluate_layout = pass::frame_pass_layout_to(
                 device,
@@ -246,7 +260,7 @@ impl Prefiltered {
             };
             let rectify_pipeline = pipe("prefiltered/rectify.wgsl", RECTIFY_WGSL, "rectify", &rectify_layout);
             let prefilter_pipeline = pipe("prefiltered/prefilter.wgsl", PREFILTER_WGSL, "prefilter", &prefilter_layout);
-            let evaluate_src = pass::with_output(EVALUATE_WGSL, output);
+            let evaluate_src = pass::with_output(&evaluate_wgsl(), output);
             let evaluate_pipeline = pipe("prefiltered/evaluate.wgsl", &evaluate_src, "evaluate", &evaluate_layout);
             let epipole_pipeline = pipe("prefiltered/evaluate.wgsl", &evaluate_src, "epipole", &evaluate_layout);
             let sampler = |mode| {

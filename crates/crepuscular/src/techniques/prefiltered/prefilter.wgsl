@@ -15,14 +15,6 @@ fn band_value(i: u32) -> f32 {
     return rows[i];
 }
 
-fn texel_depth(p: Params, stored: f32, col: u32) -> f32 {
-    if (p.ints2.w & 4u) != 0u && p.ints.x == 0u {
-        let x = line_of_column(p, f32(col) + 0.5);
-        return stored + p.epipole.z / (x * (p.ranges.w - p.ranges.z));
-    }
-    return stored;
-}
-
 fn texel_weight(f: Frame, p: Params, row: u32, band: u32, channel: u32, col: u32) -> f32 {
     if (p.ints2.w & 1u) == 0u {
         return 1.0;

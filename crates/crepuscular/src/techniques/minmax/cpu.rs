@@ -1,0 +1,630 @@
+//! CPU mirror of `minmax`: the same arithmetic (f32) as build.wgsl and traverse.wgsl, function
+//! for function. Each pass is public so a test can compare it with its GPU twin, and
+//! [`linear_scan`] is the texel-by-texel walk the tree must reproduce.
+
+use super::settings::MinMaxSettings;
+use crate::error::Error;
+use crate::frame::{CpuFrame, FrameDesc};
+use crate::image::Image;
+use crate::integrand::light_incident;
+use crate::march::{light_reach, march_interval, mean_extinction, step_offset};
+use crate::model::segment_transmittance;
+use crate::stats::{PassTime, TechniqueStats};
+use crate::techniques::prefiltered::cpu::{in_epipole_disc, march_epipole, rectify, texel_depth};
+use crate::techniques::prefiltered::rectify::{Mode, Rectification, angle_between};
+use crate::techniques::prefiltered::{epipole_pixel, epipole_samples};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::f32::consts::PI;
+
+/// The offset of level `level` in a row of the tree (`2·width` entries per row): level k holds
+/// width/2^k nodes and starts after the levels below it, at 2·width − 2·width/2^k. Mirrors
+/// `level_offset` in build.wgsl.
+pub fn level_offset(width: u32, level: u32) -> usize {
+    (2 * width - ((2 * width) >> level)) as usize
+}
+
+/// Pass `build` (Chen et al. 2011 §3.1, "1D min-max mipmap"): per row of the rectified map,
+/// level 0 the texels' depths (with the volume bias where the host rasterized the map, as
+/// `prefiltered` adds it), each of the `levels` coarser levels the (min, max) of two children.
+/// `2·width` (min, max) pairs per row, row-major. Mirrors build.wgsl.
+pub fn build(rect: &Rectification, depth: &[f32], bias: Option<f32>, levels: u32) -> Vec<[f32; 2]> {
+    let w = rect.width as usize;
+    build_rows(rect.width, rect.height, levels, |row, c| texel_depth(rect, depth[row * w + c], c as u32, bias))
+}
+
+/// [`build`] from the level-0 depth of each (row, column).
+pub fn build_rows(width: u32, height: u32, levels: u32, texel: impl Fn(usize, usize) -> f32 + Sync) -> Vec<[f32; 2]> {
+    let w = width as usize;
+    let mut tree = vec![[0.0f32; 2]; 2 * w * height as usize];
+    tree.par_chunks_mut(2 * w).enumerate().for_each(|(row, nodes)| {
+        for c in 0..w {
+            let d = texel(row, c);
+            nodes[c] = [d, d];
+        }
+        for l in 1..=levels {
+            let (below, at) = (level_offset(width, l - 1), level_offset(width, l));
+            for i in 0..(w >> l) {
+                let (a, b) = (nodes[below + 2 * i], nodes[below + 2 * i + 1]);
+                nodes[at + i] = [a[0].min(b[0]), a[1].max(b[1])];
+            }
+        }
+    });
+    tree
+}
+
+/// What one view ray's walk did (the technique's stats add them up).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Walk {
+    /// Tree nodes visited.
+    pub nodes: u32,
+    /// Nodes found entirely lit (their span integrated).
+    pub lit: u32,
+    /// Nodes found entirely shadowed (their span skipped).
+    pub shadowed: u32,
+    /// 1 when the ray reached `max_nodes` and the rest of its row was not refined.
+    pub over_budget: u32,
+}
+
+/// The view ray's row (the nearest; wrapped when the slices cover the full circle). Mirrors
+/// `ray_row` in traverse.wgsl.
+pub fn ray_row(rect: &Rectification, row: f32) -> u32 {
+    let h = rect.height as i32;
+    let r = row.floor() as i32;
+    if rect.full_circle { r.rem_euclid(h) as u32 } else { r.clamp(0, h - 1) as u32 }
+}
+
+/// The walk of Chen et al. 2011 (§3.2) along row `row` of `tree` for a ray of normalised depth
+/// `z` over the column interval [`c_a`, `c_b`]: a node whose minimum is at least `z` is lit over
+/// its whole span, one whose maximum is below `z` is shadowed, any other is descended into
+/// (a texel is never mixed: its minimum is its maximum). After a span the walk moves to the next
+/// node and climbs while that node is a left child (the parent starts where it does), so a ray
+/// visits O(log width) nodes per change of visibility. `emit(c0, c1, v)` receives each
+/// non-shadowed span clipped to [c_a, c_b], in order, with its visibility v (1, or ½ for a mixed
+/// node left unrefined once `max_nodes` is reached). Mirrors `walk` in traverse.wgsl.
+#[allow(clippy::too_many_arguments)]
+pub fn walk(
+    tree: &[[f32; 2]],
+    width: u32,
+    levels: u32,
+    max_nodes: u32,
+    row: u32,
+    z: f32,
+    c_a: f32,
+    c_b: f32,
+    mut emit: impl FnMut(f32, f32, f32),
+) -> Walk {
+    let base = row as usize * 2 * width as usize;
+    let mut out = Walk::default();
+    let mut level = 0u32;
+    let mut i = (c_a.max(0.0) as u32).min(width - 1);
+    while level < levels && i % 2 == 0 {
+        i /= 2;
+        level += 1;
+    }
+    loop {
+        let start = i << level;
+        if start >= width || start as f32 >= c_b {
+            break;
+        }
+        let coarse = out.nodes >= max_nodes;
+        out.over_budget |= coarse as u32;
+        out.nodes += 1;
+        let [lo, hi] = tree[base + level_offset(width, level) + i as usize];
+        let c0 = (start as f32).max(c_a);
+        let c1 = (((i + 1) << level) as f32).min(c_b);
+        if z <= lo {
+            out.lit += 1;
+            emit(c0, c1, 1.0);
+        } else if z > hi {
+            out.shadowed += 1;
+        } else if coarse || level == 0 {
+            emit(c0, c1, 0.5);
+        } else {
+            level -= 1;
+            i *= 2;
+            continue;
+        }
+        i += 1;
+        while level < levels && i % 2 == 0 {
+            i /= 2;
+            level += 1;
+        }
+    }
+    out
+}
+
+/// The texel-by-texel walk (no tree): every column of a row of `width` texels the ray crosses,
+/// lit where the texel's depth (`texel(column)`) is at least the ray's. What [`walk`] must
+/// reproduce span for span (tests).
+pub fn linear_scan(
+    width: u32,
+    texel: impl Fn(u32) -> f32,
+    z: f32,
+    c_a: f32,
+    c_b: f32,
+    mut emit: impl FnMut(f32, f32, f32),
+) {
+    let mut c = (c_a.max(0.0) as u32).min(width - 1);
+    while c < width && (c as f32) < c_b {
+        if z <= texel(c) {
+            emit((c as f32).max(c_a), ((c + 1) as f32).min(c_b), 1.0);
+        }
+        c += 1;
+    }
+}
+
+/// The distance along the view ray of unit direction `dir` (at angle `theta` to the axis in the
+/// epipolar map) at which it crosses the boundary of column coordinate `col`: 0 at column 0
+/// (the camera's texel reaches back to it), infinite where it never does (a local light's line
+/// behind the ray). Projective: x = t·(dir·x̂); epipolar, directional: the distance from the axis
+/// is t·sin θ; epipolar, local: the angle ψ at the light, t = D·sin ψ / sin(θ + ψ) (law of
+/// sines in the camera–light–point triangle). Mirrors `column_distance` in traverse.wgsl.
+pub fn column_distance(rect: &Rectification, dir: Vec3, theta: f32, col: f32) -> f32 {
+    if col <= 0.0 {
+        return 0.0;
+    }
+    let c = rect.line_of_column(col);
+    match rect.mode {
+        Mode::Projective => c / dir.dot(rect.axes[0]).max(1e-6),
+        Mode::Epipolar if !rect.local => c / theta.sin().max(1e-6),
+        Mode::Epipolar => {
+            if theta + c >= PI - 1e-6 {
+                return f32::INFINITY;
+            }
+            rect.light_distance * c.sin() / (theta + c).sin().max(1e-9)
+        }
+    }
+}
+
+/// The in-scattering of the lit spans of one view ray, accumulated span by span in order.
+/// Directional light: σs·p·E·e^(−σt·t₀)·(1 − e^(−σt·(t₁ − t₀)))/σt per span, exact (the phase
+/// and E are constant along the ray; docs/MODEL.md §8). Spot and point: the ray's lit interval
+/// ([`march_interval`]) cut into `light_steps` segments; each segment's light, cone, texture
+/// and phase are evaluated once, at its transmittance-weighted midpoint, and multiply the exact
+/// transmittance integral of each lit piece of it. Mirrors `Spans` in traverse.wgsl.
+pub struct Spans<'a> {
+    desc: &'a FrameDesc,
+    dir: Vec3,
+    st: Vec3,
+    /// Directional: σs·p·E. Local: unused.
+    constant: Option<Vec3>,
+    /// Local: the lit interval, segment length, sample offset.
+    iv: (f32, f32),
+    delta: f32,
+    offset: f32,
+    /// The segment whose light is cached, and that light.
+    seg: Option<(u32, Vec3)>,
+    steps: u32,
+    /// The in-scattering so far.
+    pub sum: Vec3,
+}
+
+impl<'a> Spans<'a> {
+    /// The accumulator of the view ray of unit direction `dir` that ends at distance `s`.
+    pub fn new(desc: &'a FrameDesc, settings: &MinMaxSettings, dir: Vec3, s: f32) -> Self {
+        let st = desc.medium.extinction();
+        let fl = &desc.lights[0];
+        let mut out = Spans {
+            desc,
+            dir,
+            st,
+            constant: None,
+            iv: (0.0, 0.0),
+            delta: 0.0,
+            offset: 0.0,
+            seg: None,
+            steps: settings.light_steps,
+            sum: Vec3::ZERO,
+        };
+        if matches!(fl.light, crate::Light::Directional { .. }) {
+            let (l_in, wl) = light_incident(fl, &desc.medium, desc.camera.position);
+            out.constant = Some(desc.medium.scattering * desc.medium.phase.eval(wl.dot(-dir)) * l_in);
+            return out;
+        }
+        let cone = crate::march::SpotCone::of(&fl.light);
+        out.iv = march_interval(
+            cone.as_ref(),
+            light_reach(fl, &desc.medium),
+            desc.camera.position,
+            dir,
+            s,
+            settings.spot_steps,
+            settings.spot_denominator,
+        );
+        out.delta = (out.iv.1 - out.iv.0) / settings.light_steps as f32;
+        out.offset = step_offset(mean_extinction(desc), out.delta, 0.5);
+        out
+    }
+
+    /// Adds the span [t0, t1] (distances along the ray) with visibility `v`.
+    pub fn add(&mut self, t0: f32, t1: f32, v: f32) {
+        if let Some(c) = self.constant {
+            if t1 > t0 {
+                self.sum += c * v * (-self.st * t0).exp() * segment_transmittance(self.st, t1 - t0);
+            }
+            return;
+        }
+        let (mut a, b) = (t0.max(self.iv.0), t1.min(self.iv.1));
+        if !(b > a) || !(self.delta > 0.0) {
+            return;
+        }
+        let mut k = (((a - self.iv.0) / self.delta) as u32).min(self.steps - 1);
+        while a < b {
+            let seg_end = if k + 1 >= self.steps { self.iv.1 } else { self.iv.0 + (k + 1) as f32 * self.delta };
+            let end = b.min(seg_end);
+            if end > a {
+                let f = self.segment_light(k);
+                self.sum += f * v * (-self.st * a).exp() * segment_transmittance(self.st, end - a);
+            }
+            a = end;
+            k += 1;
+            if k >= self.steps {
+                break;
+            }
+        }
+    }
+
+    /// σs·p·L_in of segment `k` at its sample point, cached while the walk stays in it.
+    fn segment_light(&mut self, k: u32) -> Vec3 {
+        if let Some((sk, f)) = self.seg
+            && sk == k
+        {
+            return f;
+        }
+        let t = self.iv.0 + k as f32 * self.delta + self.offset;
+        let p = self.desc.camera.position + self.dir * t;
+        let (l, wl) = light_incident(&self.desc.lights[0], &self.desc.medium, p);
+        let f = self.desc.medium.scattering * self.desc.medium.phase.eval(wl.dot(-self.dir)) * l;
+        self.seg = Some((k, f));
+        f
+    }
+}
+
+/// Merges adjacent spans of equal visibility before they are integrated (fewer exponentials,
+/// and an unbroken lit run integrates as one span). Mirrors the pending span in traverse.wgsl.
+pub struct Merge {
+    pending: Option<(f32, f32, f32)>,
+}
+
+impl Merge {
+    /// Nothing pending.
+    pub fn new() -> Self {
+        Self { pending: None }
+    }
+    /// Adds span [c0, c1] of visibility v; returns the finished span it closes, if any.
+    pub fn push(&mut self, c0: f32, c1: f32, v: f32) -> Option<(f32, f32, f32)> {
+        match self.pending {
+            Some((a, b, pv)) if b == c0 && pv == v => {
+                self.pending = Some((a, c1, v));
+                None
+            }
+            prev => {
+                self.pending = Some((c0, c1, v));
+                prev
+            }
+        }
+    }
+    /// The last span.
+    pub fn finish(self) -> Option<(f32, f32, f32)> {
+        self.pending
+    }
+}
+
+impl Default for Merge {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// One pixel: its ray into the rectified map (row, depth, the columns it crosses), the walk,
+/// and its in-scattering. Mirrors `shade` in traverse.wgsl.
+pub fn shade(
+    desc: &FrameDesc,
+    settings: &MinMaxSettings,
+    rect: &Rectification,
+    tree: &[[f32; 2]],
+    dir: Vec3,
+    s: f32,
+) -> (Vec3, Walk) {
+    let (row, c_b, _, z) = rect.rectify_point(desc.camera.position + dir * s, dir);
+    let theta = if rect.mode == Mode::Epipolar { angle_between(dir, rect.axes[2]) } else { 0.0 };
+    let mut spans = Spans::new(desc, settings, dir, s);
+    let mut merge = Merge::new();
+    let integrate = |span: Option<(f32, f32, f32)>, spans: &mut Spans| {
+        if let Some((c0, c1, v)) = span {
+            let t0 = column_distance(rect, dir, theta, c0).min(s);
+            let t1 = if c1 >= c_b { s } else { column_distance(rect, dir, theta, c1).min(s) };
+            spans.add(t0, t1, v);
+        }
+    };
+    let walk = walk(
+        tree,
+        rect.width,
+        settings.tree_levels(),
+        settings.max_nodes,
+        ray_row(rect, row),
+        z,
+        0.0,
+        c_b,
+        |c0, c1, v| {
+            let done = merge.push(c0, c1, v);
+            integrate(done, &mut spans);
+        },
+    );
+    integrate(merge.finish(), &mut spans);
+    (spans.sum, walk)
+}
+
+/// The outputs of every pass of one frame.
+#[derive(Clone, Debug)]
+pub struct Passes {
+    /// The rectification of the frame.
+    pub rect: Rectification,
+    /// The rectified shadow map: normalised depths, `width × height`, row-major.
+    pub depth: Vec<f32>,
+    /// The min-max tree ([`build`]).
+    pub tree: Vec<[f32; 2]>,
+    /// The in-scattering.
+    pub image: Image,
+    /// The walks' totals: rays, nodes, lit nodes, shadowed nodes, rays over budget, and the
+    /// most nodes one ray visited.
+    pub totals: WalkTotals,
+}
+
+/// The walks of a frame, added up.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WalkTotals {
+    /// Rays walked (pixels outside the epipole disc).
+    pub rays: u64,
+    /// Nodes visited, all rays.
+    pub nodes: u64,
+    /// The most nodes one ray visited.
+    pub max_nodes: u32,
+    /// Lit nodes (spans integrated).
+    pub lit: u64,
+    /// Shadowed nodes (spans skipped).
+    pub shadowed: u64,
+    /// Rays that reached `max_nodes`.
+    pub over_budget: u64,
+}
+
+impl WalkTotals {
+    fn add(&mut self, w: Walk) {
+        self.rays += 1;
+        self.nodes += w.nodes as u64;
+        self.max_nodes = self.max_nodes.max(w.nodes);
+        self.lit += w.lit as u64;
+        self.shadowed += w.shadowed as u64;
+        self.over_budget += w.over_budget as u64;
+    }
+    fn merge(mut self, o: WalkTotals) -> WalkTotals {
+        self.rays += o.rays;
+        self.nodes += o.nodes;
+        self.max_nodes = self.max_nodes.max(o.max_nodes);
+        self.lit += o.lit;
+        self.shadowed += o.shadowed;
+        self.over_budget += o.over_budget;
+        self
+    }
+}
+
+/// Pass `traverse`: every pixel outside the epipole disc shaded by [`shade`]. Mirrors
+/// traverse.wgsl.
+pub fn traverse(
+    frame: &CpuFrame,
+    settings: &MinMaxSettings,
+    rect: &Rectification,
+    tree: &[[f32; 2]],
+    epipole: Option<[f32; 2]>,
+) -> (Image, WalkTotals) {
+    let desc = frame.desc;
+    let w = desc.width as usize;
+    let mut image = Image::new(desc.width, desc.height);
+    let totals = image
+        .pixels
+        .par_chunks_mut(w)
+        .enumerate()
+        .map(|(y, line)| {
+            let mut t = WalkTotals::default();
+            for (x, out) in line.iter_mut().enumerate() {
+                let (x, y) = (x as u32, y as u32);
+                if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
+                    continue;
+                }
+                let dir = desc.pixel_ray(x, y);
+                let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
+                let (l, walk) = shade(desc, settings, rect, tree, dir, s);
+                t.add(walk);
+                *out = [l.x, l.y, l.z, 1.0];
+            }
+            t
+        })
+        .reduce(WalkTotals::default, WalkTotals::merge);
+    (image, totals)
+}
+
+/// Every pass of a frame; `host_depth` is a rectified map the host rasterized (projective frames
+/// only), else the shadow map is resampled (`prefiltered`'s pass `rectify`).
+pub fn passes(
+    frame: &CpuFrame,
+    settings: &MinMaxSettings,
+    host_depth: Option<&[f32]>,
+) -> Result<(Passes, Vec<PassTime>), Error> {
+    settings.validate()?;
+    let desc = frame.desc;
+    let mut times = vec![];
+    let mut timed = |name: &str, t: std::time::Instant| {
+        times.push(PassTime { name: name.into(), ms: t.elapsed().as_secs_f64() * 1e3 })
+    };
+    let t = std::time::Instant::now();
+    let rect = Rectification::new(desc, &settings.rectify_options());
+    let host = host_depth.filter(|_| rect.mode == Mode::Projective);
+    if let Some(d) = host
+        && d.len() != (rect.width * rect.height) as usize
+    {
+        return Err(Error::invalid("minmax host depth", d.len(), "must hold map_size[0]·map_size[1] texels"));
+    }
+    let depth = match host {
+        Some(d) => d.to_vec(),
+        None => rectify(frame, &rect),
+    };
+    timed("rectify", t);
+    let t = std::time::Instant::now();
+    let tree = build(&rect, &depth, host.map(|_| desc.lights[0].shadow_bias), settings.tree_levels());
+    timed("build", t);
+    let t = std::time::Instant::now();
+    let epipole = epipole_pixel(desc, settings.epipole_radius);
+    let (mut image, totals) = traverse(frame, settings, &rect, &tree, epipole);
+    timed("traverse", t);
+    if epipole.is_some() {
+        let t = std::time::Instant::now();
+        march_epipole(frame, &settings.rectified(), epipole, &mut image);
+        timed("epipole", t);
+    }
+    Ok((Passes { rect, depth, tree, image, totals }, times))
+}
+
+/// Renders `frame` on the CPU (one light); the result matches [`super::MinMax::encode`] up to
+/// f32 rounding where a ray's depth meets a texel's.
+pub fn render_with(
+    frame: &CpuFrame,
+    settings: &MinMaxSettings,
+    host_depth: Option<&[f32]>,
+) -> Result<(Image, TechniqueStats), Error> {
+    frame.desc.single_light()?;
+    let (p, times) = passes(frame, settings, host_depth)?;
+    let epipole = epipole_pixel(frame.desc, settings.epipole_radius);
+    let host = host_depth.is_some() && p.rect.mode == Mode::Projective;
+    let stats = TechniqueStats {
+        technique: "minmax".into(),
+        backend: "cpu".into(),
+        timing: "wall-clock".into(),
+        passes: times,
+        raymarched_samples: epipole_samples(frame.desc, &settings.rectified(), epipole),
+        gpu_memory_bytes: 0,
+        extra: super::stats_extra(settings, &p.rect, host, Some(&p.totals)),
+    };
+    Ok((p.image, stats))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic pseudo-random row set: runs of occluded and unoccluded texels of random
+    /// lengths and depths (a canopy), some rows empty (all 1.0).
+    fn rows(width: u32, height: u32, seed: u32) -> Vec<f32> {
+        let mut state = seed.wrapping_mul(2654435761).wrapping_add(1);
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            (state >> 8) as f32 / 16777216.0
+        };
+        let mut out = Vec::with_capacity((width * height) as usize);
+        for r in 0..height {
+            let mut c = 0;
+            while c < width {
+                let run = 1 + (next() * 24.0) as u32;
+                let d = if r % 7 == 3 || next() < 0.4 { 1.0 } else { next() };
+                for _ in 0..run.min(width - c) {
+                    out.push(if d < 1.0 { (d + 0.05 * next()).min(0.999) } else { 1.0 });
+                }
+                c += run;
+            }
+        }
+        out
+    }
+
+    /// Every node of every level bounds its span exactly: its (min, max) is the min and max of
+    /// the texels it covers, computed independently.
+    #[test]
+    fn every_node_bounds_its_span_exactly() {
+        let (w, h) = (256u32, 9u32);
+        let depth = rows(w, h, 7);
+        let levels = 8;
+        let tree = build_rows(w, h, levels, |r, c| depth[r * w as usize + c]);
+        for r in 0..h as usize {
+            for l in 0..=levels {
+                for i in 0..(w >> l) as usize {
+                    let span = &depth[r * w as usize + (i << l)..r * w as usize + ((i + 1) << l)];
+                    let lo = span.iter().copied().fold(f32::MAX, f32::min);
+                    let hi = span.iter().copied().fold(f32::MIN, f32::max);
+                    assert_eq!(
+                        tree[r * 2 * w as usize + level_offset(w, l) + i],
+                        [lo, hi],
+                        "row {r} level {l} node {i}"
+                    );
+                }
+            }
+        }
+    }
+
+    fn merged(mut f: impl FnMut(&mut dyn FnMut(f32, f32, f32))) -> Vec<(f32, f32, f32)> {
+        let mut m = Merge::new();
+        let mut out = vec![];
+        f(&mut |c0, c1, v| out.extend(m.push(c0, c1, v)));
+        out.extend(m.finish());
+        out
+    }
+
+    /// The tree walk finds exactly the lit spans of the texel-by-texel scan, at every number of
+    /// levels, for rays of every depth ending anywhere in the row; and it visits far fewer nodes
+    /// than the columns it covers.
+    #[test]
+    fn the_walk_equals_the_linear_scan_span_for_span() {
+        let (w, h) = (512u32, 12u32);
+        let depth = rows(w, h, 3);
+        let mut nodes_full = 0u64;
+        let mut columns = 0u64;
+        for levels in [0, 1, 3, 9] {
+            let tree = build_rows(w, h, levels, |r, c| depth[r * w as usize + c]);
+            for r in 0..h {
+                for (z, c_b) in [(0.0, 512.0), (0.3, 511.5), (0.5, 100.25), (0.95, 37.0), (1.0, 512.0), (0.62, 0.5)] {
+                    let texel = |c: u32| depth[(r * w + c) as usize];
+                    let scan = merged(|e| linear_scan(w, texel, z, 0.0, c_b, e));
+                    let mut walk_out = Walk::default();
+                    let tree_spans = merged(|e| walk_out = walk(&tree, w, levels, u32::MAX, r, z, 0.0, c_b, e));
+                    assert_eq!(tree_spans, scan, "levels {levels} row {r} z {z} end {c_b}");
+                    assert_eq!(walk_out.over_budget, 0);
+                    if levels == 9 {
+                        nodes_full += walk_out.nodes as u64;
+                        columns += c_b.ceil() as u64;
+                    }
+                }
+            }
+        }
+        assert!(nodes_full * 2 < columns, "the tree visited {nodes_full} nodes for {columns} columns");
+    }
+
+    /// With a node budget the walk stops refining: it still ends, visits at most the budget plus
+    /// one climb's worth of nodes, flags the ray, and every column it gives a visibility is one
+    /// the row allows (a mixed node counts ½, never a lit one as shadowed or the reverse).
+    #[test]
+    fn the_node_budget_bounds_the_walk() {
+        let (w, h) = (512u32, 4u32);
+        let depth = rows(w, h, 11);
+        let levels = 9;
+        let tree = build_rows(w, h, levels, |r, c| depth[r * w as usize + c]);
+        for budget in [1u32, 4, 16] {
+            for r in 0..h {
+                let z = 0.5;
+                let mut spans = vec![];
+                let walk_out = walk(&tree, w, levels, budget, r, z, 0.0, 512.0, |a, b, v| spans.push((a, b, v)));
+                let full = walk(&tree, w, levels, u32::MAX, r, z, 0.0, 512.0, |_, _, _| {});
+                assert!(walk_out.nodes <= budget + 2 * levels + 2, "budget {budget}: {} nodes", walk_out.nodes);
+                assert_eq!(walk_out.over_budget, (full.nodes > budget) as u32);
+                for (a, b, v) in spans {
+                    let cols = &depth[(r * w) as usize + a as usize..(r * w) as usize + b as usize];
+                    let lit = cols.iter().filter(|&&d| z <= d).count();
+                    match v {
+                        1.0 => assert_eq!(lit, cols.len()),
+                        0.5 => assert!(lit > 0 && lit < cols.len()),
+                        _ => panic!("visibility {v}"),
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,203 @@
+//! `minmax` against what it must equal (docs/MODEL.md §8): the closed form on an occluder-free
+//! frame at any map size and number of levels; a dense march through its own rectified map on a
+//! shadowed one (exact at the map's resolution); its GPU passes against the CPU mirror, pass by
+//! pass; and its settings' errors.
+
+mod common;
+
+use crepuscular::frame::FrameDesc;
+use crepuscular::gpu::{UploadedFrame, test_gpu};
+use crepuscular::model::segment_transmittance;
+use crepuscular::techniques::AnyGpuTechnique;
+use crepuscular::techniques::minmax::{MinMaxSettings, cpu};
+use crepuscular::testing::{gpu_render, half_plane_frame, wall_closed_form, wall_frame, wall_media};
+use crepuscular::{CpuFrame, Image, Light, ShadowMap, TechniqueSettings};
+use glam::Vec3;
+
+const W: u32 = 64;
+const H: u32 = 36;
+
+fn sun() -> Light {
+    Light::Directional {
+        direction: Vec3::new(0.3, -0.2, 1.0).normalize(),
+        color: Vec3::new(1.0, 0.9, 0.8),
+        intensity: 4.0,
+    }
+}
+
+fn cpu_frame<'a>(d: &'a FrameDesc, depth: &'a [f32], sm: &'a ShadowMap) -> CpuFrame<'a> {
+    CpuFrame { desc: d, depth, shadow_maps: std::slice::from_ref(sm), surface: None }
+}
+
+fn closed_form(desc: &FrameDesc) -> Image {
+    let mut img = Image::new(W, H);
+    for y in 0..H {
+        for x in 0..W {
+            let l = wall_closed_form(desc, x, y);
+            img.pixels[(y * W + x) as usize] = [l.x as f32, l.y as f32, l.z as f32, 1.0];
+        }
+    }
+    img
+}
+
+fn settings(map: [u32; 2], levels: u32) -> MinMaxSettings {
+    MinMaxSettings { map_size: map, levels, ..Default::default() }
+}
+
+/// With no occluder every ray is one lit span from the camera to the wall, integrated in
+/// closed form: the closed form at any map size and number of levels, up to f32 rounding.
+#[test]
+fn an_unshadowed_sun_is_the_closed_form_at_any_map_size() {
+    for m in wall_media() {
+        let (d, depth, sm) = wall_frame(sun(), m.clone(), W, H);
+        let exact = closed_form(&d);
+        for (map, levels) in [([8, 8], 0), ([64, 16], 6), ([1024, 1024], 13)] {
+            let (img, _) = cpu::render_with(&cpu_frame(&d, &depth, &sm), &settings(map, levels), None).unwrap();
+            let e = common::max_rel(&img, &exact, 1e-9);
+            assert!(e < 1e-4, "{m:?}, map {map:?}, {levels} levels: off the closed form by {e}");
+        }
+    }
+}
+
+#[test]
+fn an_unshadowed_sun_is_the_closed_form_on_the_gpu() {
+    let Some(gpu) = test_gpu("an_unshadowed_sun_is_the_closed_form_on_the_gpu") else { return };
+    for m in wall_media() {
+        let (d, depth, sm) = wall_frame(sun(), m.clone(), W, H);
+        let exact = closed_form(&d);
+        for (map, levels) in [([8, 8], 0), ([256, 64], 13)] {
+            let s = TechniqueSettings::Minmax(settings(map, levels));
+            let img = common::gpu_technique(&gpu, &cpu_frame(&d, &depth, &sm), s);
+            let e = common::max_rel(&img, &exact, 1e-9);
+            assert!(e < 1e-3, "{m:?}, map {map:?}: GPU off the closed form by {e}");
+        }
+    }
+}
+
+/// A point light with no occluder: the quadrature over the ray's lit interval converges as its
+/// segments grow (the light is evaluated once per segment, transmittance exactly).
+#[test]
+fn an_unshadowed_point_light_converges_with_its_segments() {
+    let lamp = Light::Point { position: Vec3::new(0.0, 12.0, -14.0), color: Vec3::new(1.0, 0.8, 0.6), intensity: 50.0 };
+    let m = wall_media()[0].clone();
+    let (d, depth, sm) = wall_frame(lamp, m, W, H);
+    let frame = cpu_frame(&d, &depth, &sm);
+    let (fine, _) =
+        cpu::render_with(&frame, &MinMaxSettings { light_steps: 1024, ..settings([256, 256], 13) }, None).unwrap();
+    let mut last = f32::MAX;
+    for steps in [4, 16, 64] {
+        let (img, _) =
+            cpu::render_with(&frame, &MinMaxSettings { light_steps: steps, ..settings([256, 256], 13) }, None).unwrap();
+        let e = common::max_rel(&img, &fine, 1e-9);
+        eprintln!("{steps} segments: {e}");
+        assert!(e < last, "the error must fall with more segments: {e} after {last}");
+        last = e;
+    }
+    // Measured 1.2e-4 (2026-12-02).
+    assert!(last < 3e-4, "64 segments: {last}");
+}
+
+/// On a shadowed frame (a sun over a half-plane), every pixel equals a dense march of its own
+/// ray through the same rectified map — each of 20 000 steps looks up the texel its midpoint
+/// falls in (nearest row, the column it crosses) and is lit where the texel's depth is at least
+/// the ray's —, i.e. minmax is exact at the map's resolution; the tree changes nothing
+/// (levels 0 and 10 give the same picture).
+#[test]
+fn a_shadowed_frame_equals_a_dense_march_on_its_own_map() {
+    let m = wall_media()[1].clone();
+    let (d, depth, sm, _) = half_plane_frame(m, 48, 27, 512);
+    let frame = cpu_frame(&d, &depth, &sm);
+    let s = MinMaxSettings { epipole_radius: 0, ..settings([512, 256], 10) };
+    let (p, _) = cpu::passes(&frame, &s, None).unwrap();
+    let (flat, _) = cpu::passes(&frame, &MinMaxSettings { levels: 0, ..s.clone() }, None).unwrap();
+    assert_eq!(p.image.pixels, flat.image.pixels, "the tree must not change the answer");
+    assert!(p.totals.nodes < flat.totals.nodes / 4, "tree {} nodes, linear {}", p.totals.nodes, flat.totals.nodes);
+    let r = &p.rect;
+    let st = d.medium.extinction();
+    let (l_in, wl) = crepuscular::integrand::light_incident(&d.lights[0], &d.medium, d.camera.position);
+    let (mut worst, mut shadowed_pixels) = (0.0f32, 0);
+    for y in (0..27).step_by(2) {
+        for x in (0..48).step_by(3) {
+            let dir = d.pixel_ray(x, y);
+            let s_end = d.view_distance(depth[(y * 48 + x) as usize], dir);
+            let (row, _, _, z) = r.rectify_point(d.camera.position + dir * s_end, dir);
+            let row = cpu::ray_row(r, row);
+            let f = d.medium.scattering * d.medium.phase.eval(wl.dot(-dir)) * l_in;
+            let n = 20_000;
+            let delta = s_end / n as f32;
+            let mut sum = Vec3::ZERO;
+            let mut dark = 0;
+            for i in 0..n {
+                let t = (i as f32 + 0.5) * delta;
+                let (_, col, _, _) = r.rectify_point(d.camera.position + dir * t, dir);
+                let c = (col as u32).min(r.width - 1);
+                let texel = p.tree[(row * 2 * r.width + c) as usize][0];
+                if z <= texel {
+                    sum += f * (-st * (i as f32 * delta)).exp() * segment_transmittance(st, delta);
+                } else {
+                    dark += 1;
+                }
+            }
+            shadowed_pixels += (dark > n / 10) as u32;
+            let got = p.image.pixels[(y * 48 + x) as usize];
+            let scale = f.max_element() * segment_transmittance(st, s_end).max_element();
+            let e = (0..3).map(|k| (got[k] - sum[k]).abs() / scale).fold(0.0, f32::max);
+            worst = worst.max(e);
+        }
+    }
+    eprintln!("worst {worst} of the unshadowed radiance over {shadowed_pixels} shadowed rays");
+    assert!(shadowed_pixels > 20, "the frame must have shadowed rays: {shadowed_pixels}");
+    assert!(worst < 5e-4, "off the dense march on its own map by {worst} of the unshadowed radiance");
+}
+
+/// The GPU passes against the CPU mirror: the tree built from the GPU's rectified map is the CPU
+/// build of that map, node for node; the rectified map itself, the picture and the walk counts
+/// agree up to f32 rounding where a texel's depth meets a ray's.
+#[test]
+fn the_gpu_passes_mirror_the_cpu() {
+    let Some(gpu) = test_gpu("the_gpu_passes_mirror_the_cpu") else { return };
+    let m = wall_media()[1].clone();
+    let (d, depth, sm, _) = half_plane_frame(m, 96, 54, 512);
+    let frame = cpu_frame(&d, &depth, &sm);
+    let s = settings([256, 128], 13);
+    let (p, _) = cpu::passes(&frame, &s, None).unwrap();
+    let up = UploadedFrame::new(&gpu, &frame).unwrap();
+    let out = gpu.create_output_texture(96, 54);
+    let (sc, stats) =
+        gpu_render(&gpu, TechniqueSettings::Minmax(s.clone()), &up.frame(&d), &out.create_view(&Default::default()))
+            .unwrap();
+    let AnyGpuTechnique::Minmax(t) = sc.technique() else { panic!("not minmax") };
+    let (g_depth, g_tree) = t.read_maps(&gpu).unwrap();
+    let off = g_depth.iter().zip(&p.depth).filter(|(a, b)| (*a - *b).abs() > 1e-4).count();
+    assert!(off * 1000 < g_depth.len(), "{off} of {} rectified texels differ", g_depth.len());
+    let rebuilt = cpu::build(&p.rect, &g_depth, None, s.tree_levels());
+    assert_eq!(g_tree.len(), rebuilt.len());
+    let first_off = g_tree.iter().zip(&rebuilt).position(|(a, b)| a != b);
+    assert!(first_off.is_none(), "tree node {first_off:?} differs from the CPU build of the GPU's map");
+    let img = gpu.read_image(&out).unwrap();
+    let peak = p.image.pixels.iter().map(|q| q[1]).fold(0.0f32, f32::max);
+    let bad = img.pixels.iter().zip(&p.image.pixels).filter(|(a, b)| (a[1] - b[1]).abs() > 1e-3 * peak).count();
+    assert!(bad * 100 < img.pixels.len(), "{bad} pixels differ by more than 0.1 % of the peak");
+    let nodes = stats.extra["nodes_per_ray"];
+    let cpu_nodes = p.totals.nodes as f64 / p.totals.rays as f64;
+    assert!((nodes - cpu_nodes).abs() < 0.01 * cpu_nodes, "GPU {nodes} nodes per ray, CPU {cpu_nodes}");
+    assert_eq!(stats.extra["rays"], p.totals.rays as f64);
+}
+
+/// Bad settings are refused with the setting and value named.
+#[test]
+fn bad_settings_name_the_setting() {
+    for (s, key) in [
+        (MinMaxSettings { map_size: [1000, 512], ..Default::default() }, "minmax.map_size"),
+        (MinMaxSettings { map_size: [1024, 4], ..Default::default() }, "minmax.map_size"),
+        (MinMaxSettings { levels: 14, ..Default::default() }, "minmax.levels"),
+        (MinMaxSettings { max_nodes: 0, ..Default::default() }, "minmax.max_nodes"),
+        (MinMaxSettings { light_steps: 0, ..Default::default() }, "minmax.light_steps"),
+        (MinMaxSettings { max_projective_angle: f32::NAN, ..Default::default() }, "minmax.max_projective_angle"),
+        (MinMaxSettings { spot_denominator: -1.0, ..Default::default() }, "minmax.spot_denominator"),
+    ] {
+        let e = s.validate().unwrap_err().to_string();
+        assert!(e.contains(key), "{e}");
+    }
+    assert!(MinMaxSettings::default().validate().is_ok());
+}

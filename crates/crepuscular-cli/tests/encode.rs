@@ -25,6 +25,7 @@ fn techniques(scene: &Scene) -> Vec<TechniqueSettings> {
         ("subsampled", &["steps=24"]),
         ("epipolar", &["slices=64", "samples=48"]),
         ("prefiltered", &["map_size=[128, 128]"]),
+        ("minmax", &["map_size=[128, 128]"]),
     ]
     .iter()
     .map(|(t, set)| {

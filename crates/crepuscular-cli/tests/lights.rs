@@ -29,6 +29,7 @@ fn techniques(scene: &Scene, fixed: bool) -> Vec<TechniqueSettings> {
         ("subsampled", vec!["steps=24", spot]),
         ("epipolar", vec!["slices=64", "samples=48"]),
         ("prefiltered", vec!["map_size=[128, 128]"]),
+        ("minmax", vec!["map_size=[128, 128]"]),
     ]
     .iter()
     .map(|(t, set)| {

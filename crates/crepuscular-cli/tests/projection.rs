@@ -43,6 +43,7 @@ fn techniques(scene: &Scene) -> Vec<TechniqueSettings> {
         ("subsampled", &["steps=32"]),
         ("epipolar", &["slices=64", "samples=64"]),
         ("prefiltered", &["map_size=[128, 128]"]),
+        ("minmax", &["map_size=[128, 128]"]),
         ("reference", &["steps=64"]),
     ]
     .iter()

@@ -34,10 +34,19 @@ const H: u32 = 36;
 /// two backends differ in f32 rounding there). The sweep found prefiltered taking the projective
 /// map with the sun on a screen corner (NMAE 1.00 CPU, 2.94 llvmpipe); the projective map is now
 /// refused within 0.1 NDC of the screen (0.09 there). docs/ROBUSTNESS.md has the full table.
+/// minmax 0.42 on both backends (2026-12-02), in the extreme medium (σt = 5 m⁻¹: the
+/// in-scattering comes from the first metre of each ray, where the visibility is that of the
+/// rectified map's first columns, at its resolution).
 /// Every bound is below 1.0, the NMAE of a black picture wherever the reference is visible
 /// (interleaved's and subsampled's were 1.1 until 2026-12-02: a black output passed them).
-const MAX_NMAE: &[(&str, f64)] =
-    &[("brute-force", 0.35), ("interleaved", 0.98), ("subsampled", 0.95), ("epipolar", 0.35), ("prefiltered", 0.85)];
+const MAX_NMAE: &[(&str, f64)] = &[
+    ("brute-force", 0.35),
+    ("interleaved", 0.98),
+    ("subsampled", 0.95),
+    ("epipolar", 0.35),
+    ("prefiltered", 0.85),
+    ("minmax", 0.55),
+];
 
 fn bound(technique: &str) -> f64 {
     MAX_NMAE

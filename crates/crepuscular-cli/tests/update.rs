@@ -77,6 +77,15 @@ fn settings_changed_in_place_render_what_a_fresh_runner_renders() {
                 &["map_size=[128, 128]"],
             ],
         ),
+        (
+            "minmax",
+            &[
+                &["map_size=[128, 128]"],
+                &["map_size=[64, 32]"],
+                &["map_size=[128, 128]", "max_nodes=2"],
+                &["map_size=[128, 128]"],
+            ],
+        ),
     ];
     for scene_name in ["colonnade", "stained-glass"] {
         let scene = small(scene_name);
@@ -117,6 +126,7 @@ fn stats_off_renders_the_same_image_without_timing_or_readbacks() {
             ("subsampled", &[]),
             ("epipolar", &["slices=64", "samples=64"]),
             ("prefiltered", &["map_size=[128, 128]"]),
+            ("minmax", &["map_size=[128, 128]"]),
         ] {
             let choice = parse(technique, &scene, set);
             let mut runner = scattering(&gpu, &choice).unwrap().expect("a GPU technique");
@@ -148,6 +158,12 @@ fn stats_off_renders_the_same_image_without_timing_or_readbacks() {
                     assert_eq!(os.raymarched_samples, ms.raymarched_samples)
                 }
                 // The grid only: without the re-marched pixels, which only the GPU counts.
+                // The epipole disc's samples are known on the CPU; the walks are counted on
+                // the GPU only.
+                "minmax" => {
+                    assert_eq!(os.raymarched_samples, ms.raymarched_samples);
+                    assert!(!os.extra.contains_key("nodes_per_ray") && ms.extra.contains_key("nodes_per_ray"));
+                }
                 "subsampled" => {
                     assert!(os.raymarched_samples <= ms.raymarched_samples && os.raymarched_samples > 0);
                     assert!(!os.extra.contains_key("remarched_pixels") && ms.extra.contains_key("remarched_pixels"));

@@ -77,6 +77,7 @@ fn view_renders_frames_under_xvfb_and_saves_the_scene_image() {
         ("brute-force", "colonnade", None),
         ("epipolar", "cage", None),
         ("prefiltered", "forest", Some("map_size=[256, 256]")),
+        ("minmax", "stained-glass", Some("map_size=[256, 256]")),
         // Several lights (six lamps, a lantern and the moon): one march for all of them.
         ("brute-force", "night-street", None),
     ] {

@@ -174,7 +174,7 @@ pub fn abs_error_heatmap(reference: &Image, test: &Image) -> Result<Vec<u8>> {
 
 /// Magma-like colour ramp for `v` in `[0, 1]`: piecewise-linear through matplotlib's magma
 /// sampled at eighths (0, 1/8, …, 1). Values outside are clamped; NaN gives the top colour.
-fn magma_ramp(v: f32) -> [u8; 3] {
+pub fn magma_ramp(v: f32) -> [u8; 3] {
     const STOPS: [[f32; 3]; 9] = [
         [0.0, 0.0, 4.0],
         [28.0, 16.0, 68.0],

@@ -5,7 +5,7 @@ use anyhow::{Context, Result, bail};
 use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::GpuContext;
 use crepuscular::stats::{PassTime, TechniqueStats};
-use crepuscular::techniques::{epipolar, interleaved, prefiltered};
+use crepuscular::techniques::{epipolar, interleaved, minmax, prefiltered};
 use crepuscular::tonemap::composite;
 use crepuscular::{
     AnyGpuTechnique, Composite, CompositeInputs, CompositeTarget, CpuFrame, GpuFrame, Image, Scattering, StatsMode,
@@ -405,6 +405,10 @@ pub enum DebugView {
     /// `prefiltered`: the prefiltered average visibility of every pixel's ray (Listing 4), the
     /// ray-marched epipole disc (§5) in red.
     Visibility,
+    /// `minmax`: the tree nodes each pixel's walk visits (Chen et al. 2011: the cost follows the
+    /// changes of visibility along the ray), magma from 0 (black) to the frame's most (pale
+    /// yellow), the ray-marched epipole disc in red.
+    Nodes,
 }
 
 impl DebugView {
@@ -417,6 +421,7 @@ impl DebugView {
             DebugView::RectifiedMap => "rectified-map",
             DebugView::Basis => "basis",
             DebugView::Visibility => "visibility",
+            DebugView::Nodes => "nodes",
         }
     }
 
@@ -426,6 +431,7 @@ impl DebugView {
             TechniqueSettings::Epipolar(_) => &[DebugView::Classification, DebugView::Radiance],
             TechniqueSettings::Interleaved(_) => &[DebugView::Pattern],
             TechniqueSettings::Prefiltered(_) => &[DebugView::RectifiedMap, DebugView::Basis, DebugView::Visibility],
+            TechniqueSettings::Minmax(_) => &[DebugView::Nodes],
             _ => &[],
         }
     }
@@ -468,6 +474,9 @@ pub fn debug_view(
     }
     if let TechniqueSettings::Prefiltered(s) = technique {
         return prefiltered_debug_view(scene, gpu, s, view);
+    }
+    if let TechniqueSettings::Minmax(s) = technique {
+        return minmax_debug_view(scene, gpu, s);
     }
     let TechniqueSettings::Epipolar(settings) = technique else {
         bail!("--debug {}: not a debug view of `{}`", view.name(), technique.name());
@@ -556,7 +565,49 @@ fn prefiltered_debug_view(
     })
 }
 
+/// `minmax`'s `nodes` view: the frame rendered on the backend (with the host's rectified raster
+/// where the rectification is projective), its rectified map and tree read back, every pixel's
+/// walk counted on the CPU over them.
+fn minmax_debug_view(scene: &Scene, gpu: Option<&GpuContext>, settings: &minmax::MinMaxSettings) -> Result<Image> {
+    let desc = debug_desc(scene);
+    let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
+    let rect = prefiltered::Rectification::new(&desc, &settings.rectify_options());
+    let (depth, tree) = match gpu {
+        Some(gpu) => {
+            let host = GpuHost::for_scene(gpu, &scene)?;
+            let tex = host.render(gpu, &desc)?;
+            let mut runner = Scattering::from_gpu(gpu, TechniqueSettings::Minmax(settings.clone()))?
+                .with_stats(tool_stats_mode(gpu))?;
+            let out = gpu.create_output_texture(desc.width, desc.height);
+            let views = tex.views();
+            render_gpu(&mut runner, Some(&host), &views.frame(&desc), &out.create_view(&Default::default()))?;
+            let AnyGpuTechnique::Minmax(t) = runner.technique() else { unreachable!("built above") };
+            (gpu.read_texture_f32(&tex.depth, 0)?, t.read_maps(gpu)?.1)
+        }
+        None => {
+            let frame =
+                CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
+            let raster = rect.raster().map(|r| crepuscular_scene::raster::rasterize_rectified(&scene.geometry, &r));
+            (h.depth.clone(), minmax::cpu::passes(&frame, settings, raster.as_deref())?.0.tree)
+        }
+    };
+    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &h.shadow_maps, surface: None };
+    let epipole = prefiltered::epipole_pixel(&desc, settings.epipole_radius);
+    let nodes = minmax::cpu::walk_nodes(&frame, settings, &rect, &tree, epipole);
+    let most = nodes.iter().copied().filter(|&n| n != u32::MAX).max().unwrap_or(1).max(1);
+    let mut img = Image::new(desc.width, desc.height);
+    for (p, &n) in img.pixels.iter_mut().zip(&nodes) {
+        *p = if n == u32::MAX {
+            [1.0, 0.0, 0.0, 1.0]
+        } else {
+            let c = crate::metrics::magma_ramp(n as f32 / most as f32);
+            [c[0] as f32 / 255.0, c[1] as f32 / 255.0, c[2] as f32 / 255.0, 1.0]
+        };
+    }
+    Ok(img)
+}
+
 /// "epipolar: classification, radiance; interleaved: pattern" — for error messages and help.
 pub fn debug_view_list() -> &'static str {
-    "debug views: epipolar — classification, radiance; interleaved — pattern; prefiltered — rectified-map, basis, visibility"
+    "debug views: epipolar — classification, radiance; interleaved — pattern; prefiltered — rectified-map, basis, visibility; minmax — nodes"
 }

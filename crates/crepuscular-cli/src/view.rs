@@ -1317,6 +1317,7 @@ impl Viewer {
                     DebugView::RectifiedMap => "prefiltered: the rectified shadow map (rows = epipolar slices)",
                     DebugView::Basis => "prefiltered: filtered-basis layer 0 (bases 0–2 as RGB)",
                     DebugView::Visibility => "prefiltered: average visibility per pixel (epipole disc red)",
+                    DebugView::Nodes => "minmax: tree nodes each pixel's walk visits (epipole disc red)",
                 };
                 if ui.button(view.name()).on_hover_text(tip).clicked() {
                     self.pending.push(Action::Debug(view));

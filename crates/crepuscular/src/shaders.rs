@@ -23,6 +23,7 @@ pub fn all_library_shaders() -> Vec<(&'static str, String)> {
     ]);
     v.extend(epipolar::SHADERS.iter().map(|(n, s, _)| (*n, compose(&epipolar::pass_source(s)))));
     v.extend(crate::techniques::prefiltered::shaders().into_iter().map(|(n, s, _)| (n, compose(&s))));
+    v.push(("epipolar/march_minmax", compose(&epipolar::march_minmax_source())));
     v.extend(crate::techniques::minmax::shaders().into_iter().map(|(n, s, _)| (n, compose(&s))));
     v.push(("composite", compose(crate::composite::COMPOSITE_WGSL)));
     v.push(("light_sum", compose(include_str!("shaders/light_sum.wgsl"))));

@@ -777,6 +777,35 @@ pub fn prefiltered_desc(desc: &FrameDesc, level: u32) -> Option<FrameDesc> {
 
 // ---- the frame ----
 
+/// Mirrors march_minmax.wgsl (`march = "minmax"`): every pixel of `list` walks its ray through
+/// the min-max tree `tree` of rectification `rect` (`minmax`'s `shade`) into the marched
+/// texture, as [`march`] does with steps.
+pub fn march_minmax(
+    frame: &CpuFrame,
+    settings: &crate::techniques::minmax::MinMaxSettings,
+    rect: &crate::techniques::prefiltered::Rectification,
+    tree: &[[f32; 2]],
+    list: &[u32],
+) -> Image {
+    let desc = frame.desc;
+    let values: Vec<(usize, [f32; 4])> = list
+        .par_iter()
+        .map(|&pixel| {
+            let (x, y) = (pixel % desc.width, pixel / desc.width);
+            let dir = desc.pixel_ray(x, y);
+            let s = desc.view_distance(frame.depth[pixel as usize], dir);
+            let (l, _) = crate::techniques::minmax::cpu::shade(desc, settings, rect, tree, dir, s);
+            (pixel as usize, [l.x, l.y, l.z, s])
+        })
+        .collect();
+    let mut out =
+        Image { width: desc.width, height: desc.height, pixels: vec![[0.0; 4]; (desc.width * desc.height) as usize] };
+    for (i, v) in values {
+        out.pixels[i] = v;
+    }
+    out
+}
+
 /// Every pass, timed by wall clock, with the same stats as the GPU side.
 pub fn render(frame: &CpuFrame, settings: &EpipolarSettings) -> Result<(Image, TechniqueStats), Error> {
     render_with_debug(frame, settings).map(|(img, stats, _)| (img, stats))
@@ -808,9 +837,27 @@ pub fn render_with_debug(
     let start = std::time::Instant::now();
     let refined = refine(desc, &p, &lines, &coords);
     timed("refine", start);
-    let start = std::time::Instant::now();
-    let marched = march(&march_frame, &p, &refined.list);
-    timed("march", start);
+    let minmax = settings.march == super::EpipolarMarch::Minmax;
+    let marched = if minmax {
+        // The tree (minmax's passes `rectify` and `build`), then the walk per sample.
+        let mm = settings.minmax();
+        let start = std::time::Instant::now();
+        let rect = crate::techniques::prefiltered::Rectification::new(desc, &mm.rectify_options());
+        let depth = crate::techniques::prefiltered::cpu::rectify(frame, &rect);
+        timed("rectify", start);
+        let start = std::time::Instant::now();
+        let tree = crate::techniques::minmax::cpu::build(&rect, &depth, None, mm.tree_levels());
+        timed("build", start);
+        let start = std::time::Instant::now();
+        let marched = march_minmax(&march_frame, &mm, &rect, &tree, &refined.list);
+        timed("march", start);
+        marched
+    } else {
+        let start = std::time::Instant::now();
+        let marched = march(&march_frame, &p, &refined.list);
+        timed("march", start);
+        marched
+    };
     let start = std::time::Instant::now();
     let radiance = interpolate(desc, &p, &coords, &refined.interp, &marched);
     timed("interpolate", start);
@@ -824,7 +871,7 @@ pub fn render_with_debug(
         backend: "cpu".into(),
         timing: "wall-clock".into(),
         passes,
-        raymarched_samples: (marched_n + remarched) * p.steps as u64,
+        raymarched_samples: (if minmax { remarched } else { marched_n + remarched }) * p.steps as u64,
         gpu_memory_bytes: 0,
         extra: stats_extra(&p, (desc.width, desc.height), valid, marched_n, remarched, refined.sample_texels),
     };

@@ -100,6 +100,20 @@ pub const LINES_WGSL: &str = include_str!("lines.wgsl");
 pub const REFINE_WGSL: &str = include_str!("refine.wgsl");
 /// Pass `march` (entry `march`).
 pub const MARCH_WGSL: &str = include_str!("march.wgsl");
+/// Pass `march` with `march = "minmax"` (entry `march`): composed with the rectification's
+/// geometry and minmax's walk instead of the epipolar geometry ([`march_minmax_source`]).
+pub const MARCH_MINMAX_WGSL: &str = include_str!("march_minmax.wgsl");
+
+/// The min-max march's source: prefiltered/geometry.wgsl + minmax/walk.wgsl + the pass
+/// (common.wgsl is added by [`crate::shaders::compose`]).
+pub fn march_minmax_source() -> String {
+    use crate::techniques::{minmax, prefiltered};
+    prefiltered::pass_source(
+        &format!("{}\n{MARCH_MINMAX_WGSL}", minmax::WALK_WGSL),
+        prefiltered::BasisPrecision::Unorm8,
+    )
+}
+
 /// Pass `interpolate` (entry `interpolate`).
 pub const INTERPOLATE_WGSL: &str = include_str!("interpolate.wgsl");
 /// Pass `upsample` (entry `upsample`).
@@ -381,6 +395,28 @@ pub struct EpipolarSettings {
     pub spot_steps: SpotSteps,
     /// The App. B denominator of the `appendix-b-*` policies, in (0, 1]. Default 0.3.
     pub spot_denominator: f32,
+    /// How each ray-march sample integrates its ray: `"steps"` (default: `steps` fixed steps,
+    /// as `brute-force`) or `"minmax"` — the walk of `minmax` through a min-max tree on a
+    /// rectified shadow map of `minmax_map_size` (Yusov 2013 combines epipolar sampling with
+    /// Chen et al. 2011's 1D min-max mipmaps in exactly this way): exact at that map's
+    /// resolution, no step count, its cost the tree's build (once per frame) plus nodes per
+    /// sample instead of `steps` lookups. The re-marched pixels (epipole, fallback) keep their
+    /// `steps`; a spot or point light's quadrature takes `steps` segments.
+    pub march: EpipolarMarch,
+    /// The rectified map of `march = "minmax"`, [columns, rows] (columns a power of two, as
+    /// `minmax.map_size`). Memory: 20 bytes per texel. Default [1024, 1024].
+    pub minmax_map_size: [u32; 2],
+}
+
+/// How `epipolar` integrates the ray of each ray-march sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EpipolarMarch {
+    /// `steps` fixed steps over the spot-step policy's interval (Engelhardt & Dachsbacher 2010).
+    #[default]
+    Steps,
+    /// The min-max walk of `minmax` (Chen et al. 2011; Yusov 2013).
+    Minmax,
 }
 
 impl Default for EpipolarSettings {
@@ -405,6 +441,8 @@ impl Default for EpipolarSettings {
             frame_index: 0,
             spot_steps: SpotSteps::ExactCone,
             spot_denominator: DEFAULT_SPOT_DENOMINATOR,
+            march: EpipolarMarch::Steps,
+            minmax_map_size: [1024, 1024],
         }
     }
 }
@@ -485,7 +523,29 @@ impl EpipolarSettings {
         if !(1..=4096).contains(&self.steps) {
             return Err(Error::invalid("epipolar.steps", self.steps, "must be in 1..=4096"));
         }
+        let [w, h] = self.minmax_map_size;
+        if !(8..=8192).contains(&w) || !w.is_power_of_two() || !(8..=8192).contains(&h) {
+            return Err(Error::invalid(
+                "epipolar.minmax_map_size",
+                format!("[{w}, {h}]"),
+                "columns must be a power of two in 8..=8192, rows in 8..=8192",
+            ));
+        }
         validate_spot_denominator("epipolar.spot_denominator", self.spot_denominator)
+    }
+
+    /// The min-max tree's settings for `march = "minmax"`: `minmax_map_size`, `steps` quadrature
+    /// segments for local lights, this technique's spot-step policy; no epipole disc (the
+    /// upsampling re-marches those pixels).
+    pub fn minmax(&self) -> crate::techniques::minmax::MinMaxSettings {
+        crate::techniques::minmax::MinMaxSettings {
+            map_size: self.minmax_map_size,
+            light_steps: self.steps.min(1024),
+            spot_steps: self.spot_steps,
+            spot_denominator: self.spot_denominator,
+            epipole_radius: 0,
+            ..Default::default()
+        }
     }
 
     /// (slices, samples) for a `width`×`height` image: the settings, or where they are unset
@@ -718,6 +778,30 @@ pub struct Epipolar {
     prefiltered: Option<Prefiltered>,
     last_params: Option<EpipolarParams>,
     binds: pass::BindCache<Binds>,
+    /// `march = "minmax"`: the tree and the walk's pipeline, built on the first such frame.
+    minmax: Option<MinmaxMarch>,
+}
+
+/// What `march = "minmax"` adds: the min-max tree of the frame and the march that walks it.
+struct MinmaxMarch {
+    tree: crate::techniques::minmax::TreeBuilder,
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+    binds: pass::BindCache<wgpu::BindGroup>,
+}
+
+impl MinmaxMarch {
+    fn new(device: &wgpu::Device) -> Self {
+        use pass::storage_buffer_entry as buf;
+        let layout = pass::frame_pass_layout(
+            device,
+            "epipolar march (minmax)",
+            &[buf(6, true, None), buf(7, true, Some(4)), buf(8, true, Some(16))],
+        );
+        let pipeline =
+            pass::compute_pipeline(device, "epipolar/march_minmax.wgsl", &march_minmax_source(), "march", &layout);
+        Self { tree: crate::techniques::minmax::TreeBuilder::new(device), layout, pipeline, binds: Default::default() }
+    }
 }
 
 /// The bind groups of one frame's passes (`prefilter` only with a prefiltered spot texture).
@@ -888,6 +972,7 @@ impl Epipolar {
                 prefiltered: None,
                 last_params: None,
                 binds: Default::default(),
+                minmax: None,
             }
         })
     }
@@ -905,6 +990,7 @@ impl Epipolar {
             + 16
             + self.sized.as_ref().map_or(0, Sized::bytes)
             + pre
+            + self.minmax.as_ref().map_or(0, |m| m.tree.gpu_memory_bytes())
     }
 
     /// The coordinate texture of the last frame (`Rgba32Float`, `samples` × `slices`: p.x,
@@ -1190,12 +1276,51 @@ impl Epipolar {
             pass.set_pipeline(&p.args);
             pass.dispatch_workgroups(1, 1, 1);
         })?;
-        rec.pass("march", |enc, ts| {
-            let mut pass = compute_pass(enc, "epipolar march", ts);
-            pass.set_pipeline(&p.march);
-            pass.set_bind_group(0, march_bind, &[]);
-            pass.dispatch_workgroups_indirect(&self.indirect, 0);
-        })?;
+        let minmax_march = s.march == EpipolarMarch::Minmax;
+        if minmax_march {
+            // The tree (minmax's `rectify` and `build`), then the walk per listed pixel.
+            let mm = self.minmax.get_or_insert_with(|| MinmaxMarch::new(&gpu.device));
+            let march_frame = GpuFrame { spot_textures: Some(march_spot), ..*frame };
+            mm.tree.encode(gpu, rec, &march_frame, &s.minmax(), &self.buffers)?;
+            let tree = mm.tree.tree().expect("built by encode").clone();
+            let mut key = pass::frame_key(frame, marched);
+            key.extend([Bound::Buffer(tree.clone()), Bound::View(march_spot.clone())]);
+            if !mm.binds.is_current(&key) {
+                let group = gpu.scoped("binding the epipolar min-max march", || {
+                    let e = |binding, resource| wgpu::BindGroupEntry { binding, resource };
+                    let mut me =
+                        pass::frame_pass_bindings(&self.buffers, mm.tree.params_buffer(), frame, &self.white, marched)
+                            .to_vec();
+                    me[4] = e(4, wgpu::BindingResource::TextureView(march_spot));
+                    me[6] = pass::lights_binding(&self.march_lights);
+                    me.extend([
+                        e(6, tree.as_entire_binding()),
+                        e(7, sized.list.as_entire_binding()),
+                        e(8, self.counters.as_entire_binding()),
+                    ]);
+                    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some("epipolar march (minmax)"),
+                        layout: &mm.layout,
+                        entries: &me,
+                    })
+                })?;
+                mm.binds.store(key, group);
+            }
+            let (pipeline, bind) = (&mm.pipeline, mm.binds.value());
+            rec.pass("march", |enc, ts| {
+                let mut pass = compute_pass(enc, "epipolar march (minmax)", ts);
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, bind, &[]);
+                pass.dispatch_workgroups_indirect(&self.indirect, 0);
+            })?;
+        } else {
+            rec.pass("march", |enc, ts| {
+                let mut pass = compute_pass(enc, "epipolar march", ts);
+                pass.set_pipeline(&p.march);
+                pass.set_bind_group(0, march_bind, &[]);
+                pass.dispatch_workgroups_indirect(&self.indirect, 0);
+            })?;
+        }
         let groups = [samples.div_ceil(8), slices.div_ceil(8), 1];
         rec.dispatch("interpolate", "epipolar interpolate", &p.interpolate, interpolate_bind, groups)?;
         rec.pass("upsample", |enc, ts| {
@@ -1211,7 +1336,8 @@ impl Epipolar {
         rec.read_counters(&self.counters, move |data, stats| {
             let v: &[u32] = bytemuck::cast_slice(&data[..16]);
             let [marched_n, remarched, valid_lines, sample_texels] = [v[0], v[1], v[2], v[3]].map(u64::from);
-            stats.raymarched_samples = (marched_n + remarched) * steps;
+            // The min-max march walks its samples instead of stepping them.
+            stats.raymarched_samples = (if minmax_march { remarched } else { marched_n + remarched }) * steps;
             stats.extra = stats_extra(&params, (w, h), valid_lines, marched_n, remarched, sample_texels);
         });
         let mut extra = stats_extra(&params, (w, h), 0, 0, 0, 0);

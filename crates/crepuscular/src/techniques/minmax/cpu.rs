@@ -444,6 +444,33 @@ pub fn traverse(
     (image, totals)
 }
 
+/// The nodes each pixel's walk visits (`u32::MAX` in the epipole disc, which is ray-marched):
+/// what the `nodes` debug view draws. Row-major, the frame's size.
+pub fn walk_nodes(
+    frame: &CpuFrame,
+    settings: &MinMaxSettings,
+    rect: &Rectification,
+    tree: &[[f32; 2]],
+    epipole: Option<[f32; 2]>,
+) -> Vec<u32> {
+    let desc = frame.desc;
+    let w = desc.width as usize;
+    let mut out = vec![0u32; w * desc.height as usize];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, line)| {
+        for (x, n) in line.iter_mut().enumerate() {
+            let (x, y) = (x as u32, y as u32);
+            *n = if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
+                u32::MAX
+            } else {
+                let dir = desc.pixel_ray(x, y);
+                let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
+                shade(desc, settings, rect, tree, dir, s).1.nodes
+            };
+        }
+    });
+    out
+}
+
 /// Every pass of a frame; `host_depth` is a rectified map the host rasterized (projective frames
 /// only), else the shadow map is resampled (`prefiltered`'s pass `rectify`).
 pub fn passes(

@@ -38,11 +38,13 @@ use std::collections::BTreeMap;
 
 /// Pass `build`.
 pub const BUILD_WGSL: &str = include_str!("build.wgsl");
-/// Pass `traverse` (the `epipole` entry is appended from prefiltered/epipole.wgsl).
+/// The walk and its integration (`shade`), shared by `traverse` and epipolar's min-max march.
+pub const WALK_WGSL: &str = include_str!("walk.wgsl");
+/// Pass `traverse` (the walk and the `epipole` entry of prefiltered/epipole.wgsl appended).
 pub const TRAVERSE_WGSL: &str = include_str!("traverse.wgsl");
 
 fn traverse_wgsl() -> String {
-    format!("{TRAVERSE_WGSL}\n{EPIPOLE_WGSL}")
+    format!("{WALK_WGSL}\n{TRAVERSE_WGSL}\n{EPIPOLE_WGSL}")
 }
 
 /// The pass shaders: (name, source with the rectification's geometry prepended, entry).
@@ -110,7 +112,7 @@ pub(crate) fn stats_extra(
     m
 }
 
-/// The technique's own buffers and textures, reallocated when the map size changes.
+/// The rectified map and its tree, reallocated when the map size changes.
 struct Maps {
     depth: wgpu::Texture,
     depth_view: wgpu::TextureView,
@@ -118,141 +120,111 @@ struct Maps {
     key: [u32; 2],
 }
 
-/// The GPU side of `minmax`: four pipelines, the rectified map, the tree and the counters.
-pub struct MinMax {
-    /// Current settings; changes apply on the next render.
-    pub settings: MinMaxSettings,
-    rectify_pipeline: wgpu::ComputePipeline,
-    build_pipeline: wgpu::ComputePipeline,
-    traverse_pipeline: wgpu::ComputePipeline,
-    epipole_pipeline: wgpu::ComputePipeline,
-    rectify_layout: wgpu::BindGroupLayout,
-    build_layout: wgpu::BindGroupLayout,
-    traverse_layout: wgpu::BindGroupLayout,
-    buffers: pass::FrameBuffers,
-    params_buffer: wgpu::Buffer,
-    /// The rectify pass's per-row reference rays (unused by minmax, bound for the layout).
-    rows_buffer: wgpu::Buffer,
-    counters: wgpu::Buffer,
-    white: wgpu::TextureView,
-    maps: Option<Maps>,
-    last: Option<Rectification>,
-    binds: pass::BindCache<[wgpu::BindGroup; 3]>,
+/// What [`TreeBuilder::encode`] recorded for a frame.
+pub struct TreeFrame {
+    /// The frame's rectification.
+    pub rect: Rectification,
+    /// The host's rectified raster was used (projective frames).
+    pub host: bool,
 }
 
-impl MinMax {
-    /// Builds the pipelines and buffers.
-    pub fn new(gpu: &GpuContext, settings: MinMaxSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
-        settings.validate()?;
-        gpu.scoped("creating the minmax pipelines", || {
-            use wgpu::TextureViewDimension as D;
-            let device = &gpu.device;
-            let rectify_layout = prefiltered::rectify_layout(device);
-            let build_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("minmax build"),
-                entries: &[
-                    pass::uniform_entry(0),
-                    pass::uniform_entry(1),
-                    pass::texture_entry(2, D::D2),
-                    pass::storage_buffer_entry(3, false, None),
-                ],
-            });
-            let traverse_layout = pass::frame_pass_layout_to(
+/// The min-max structure of a one-light frame on the GPU: passes `rectify` (skipped where the
+/// host rasterized the projective map) and `build`, into a tree buffer and the uniform block the
+/// walk reads. `minmax` walks it per pixel; `epipolar` with `march = "minmax"` per ray-march
+/// sample (Yusov 2013). Its frame uniforms and lights are the owner's ([`pass::FrameBuffers`],
+/// written by the owner before [`TreeBuilder::encode`]).
+pub struct TreeBuilder {
+    rectify_pipeline: wgpu::ComputePipeline,
+    build_pipeline: wgpu::ComputePipeline,
+    rectify_layout: wgpu::BindGroupLayout,
+    build_layout: wgpu::BindGroupLayout,
+    params_buffer: wgpu::Buffer,
+    /// The rectify pass's per-row reference rays (unused by the walk, bound for the layout).
+    rows_buffer: wgpu::Buffer,
+    maps: Option<Maps>,
+    binds: pass::BindCache<[wgpu::BindGroup; 2]>,
+}
+
+impl TreeBuilder {
+    /// Builds the two pipelines.
+    pub fn new(device: &wgpu::Device) -> Self {
+        use wgpu::TextureViewDimension as D;
+        let rectify_layout = prefiltered::rectify_layout(device);
+        let build_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("minmax build"),
+            entries: &[
+                pass::uniform_entry(0),
+                pass::uniform_entry(1),
+                pass::texture_entry(2, D::D2),
+                pass::storage_buffer_entry(3, false, None),
+            ],
+        });
+        let p = prefiltered::BasisPrecision::Unorm8;
+        let pipe = |label: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
+            pass::compute_pipeline(device, label, &pass_source(src, p), entry, layout)
+        };
+        Self {
+            rectify_pipeline: pipe("prefiltered/rectify.wgsl", RECTIFY_WGSL, "rectify", &rectify_layout),
+            build_pipeline: pipe("minmax/build.wgsl", BUILD_WGSL, "build", &build_layout),
+            rectify_layout,
+            build_layout,
+            params_buffer: pass::uniform_buffer(
                 device,
-                "minmax traverse",
-                &[pass::storage_buffer_entry(6, true, None), pass::storage_buffer_entry(7, false, None)],
-                output,
-            );
-            let p = prefiltered::BasisPrecision::Unorm8;
-            let pipe = |label: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
-                pass::compute_pipeline(device, label, &pass_source(src, p), entry, layout)
-            };
-            let traverse_src = pass::with_output(&traverse_wgsl(), output);
-            let buf = |label, size, usage| {
-                device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(label),
-                    size,
-                    usage,
-                    mapped_at_creation: false,
-                })
-            };
-            use wgpu::BufferUsages as U;
-            Self {
-                rectify_pipeline: pipe("prefiltered/rectify.wgsl", RECTIFY_WGSL, "rectify", &rectify_layout),
-                build_pipeline: pipe("minmax/build.wgsl", BUILD_WGSL, "build", &build_layout),
-                traverse_pipeline: pipe("minmax/traverse.wgsl", &traverse_src, "traverse", &traverse_layout),
-                epipole_pipeline: pipe("minmax/traverse.wgsl", &traverse_src, "epipole", &traverse_layout),
-                rectify_layout,
-                build_layout,
-                traverse_layout,
-                buffers: pass::FrameBuffers::new(device),
-                params_buffer: pass::uniform_buffer(
-                    device,
-                    "minmax params",
-                    std::mem::size_of::<PrefilteredParams>() as u64,
-                ),
-                rows_buffer: buf("minmax rows", 16, U::STORAGE),
-                counters: buf("minmax counters", 32, U::STORAGE | U::COPY_DST | U::COPY_SRC),
-                white: pass::white_array(gpu),
-                maps: None,
-                last: None,
-                binds: Default::default(),
-                settings,
-            }
-        })
+                "minmax params",
+                std::mem::size_of::<PrefilteredParams>() as u64,
+            ),
+            rows_buffer: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("minmax rows"),
+                size: 16,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            }),
+            maps: None,
+            binds: Default::default(),
+        }
     }
 
-    /// The rectification of the last frame rendered.
-    pub fn last_rectification(&self) -> Option<&Rectification> {
-        self.last.as_ref()
+    /// The uniform block of the last frame (`Params` of the walk).
+    pub fn params_buffer(&self) -> &wgpu::Buffer {
+        &self.params_buffer
     }
 
-    /// Bytes of GPU memory this technique holds: the rectified depth, the tree, the counters and
-    /// the uniforms.
+    /// The tree of the last frame (`2·columns` (min, max) pairs per row); None before the first.
+    pub fn tree(&self) -> Option<&wgpu::Buffer> {
+        self.maps.as_ref().map(|m| &m.tree)
+    }
+
+    /// Bytes held: the rectified depth, the tree and the two small buffers.
     pub fn gpu_memory_bytes(&self) -> u64 {
         let maps = self.maps.as_ref().map_or(0, |m| m.key[0] as u64 * m.key[1] as u64 * 4 + m.tree.size());
-        maps + self.buffers.size() + self.params_buffer.size() + self.rows_buffer.size() + self.counters.size() + 16
+        maps + self.params_buffer.size() + self.rows_buffer.size()
     }
 
-    /// Reads back the last frame's rectified depth (`width × height`) and tree (`2·width`
-    /// (min, max) pairs per row), laid out as [`cpu::Passes`], for tests and debug views.
-    pub fn read_maps(&self, gpu: &GpuContext) -> Result<(Vec<f32>, Vec<[f32; 2]>), Error> {
-        let m = self.maps.as_ref().ok_or_else(|| Error::invalid("minmax maps", "none", "render a frame first"))?;
-        let depth = gpu.read_texture_f32(&m.depth, 0)?;
-        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("minmax tree readback"),
-            size: m.tree.size(),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(&m.tree, 0, &staging, 0, m.tree.size());
-        gpu.queue.submit([enc.finish()]);
-        let tree = gpu.read_mapped(&staging, "reading the minmax tree", |b| bytemuck::cast_slice(b).to_vec())?;
-        Ok((depth, tree))
-    }
-
-    /// Records the in-scattering of `frame` into `output` through `rec`. Passes: `rectify`
-    /// (skipped when the frame carries the host's rectified raster and this frame's
-    /// rectification is projective), `build`, `traverse`, `epipole` (when the light's disc is on
-    /// screen).
+    /// Records `rectify` (unless the host's raster serves) and `build` for `frame` under `s`;
+    /// `buffers` hold the frame's uniforms and lights.
     pub fn encode(
         &mut self,
         gpu: &GpuContext,
         rec: &mut Recorder,
         frame: &GpuFrame,
-        output: &wgpu::TextureView,
-    ) -> Result<TechniqueStats, Error> {
-        let host_depth = frame.rectified_shadow_map();
-        self.settings.validate()?;
-        frame.desc.single_light()?;
-        let s = self.settings.clone();
+        s: &MinMaxSettings,
+        buffers: &pass::FrameBuffers,
+    ) -> Result<TreeFrame, Error> {
         let desc = frame.desc;
         let [w, h] = s.map_size;
         gpu.check_texture_size("minmax rectified map", w, h)?;
         let rect = Rectification::new(desc, &s.rectify_options());
-        let host = host_depth.filter(|_| rect.mode == Mode::Projective);
+        let host = frame.rectified_shadow_map().filter(|_| rect.mode == Mode::Projective);
         if self.maps.as_ref().is_none_or(|m| m.key != [w, h]) {
+            let limit = gpu.device.limits().max_storage_buffer_binding_size;
+            if s.tree_bytes() > limit {
+                return Err(Error::Limit {
+                    what: "minmax tree (16 bytes × map_size[0] × map_size[1])".into(),
+                    value: s.tree_bytes(),
+                    limit,
+                });
+            }
+            self.maps = None;
             self.maps = Some(gpu.scoped("allocating the minmax maps", || {
                 let depth = crate::gpu::storage_texture(
                     &gpu.device,
@@ -271,17 +243,12 @@ impl MinMax {
             })?);
         }
         let epipole = epipole_pixel(desc, s.epipole_radius);
-        let params = params(&s, &rect, desc, epipole, host.is_some());
-        self.buffers.write(rec, desc);
-        rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&params));
+        let p = params(s, &rect, desc, epipole, host.is_some());
+        rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&p));
         let maps = self.maps.as_ref().expect("allocated above");
         let view = wgpu::BindingResource::TextureView;
-        let mut key = pass::frame_key(frame, output);
-        key.extend([
-            pass::Bound::View(maps.depth_view.clone()),
-            pass::Bound::Buffer(maps.tree.clone()),
-            pass::Bound::Choice(host.is_some() as u32),
-        ]);
+        let mut key = pass::frame_key(frame, &maps.depth_view);
+        key.extend([pass::Bound::Buffer(maps.tree.clone()), pass::Bound::Choice(host.is_some() as u32)]);
         if !self.binds.is_current(&key) {
             let binds = gpu.scoped("binding the minmax inputs", || {
                 let bind = |label, layout, entries: &[wgpu::BindGroupEntry]| {
@@ -292,38 +259,172 @@ impl MinMax {
                     "minmax rectify",
                     &self.rectify_layout,
                     &[
-                        e(0, self.buffers.frame.as_entire_binding()),
+                        e(0, buffers.frame.as_entire_binding()),
                         e(1, self.params_buffer.as_entire_binding()),
                         e(2, view(frame.shadow_maps)),
                         e(3, self.rows_buffer.as_entire_binding()),
                         e(4, view(&maps.depth_view)),
-                        pass::lights_binding(&self.buffers.lights),
+                        pass::lights_binding(&buffers.lights),
                     ],
                 );
                 let build = bind(
                     "minmax build",
                     &self.build_layout,
                     &[
-                        e(0, self.buffers.frame.as_entire_binding()),
+                        e(0, buffers.frame.as_entire_binding()),
                         e(1, self.params_buffer.as_entire_binding()),
                         e(2, view(host.unwrap_or(&maps.depth_view))),
                         e(3, maps.tree.as_entire_binding()),
                     ],
                 );
-                let mut entries =
-                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, output).to_vec();
-                entries.extend([e(6, maps.tree.as_entire_binding()), e(7, self.counters.as_entire_binding())]);
-                let traverse = bind("minmax traverse", &self.traverse_layout, &entries);
-                [rectify, build, traverse]
+                [rectify, build]
             })?;
             self.binds.store(key, binds);
         }
-        let [rectify_bind, build_bind, traverse_bind] = self.binds.value();
+        let [rectify_bind, build_bind] = self.binds.value();
         if host.is_none() {
             let groups = [w.div_ceil(8), h.div_ceil(8), 1];
             rec.dispatch("rectify", "minmax rectify", &self.rectify_pipeline, rectify_bind, groups)?;
         }
         rec.dispatch("build", "minmax build", &self.build_pipeline, build_bind, [h, 1, 1])?;
+        Ok(TreeFrame { rect, host: host.is_some() })
+    }
+
+    /// Reads back the last frame's rectified depth (`width × height`) and tree (`2·width`
+    /// (min, max) pairs per row), laid out as [`cpu::Passes`], for tests and debug views.
+    pub fn read_maps(&self, gpu: &GpuContext) -> Result<(Vec<f32>, Vec<[f32; 2]>), Error> {
+        let m = self.maps.as_ref().ok_or_else(|| Error::invalid("minmax maps", "none", "render a frame first"))?;
+        let depth = gpu.read_texture_f32(&m.depth, 0)?;
+        let tree = bytemuck::cast_slice(&crate::scattering::read_buffer(gpu, &m.tree)?).to_vec();
+        Ok((depth, tree))
+    }
+
+    /// The bind groups built so far.
+    fn builds(&self) -> u64 {
+        self.binds.builds()
+    }
+}
+
+/// The GPU side of `minmax`: the tree ([`TreeBuilder`]), the walk's pipelines and the counters.
+pub struct MinMax {
+    /// Current settings; changes apply on the next render.
+    pub settings: MinMaxSettings,
+    tree: TreeBuilder,
+    traverse_pipeline: wgpu::ComputePipeline,
+    epipole_pipeline: wgpu::ComputePipeline,
+    traverse_layout: wgpu::BindGroupLayout,
+    buffers: pass::FrameBuffers,
+    counters: wgpu::Buffer,
+    white: wgpu::TextureView,
+    last: Option<Rectification>,
+    binds: Binds,
+}
+
+/// The traverse pass's bind groups, with the tree builder's count for the trait.
+#[derive(Default)]
+struct Binds {
+    traverse: pass::BindCache<wgpu::BindGroup>,
+    tree_builds: u64,
+}
+
+impl Binds {
+    fn builds(&self) -> u64 {
+        self.traverse.builds() + self.tree_builds
+    }
+}
+
+impl MinMax {
+    /// Builds the pipelines and buffers.
+    pub fn new(gpu: &GpuContext, settings: MinMaxSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+        settings.validate()?;
+        gpu.scoped("creating the minmax pipelines", || {
+            let device = &gpu.device;
+            let traverse_layout = pass::frame_pass_layout_to(
+                device,
+                "minmax traverse",
+                &[pass::storage_buffer_entry(6, true, None), pass::storage_buffer_entry(7, false, None)],
+                output,
+            );
+            let p = prefiltered::BasisPrecision::Unorm8;
+            let traverse_src = pass_source(&pass::with_output(&traverse_wgsl(), output), p);
+            let pipe = |entry: &str| {
+                pass::compute_pipeline(device, "minmax/traverse.wgsl", &traverse_src, entry, &traverse_layout)
+            };
+            Self {
+                tree: TreeBuilder::new(device),
+                traverse_pipeline: pipe("traverse"),
+                epipole_pipeline: pipe("epipole"),
+                traverse_layout,
+                buffers: pass::FrameBuffers::new(device),
+                counters: device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("minmax counters"),
+                    size: 32,
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                }),
+                white: pass::white_array(gpu),
+                last: None,
+                binds: Binds::default(),
+                settings,
+            }
+        })
+    }
+
+    /// The rectification of the last frame rendered.
+    pub fn last_rectification(&self) -> Option<&Rectification> {
+        self.last.as_ref()
+    }
+
+    /// Bytes of GPU memory this technique holds: the rectified depth, the tree, the counters and
+    /// the uniforms.
+    pub fn gpu_memory_bytes(&self) -> u64 {
+        self.tree.gpu_memory_bytes() + self.buffers.size() + self.counters.size() + 16
+    }
+
+    /// Reads back the last frame's rectified depth and tree ([`TreeBuilder::read_maps`]).
+    pub fn read_maps(&self, gpu: &GpuContext) -> Result<(Vec<f32>, Vec<[f32; 2]>), Error> {
+        self.tree.read_maps(gpu)
+    }
+
+    /// Records the in-scattering of `frame` into `output` through `rec`. Passes: `rectify`
+    /// (skipped when the frame carries the host's rectified raster and this frame's
+    /// rectification is projective), `build`, `traverse`, `epipole` (when the light's disc is on
+    /// screen).
+    pub fn encode(
+        &mut self,
+        gpu: &GpuContext,
+        rec: &mut Recorder,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+    ) -> Result<TechniqueStats, Error> {
+        self.settings.validate()?;
+        frame.desc.single_light()?;
+        let s = self.settings.clone();
+        let desc = frame.desc;
+        self.buffers.write(rec, desc);
+        let TreeFrame { rect, host } = self.tree.encode(gpu, rec, frame, &s, &self.buffers)?;
+        self.binds.tree_builds = self.tree.builds();
+        let tree = self.tree.tree().expect("built by encode").clone();
+        let mut key = pass::frame_key(frame, output);
+        key.push(pass::Bound::Buffer(tree.clone()));
+        if !self.binds.traverse.is_current(&key) {
+            let bind = gpu.scoped("binding the minmax walk", || {
+                let mut entries =
+                    pass::frame_pass_bindings(&self.buffers, self.tree.params_buffer(), frame, &self.white, output)
+                        .to_vec();
+                entries.extend([
+                    wgpu::BindGroupEntry { binding: 6, resource: tree.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 7, resource: self.counters.as_entire_binding() },
+                ]);
+                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("minmax traverse"),
+                    layout: &self.traverse_layout,
+                    entries: &entries,
+                })
+            })?;
+            self.binds.traverse.store(key, bind);
+        }
+        let traverse_bind = self.binds.traverse.value();
         rec.pass("traverse", |enc, ts| {
             enc.clear_buffer(&self.counters, 0, None);
             let mut pass = crate::gpu::compute_pass(enc, "minmax traverse", ts);
@@ -331,13 +432,14 @@ impl MinMax {
             pass.set_bind_group(0, traverse_bind, &[]);
             pass.dispatch_workgroups(desc.width.div_ceil(8), desc.height.div_ceil(8), 1);
         })?;
+        let epipole = epipole_pixel(desc, s.epipole_radius);
         if let Some([x0, y0, x1, y1]) = epipole_box(desc, s.epipole_radius, epipole) {
             let groups = [(x1 - x0).div_ceil(8), (y1 - y0).div_ceil(8), 1];
             rec.dispatch("epipole", "minmax epipole", &self.epipole_pipeline, traverse_bind, groups)?;
         }
         // The walks are counted on the GPU; their figures join the stats once the counters are
         // read back (never with StatsMode::Off).
-        let (settings, rect_c, hosted) = (s.clone(), rect.clone(), host.is_some());
+        let (settings, rect_c) = (s.clone(), rect.clone());
         rec.read_counters(&self.counters, move |data, stats| {
             let v: &[u32] = bytemuck::cast_slice(&data[..24]);
             let totals = cpu::WalkTotals {
@@ -348,9 +450,9 @@ impl MinMax {
                 shadowed: v[4] as u64,
                 over_budget: v[5] as u64,
             };
-            stats.extra = stats_extra(&settings, &rect_c, hosted, Some(&totals));
+            stats.extra = stats_extra(&settings, &rect_c, host, Some(&totals));
         });
-        let extra = stats_extra(&s, &rect, host.is_some(), None);
+        let extra = stats_extra(&s, &rect, host, None);
         self.last = Some(rect);
         Ok(TechniqueStats {
             technique: "minmax".into(),

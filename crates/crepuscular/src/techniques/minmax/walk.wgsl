@@ -1,0 +1,217 @@
+// minmax: the walk and its integration (cpu.rs ray_row, column_distance, Spans, Merge, shade):
+// per view ray, its row and depth in the rectified map, the walk of Chen et al. 2011 §3.2 down
+// the row's min-max tree, and the exact in-scattering of its lit spans. Shared by minmax's
+// `traverse` pass and epipolar's min-max march; the pass declares `tree`, `spot_tex`, `frame`
+// and `params`.
+
+fn band_value(i: u32) -> f32 {
+    return 0.0;
+}
+
+fn level_offset(width: u32, level: u32) -> u32 {
+    return 2u * width - ((2u * width) >> level);
+}
+
+// cpu.rs ray_row.
+fn ray_row(p: Params, row: f32) -> u32 {
+    let h = i32(p.ints.w);
+    let r = i32(floor(row));
+    if (p.ints2.w & 2u) != 0u {
+        return u32(((r % h) + h) % h);
+    }
+    return u32(clamp(r, 0, h - 1));
+}
+
+// cpu.rs column_distance.
+fn column_distance(p: Params, dir: vec3<f32>, theta: f32, col: f32) -> f32 {
+    if col <= 0.0 {
+        return 0.0;
+    }
+    let c = line_of_column(p, col);
+    if p.ints.x == 0u {
+        return c / max(dot(dir, p.axes[0].xyz), 1e-6);
+    }
+    if p.ints.y == 0u {
+        return c / max(sin(theta), 1e-6);
+    }
+    if theta + c >= PI - 1e-6 {
+        return INF;
+    }
+    return p.light.w * sin(c) / max(sin(theta + c), 1e-9);
+}
+
+// cpu.rs Spans: the in-scattering of the lit spans of one ray.
+struct Spans {
+    dir: vec3<f32>,
+    directional: bool,
+    constant: vec3<f32>,
+    iv: vec2<f32>,
+    delta: f32,
+    offset: f32,
+    seg: u32,
+    seg_light: vec3<f32>,
+    sum: vec3<f32>,
+}
+
+fn spans_new(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> Spans {
+    var sp: Spans;
+    sp.dir = dir;
+    sp.sum = vec3<f32>(0.0);
+    sp.seg = 0xffffffffu;
+    let light = lights.items[0];
+    sp.directional = light.kind == LIGHT_DIRECTIONAL;
+    if sp.directional {
+        let inc = light_incident(f, light, spot_tex, f.camera_pos.xyz);
+        sp.constant = f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance;
+        return sp;
+    }
+    sp.iv = march_interval(f, light, f.camera_pos.xyz, dir, s, p.ints3.w, p.epipole.w);
+    sp.delta = (sp.iv.y - sp.iv.x) / f32(p.ints3.z);
+    let st = extinction(f);
+    sp.offset = step_offset((st.x + st.y + st.z) / 3.0, sp.delta, 0.5);
+    return sp;
+}
+
+fn segment_light(f: Frame, sp: ptr<function, Spans>, k: u32) -> vec3<f32> {
+    if (*sp).seg == k {
+        return (*sp).seg_light;
+    }
+    let t = (*sp).iv.x + f32(k) * (*sp).delta + (*sp).offset;
+    let inc = light_incident(f, lights.items[0], spot_tex, f.camera_pos.xyz + (*sp).dir * t);
+    let l = f.sigma_s.xyz * phase(f, dot(inc.dir, -(*sp).dir)) * inc.radiance;
+    (*sp).seg = k;
+    (*sp).seg_light = l;
+    return l;
+}
+
+fn spans_add(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, v: f32) {
+    let st = extinction(f);
+    if (*sp).directional {
+        if t1 > t0 {
+            (*sp).sum += (*sp).constant * v * exp(-st * t0) * segment_transmittance(st, t1 - t0);
+        }
+        return;
+    }
+    var a = max(t0, (*sp).iv.x);
+    let b = min(t1, (*sp).iv.y);
+    if !(b > a) || !((*sp).delta > 0.0) {
+        return;
+    }
+    let steps = p.ints3.z;
+    var k = min(u32((a - (*sp).iv.x) / (*sp).delta), steps - 1u);
+    loop {
+        if !(a < b) {
+            break;
+        }
+        var seg_end = (*sp).iv.y;
+        if k + 1u < steps {
+            seg_end = (*sp).iv.x + f32(k + 1u) * (*sp).delta;
+        }
+        let end = min(b, seg_end);
+        if end > a {
+            let l = segment_light(f, sp, k);
+            (*sp).sum += l * v * exp(-st * a) * segment_transmittance(st, end - a);
+        }
+        a = end;
+        k += 1u;
+        if k >= steps {
+            break;
+        }
+    }
+}
+
+struct Walk {
+    nodes: u32,
+    lit: u32,
+    shadowed: u32,
+    over_budget: u32,
+}
+
+struct Shaded {
+    l: vec3<f32>,
+    walk: Walk,
+}
+
+// cpu.rs shade and walk, with cpu.rs Merge as the pending span (c0, c1, v).
+fn shade(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> Shaded {
+    let rp = rectify_point(p, f.camera_pos.xyz + dir * s, dir);
+    var theta = 0.0;
+    if p.ints.x == 1u {
+        theta = angle_between(dir, p.axes[2].xyz);
+    }
+    let c_b = rp.col;
+    let z = rp.z;
+    var sp = spans_new(f, p, dir, s);
+    var w: Walk;
+    let width = p.ints.z;
+    let levels = p.ints4.z;
+    let max_nodes = p.ints4.w;
+    let base = ray_row(p, rp.row) * 2u * width;
+    var pending = vec3<f32>(0.0, 0.0, -1.0);
+    var level = 0u;
+    var i = 0u;
+    while level < levels && i % 2u == 0u {
+        i /= 2u;
+        level += 1u;
+    }
+    loop {
+        let start = i << level;
+        if start >= width || f32(start) >= c_b {
+            break;
+        }
+        let coarse = w.nodes >= max_nodes;
+        if coarse {
+            w.over_budget = 1u;
+        }
+        w.nodes += 1u;
+        let node = tree[base + level_offset(width, level) + i];
+        let c0 = f32(start);
+        let c1 = min(f32((i + 1u) << level), c_b);
+        var v = -1.0;
+        if z <= node.x {
+            w.lit += 1u;
+            v = 1.0;
+        } else if z > node.y {
+            w.shadowed += 1u;
+        } else if coarse || level == 0u {
+            v = 0.5;
+        } else {
+            level -= 1u;
+            i *= 2u;
+            continue;
+        }
+        if v >= 0.0 {
+            if pending.z == v && pending.y == c0 {
+                pending.y = c1;
+            } else {
+                if pending.z >= 0.0 {
+                    let t0 = min(column_distance(p, dir, theta, pending.x), s);
+                    var t1 = s;
+                    if pending.y < c_b {
+                        t1 = min(column_distance(p, dir, theta, pending.y), s);
+                    }
+                    spans_add(f, p, &sp, t0, t1, pending.z);
+                }
+                pending = vec3<f32>(c0, c1, v);
+            }
+        }
+        i += 1u;
+        while level < levels && i % 2u == 0u {
+            i /= 2u;
+            level += 1u;
+        }
+    }
+    if pending.z >= 0.0 {
+        let t0 = min(column_distance(p, dir, theta, pending.x), s);
+        var t1 = s;
+        if pending.y < c_b {
+            t1 = min(column_distance(p, dir, theta, pending.y), s);
+        }
+        spans_add(f, p, &sp, t0, t1, pending.z);
+    }
+    var out: Shaded;
+    out.l = sp.sum;
+    out.walk = w;
+    return out;
+}
+

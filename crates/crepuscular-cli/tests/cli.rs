@@ -327,6 +327,7 @@ fn debug_views_are_written_for_their_techniques_and_refused_for_others() {
         ("epipolar", "classification", (64, 36)),
         ("epipolar", "radiance", (0, 0)),
         ("interleaved", "pattern", (64, 36)),
+        ("minmax", "nodes", (64, 36)),
     ] {
         let out = d.join(format!("{technique}.png"));
         let r = bin()

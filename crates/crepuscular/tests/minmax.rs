@@ -112,6 +112,10 @@ fn a_shadowed_frame_equals_a_dense_march_on_its_own_map() {
     let (flat, _) = cpu::passes(&frame, &MinMaxSettings { levels: 0, ..s.clone() }, None).unwrap();
     assert_eq!(p.image.pixels, flat.image.pixels, "the tree must not change the answer");
     assert!(p.totals.nodes < flat.totals.nodes / 4, "tree {} nodes, linear {}", p.totals.nodes, flat.totals.nodes);
+    // The `nodes` debug view counts exactly the walks the frame made.
+    let per_pixel = cpu::walk_nodes(&frame, &s, &p.rect, &p.tree, None);
+    assert_eq!(per_pixel.iter().map(|&n| n as u64).sum::<u64>(), p.totals.nodes);
+    assert_eq!(per_pixel.iter().copied().max(), Some(p.totals.max_nodes));
     let r = &p.rect;
     let st = d.medium.extinction();
     let (l_in, wl) = crepuscular::integrand::light_incident(&d.lights[0], &d.medium, d.camera.position);
@@ -200,4 +204,41 @@ fn bad_settings_name_the_setting() {
         assert!(e.contains(key), "{e}");
     }
     assert!(MinMaxSettings::default().validate().is_ok());
+}
+
+/// `epipolar` with `march = "minmax"`: its samples walk the tree (Yusov 2013). On the shadowed
+/// frame the GPU agrees with the CPU mirror, and against the exact image it does at least as
+/// well as its stepped march at the default 64 steps (its samples have no step error).
+#[test]
+fn epipolar_with_the_minmax_march_mirrors_and_beats_its_steps() {
+    use crepuscular::techniques::epipolar::{EpipolarMarch, EpipolarSettings, cpu as ecpu};
+    let m = wall_media()[1].clone();
+    let (w, h) = (96, 54);
+    let (d, depth, sm, plane) = half_plane_frame(m, w, h, 1024);
+    let frame = cpu_frame(&d, &depth, &sm);
+    let mut exact = Image::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            let l = plane.closed_form(&d, x, y);
+            exact.pixels[(y * w + x) as usize] = [l.x as f32, l.y as f32, l.z as f32, 1.0];
+        }
+    }
+    let peak = exact.pixels.iter().map(|p| p[1]).fold(0.0f32, f32::max);
+    let mean_err = |img: &Image| {
+        img.pixels.iter().zip(&exact.pixels).map(|(a, b)| (a[1] - b[1]).abs()).sum::<f32>() / img.pixels.len() as f32
+            / peak
+    };
+    let stepped = EpipolarSettings::default();
+    let walked = EpipolarSettings { march: EpipolarMarch::Minmax, ..Default::default() };
+    let (img_steps, _) = ecpu::render(&frame, &stepped).unwrap();
+    let (img_walk, stats) = ecpu::render(&frame, &walked).unwrap();
+    let names: Vec<_> = stats.passes.iter().map(|p| p.name.as_str()).collect();
+    assert!(names.contains(&"build") && names.contains(&"rectify"), "{names:?}");
+    let (e_steps, e_walk) = (mean_err(&img_steps), mean_err(&img_walk));
+    eprintln!("mean error / peak: steps {e_steps:.5}, min-max march {e_walk:.5}");
+    assert!(e_walk <= e_steps * 1.05, "the min-max march ({e_walk}) is worse than 64 steps ({e_steps})");
+    let Some(gpu) = test_gpu("epipolar_with_the_minmax_march_mirrors_and_beats_its_steps") else { return };
+    let g = common::gpu_technique(&gpu, &frame, TechniqueSettings::Epipolar(walked));
+    let bad = g.pixels.iter().zip(&img_walk.pixels).filter(|(a, b)| (a[1] - b[1]).abs() > 1e-3 * peak).count();
+    assert!(bad * 100 < g.pixels.len(), "{bad} pixels differ by more than 0.1 % of the peak between GPU and CPU");
 }

@@ -568,7 +568,7 @@ fn prefiltered_debug_view(
 /// `minmax`'s `nodes` view: the frame rendered on the backend (with the host's rectified raster
 /// where the rectification is projective), its rectified map and tree read back, every pixel's
 /// walk counted on the CPU over them.
-fn minmax_debug_view(scene: &Scene, gpu: Option<&GpuContext>, settings: &minmax::MinMaxSettings) -> Result<Image> {
+fn minmax_debug_view(scene: &Scene, gpu: Option<&GpuContext>, settings: &minmax::MinmaxSettings) -> Result<Image> {
     let desc = debug_desc(scene);
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let rect = prefiltered::Rectification::new(&desc, &settings.rectify_options());

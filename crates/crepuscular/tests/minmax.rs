@@ -9,7 +9,7 @@ use crepuscular::frame::FrameDesc;
 use crepuscular::gpu::{UploadedFrame, test_gpu};
 use crepuscular::model::segment_transmittance;
 use crepuscular::techniques::AnyGpuTechnique;
-use crepuscular::techniques::minmax::{MinMaxSettings, cpu};
+use crepuscular::techniques::minmax::{MinmaxSettings, cpu};
 use crepuscular::testing::{gpu_render, half_plane_frame, wall_closed_form, wall_frame, wall_media};
 use crepuscular::{CpuFrame, Image, Light, ShadowMap, TechniqueSettings};
 use glam::Vec3;
@@ -40,8 +40,8 @@ fn closed_form(desc: &FrameDesc) -> Image {
     img
 }
 
-fn settings(map: [u32; 2], levels: u32) -> MinMaxSettings {
-    MinMaxSettings { map_size: map, levels, ..Default::default() }
+fn settings(map: [u32; 2], levels: u32) -> MinmaxSettings {
+    MinmaxSettings { map_size: map, levels, ..Default::default() }
 }
 
 /// With no occluder every ray is one lit span from the camera to the wall, integrated in
@@ -83,11 +83,11 @@ fn an_unshadowed_point_light_converges_with_its_segments() {
     let (d, depth, sm) = wall_frame(lamp, m, W, H);
     let frame = cpu_frame(&d, &depth, &sm);
     let (fine, _) =
-        cpu::render_with(&frame, &MinMaxSettings { light_steps: 1024, ..settings([256, 256], 13) }, None).unwrap();
+        cpu::render_with(&frame, &MinmaxSettings { light_steps: 1024, ..settings([256, 256], 13) }, None).unwrap();
     let mut last = f32::MAX;
     for steps in [4, 16, 64] {
         let (img, _) =
-            cpu::render_with(&frame, &MinMaxSettings { light_steps: steps, ..settings([256, 256], 13) }, None).unwrap();
+            cpu::render_with(&frame, &MinmaxSettings { light_steps: steps, ..settings([256, 256], 13) }, None).unwrap();
         let e = common::max_rel(&img, &fine, 1e-9);
         eprintln!("{steps} segments: {e}");
         assert!(e < last, "the error must fall with more segments: {e} after {last}");
@@ -107,9 +107,9 @@ fn a_shadowed_frame_equals_a_dense_march_on_its_own_map() {
     let m = wall_media()[1].clone();
     let (d, depth, sm, _) = half_plane_frame(m, 48, 27, 512);
     let frame = cpu_frame(&d, &depth, &sm);
-    let s = MinMaxSettings { epipole_radius: 0, ..settings([512, 256], 10) };
+    let s = MinmaxSettings { epipole_radius: 0, ..settings([512, 256], 10) };
     let (p, _) = cpu::passes(&frame, &s, None).unwrap();
-    let (flat, _) = cpu::passes(&frame, &MinMaxSettings { levels: 0, ..s.clone() }, None).unwrap();
+    let (flat, _) = cpu::passes(&frame, &MinmaxSettings { levels: 0, ..s.clone() }, None).unwrap();
     assert_eq!(p.image.pixels, flat.image.pixels, "the tree must not change the answer");
     assert!(p.totals.nodes < flat.totals.nodes / 4, "tree {} nodes, linear {}", p.totals.nodes, flat.totals.nodes);
     // The `nodes` debug view counts exactly the walks the frame made.
@@ -192,18 +192,21 @@ fn the_gpu_passes_mirror_the_cpu() {
 #[test]
 fn bad_settings_name_the_setting() {
     for (s, key) in [
-        (MinMaxSettings { map_size: [1000, 512], ..Default::default() }, "minmax.map_size"),
-        (MinMaxSettings { map_size: [1024, 4], ..Default::default() }, "minmax.map_size"),
-        (MinMaxSettings { levels: 14, ..Default::default() }, "minmax.levels"),
-        (MinMaxSettings { max_nodes: 0, ..Default::default() }, "minmax.max_nodes"),
-        (MinMaxSettings { light_steps: 0, ..Default::default() }, "minmax.light_steps"),
-        (MinMaxSettings { max_projective_angle: f32::NAN, ..Default::default() }, "minmax.max_projective_angle"),
-        (MinMaxSettings { spot_denominator: -1.0, ..Default::default() }, "minmax.spot_denominator"),
+        (MinmaxSettings { map_size: [1000, 512], ..Default::default() }, "minmax.map_size"),
+        (MinmaxSettings { map_size: [1024, 4], ..Default::default() }, "minmax.map_size"),
+        (MinmaxSettings { levels: 14, ..Default::default() }, "minmax.levels"),
+        (MinmaxSettings { max_nodes: 0, ..Default::default() }, "minmax.max_nodes"),
+        (MinmaxSettings { light_steps: 0, ..Default::default() }, "minmax.light_steps"),
+        (MinmaxSettings { max_projective_angle: f32::NAN, ..Default::default() }, "minmax.max_projective_angle"),
+        (MinmaxSettings { spot_denominator: -1.0, ..Default::default() }, "minmax.spot_denominator"),
     ] {
         let e = s.validate().unwrap_err().to_string();
         assert!(e.contains(key), "{e}");
     }
-    assert!(MinMaxSettings::default().validate().is_ok());
+    assert!(MinmaxSettings::default().validate().is_ok());
+    use crepuscular::techniques::epipolar::EpipolarSettings;
+    let e = EpipolarSettings { minmax_map_size: [100, 64], ..Default::default() }.validate().unwrap_err().to_string();
+    assert!(e.contains("epipolar.minmax_map_size") && e.contains("[100, 64]"), "{e}");
 }
 
 /// `epipolar` with `march = "minmax"`: its samples walk the tree (Yusov 2013). On the shadowed
@@ -225,7 +228,8 @@ fn epipolar_with_the_minmax_march_mirrors_and_beats_its_steps() {
     }
     let peak = exact.pixels.iter().map(|p| p[1]).fold(0.0f32, f32::max);
     let mean_err = |img: &Image| {
-        img.pixels.iter().zip(&exact.pixels).map(|(a, b)| (a[1] - b[1]).abs()).sum::<f32>() / img.pixels.len() as f32
+        img.pixels.iter().zip(&exact.pixels).map(|(a, b)| (a[1] - b[1]).abs()).sum::<f32>()
+            / img.pixels.len() as f32
             / peak
     };
     let stepped = EpipolarSettings::default();

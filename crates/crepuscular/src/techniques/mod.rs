@@ -316,7 +316,7 @@ registry! {
         Subsampled(subsampled::SubsampledSettings) => Subsampled,
         Epipolar(epipolar::EpipolarSettings) => Epipolar,
         Prefiltered(prefiltered::PrefilteredSettings) => Prefiltered,
-        Minmax(minmax::MinMaxSettings) => MinMax,
+        Minmax(minmax::MinmaxSettings) => MinMax,
     ],
     cpu: [
         Reference(reference::ReferenceSettings),

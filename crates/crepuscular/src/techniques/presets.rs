@@ -37,7 +37,7 @@ use crate::techniques::TechniqueSettings;
 use crate::techniques::brute_force::BruteForceSettings;
 use crate::techniques::epipolar::EpipolarSettings;
 use crate::techniques::interleaved::InterleavedSettings;
-use crate::techniques::minmax::MinMaxSettings;
+use crate::techniques::minmax::MinmaxSettings;
 use crate::techniques::prefiltered::PrefilteredSettings;
 use crate::techniques::reference::ReferenceSettings;
 use crate::techniques::subsampled::SubsampledSettings;
@@ -170,14 +170,14 @@ impl Preset {
     /// `minmax`: a 512² / 1024² (the default) / 2048² rectified map — its resolution is what the
     /// result is exact at —, 16 / 32 / 128 quadrature segments for spot and point lights, and the
     /// epipole disc as `prefiltered`'s (32 / 64 / 256 steps, 16 pixels for `reference-like`).
-    pub fn minmax(self) -> MinMaxSettings {
-        let d = MinMaxSettings::default();
+    pub fn minmax(self) -> MinmaxSettings {
+        let d = MinmaxSettings::default();
         let (map, light_steps, radius) = match self {
             Preset::Fast => (512, 16, d.epipole_radius),
             Preset::Balanced => (d.map_size[0], d.light_steps, d.epipole_radius),
             Preset::ReferenceLike => (2048, 128, 16),
         };
-        MinMaxSettings {
+        MinmaxSettings {
             map_size: [map, map],
             light_steps,
             epipole_radius: radius,
@@ -242,7 +242,7 @@ mod tests {
         assert_eq!(Preset::Balanced.interleaved(), InterleavedSettings::default());
         assert_eq!(Preset::Balanced.subsampled(), SubsampledSettings::default());
         assert_eq!(Preset::Balanced.epipolar(), EpipolarSettings::default());
-        assert_eq!(Preset::Balanced.minmax(), MinMaxSettings::default());
+        assert_eq!(Preset::Balanced.minmax(), MinmaxSettings::default());
     }
 
     #[test]

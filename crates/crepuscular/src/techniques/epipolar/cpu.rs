@@ -782,7 +782,7 @@ pub fn prefiltered_desc(desc: &FrameDesc, level: u32) -> Option<FrameDesc> {
 /// texture, as [`march`] does with steps.
 pub fn march_minmax(
     frame: &CpuFrame,
-    settings: &crate::techniques::minmax::MinMaxSettings,
+    settings: &crate::techniques::minmax::MinmaxSettings,
     rect: &crate::techniques::prefiltered::Rectification,
     tree: &[[f32; 2]],
     list: &[u32],

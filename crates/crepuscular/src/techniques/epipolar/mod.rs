@@ -401,7 +401,11 @@ pub struct EpipolarSettings {
     /// Chen et al. 2011's 1D min-max mipmaps in exactly this way): exact at that map's
     /// resolution, no step count, its cost the tree's build (once per frame) plus nodes per
     /// sample instead of `steps` lookups. The re-marched pixels (epipole, fallback) keep their
-    /// `steps`; a spot or point light's quadrature takes `steps` segments.
+    /// `steps`; a spot or point light's quadrature takes `steps` segments (at most 1024). The
+    /// tree's own settings are `minmax`'s defaults (all levels, 512 nodes per ray); its map is
+    /// always resampled from the shadow map (no host raster). Samples near a visible light's
+    /// epipole, where the rectified map has little precision, walk it too: only the
+    /// `epipole_radius` pixels are re-marched.
     pub march: EpipolarMarch,
     /// The rectified map of `march = "minmax"`, [columns, rows] (columns a power of two, as
     /// `minmax.map_size`). Memory: 20 bytes per texel. Default [1024, 1024].
@@ -523,22 +527,21 @@ impl EpipolarSettings {
         if !(1..=4096).contains(&self.steps) {
             return Err(Error::invalid("epipolar.steps", self.steps, "must be in 1..=4096"));
         }
-        let [w, h] = self.minmax_map_size;
-        if !(8..=8192).contains(&w) || !w.is_power_of_two() || !(8..=8192).contains(&h) {
-            return Err(Error::invalid(
-                "epipolar.minmax_map_size",
-                format!("[{w}, {h}]"),
-                "columns must be a power of two in 8..=8192, rows in 8..=8192",
-            ));
-        }
-        validate_spot_denominator("epipolar.spot_denominator", self.spot_denominator)
+        validate_spot_denominator("epipolar.spot_denominator", self.spot_denominator)?;
+        // The tree's settings (checked whatever `march` is, so a bad value is never kept).
+        self.minmax().validate().map_err(|e| match e {
+            Error::Invalid { key, value, reason } if key == "minmax.map_size" => {
+                Error::Invalid { key: "epipolar.minmax_map_size".into(), value, reason }
+            }
+            other => other,
+        })
     }
 
     /// The min-max tree's settings for `march = "minmax"`: `minmax_map_size`, `steps` quadrature
     /// segments for local lights, this technique's spot-step policy; no epipole disc (the
     /// upsampling re-marches those pixels).
-    pub fn minmax(&self) -> crate::techniques::minmax::MinMaxSettings {
-        crate::techniques::minmax::MinMaxSettings {
+    pub fn minmax(&self) -> crate::techniques::minmax::MinmaxSettings {
+        crate::techniques::minmax::MinmaxSettings {
             map_size: self.minmax_map_size,
             light_steps: self.steps.min(1024),
             spot_steps: self.spot_steps,
@@ -1281,7 +1284,8 @@ impl Epipolar {
             // The tree (minmax's `rectify` and `build`), then the walk per listed pixel.
             let mm = self.minmax.get_or_insert_with(|| MinmaxMarch::new(&gpu.device));
             let march_frame = GpuFrame { spot_textures: Some(march_spot), ..*frame };
-            mm.tree.encode(gpu, rec, &march_frame, &s.minmax(), &self.buffers)?;
+            // Always resampled (epipolar asks the host for no rectified raster), as on the CPU.
+            mm.tree.encode(gpu, rec, &march_frame, &s.minmax(), &self.buffers, false)?;
             let tree = mm.tree.tree().expect("built by encode").clone();
             let mut key = pass::frame_key(frame, marched);
             key.extend([Bound::Buffer(tree.clone()), Bound::View(march_spot.clone())]);

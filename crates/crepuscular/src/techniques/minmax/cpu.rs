@@ -2,7 +2,7 @@
 //! for function. Each pass is public so a test can compare it with its GPU twin, and
 //! [`linear_scan`] is the texel-by-texel walk the tree must reproduce.
 
-use super::settings::MinMaxSettings;
+use super::settings::MinmaxSettings;
 use crate::error::Error;
 use crate::frame::{CpuFrame, FrameDesc};
 use crate::image::Image;
@@ -74,7 +74,8 @@ pub fn ray_row(rect: &Rectification, row: f32) -> u32 {
     if rect.full_circle { r.rem_euclid(h) as u32 } else { r.clamp(0, h - 1) as u32 }
 }
 
-/// The walk of Chen et al. 2011 (§3.2) along row `row` of `tree` for a ray of normalised depth
+/// The walk of Chen et al. 2011 (§3.2) along row `row` of `tree` (`levels` at most log2 of the
+/// power-of-two `width`; more are clamped) for a ray of normalised depth
 /// `z` over the column interval [`c_a`, `c_b`]: a node whose minimum is at least `z` is lit over
 /// its whole span, one whose maximum is below `z` is shadowed, any other is descended into
 /// (a texel is never mixed: its minimum is its maximum). After a span the walk moves to the next
@@ -94,8 +95,13 @@ pub fn walk(
     c_b: f32,
     mut emit: impl FnMut(f32, f32, f32),
 ) -> Walk {
-    let base = row as usize * 2 * width as usize;
     let mut out = Walk::default();
+    if width == 0 {
+        return out;
+    }
+    // A tree has at most log2(width) levels above the texels.
+    let levels = levels.min(width.trailing_zeros());
+    let base = row as usize * 2 * width as usize;
     let mut level = 0u32;
     let mut i = (c_a.max(0.0) as u32).min(width - 1);
     while level < levels && i % 2 == 0 {
@@ -145,7 +151,7 @@ pub fn linear_scan(
     c_b: f32,
     mut emit: impl FnMut(f32, f32, f32),
 ) {
-    let mut c = (c_a.max(0.0) as u32).min(width - 1);
+    let mut c = (c_a.max(0.0) as u32).min(width.saturating_sub(1));
     while c < width && (c as f32) < c_b {
         if z <= texel(c) {
             emit((c as f32).max(c_a), ((c + 1) as f32).min(c_b), 1.0);
@@ -202,7 +208,7 @@ pub struct Spans<'a> {
 
 impl<'a> Spans<'a> {
     /// The accumulator of the view ray of unit direction `dir` that ends at distance `s`.
-    pub fn new(desc: &'a FrameDesc, settings: &MinMaxSettings, dir: Vec3, s: f32) -> Self {
+    pub fn new(desc: &'a FrameDesc, settings: &MinmaxSettings, dir: Vec3, s: f32) -> Self {
         let st = desc.medium.extinction();
         let fl = &desc.lights[0];
         let mut out = Spans {
@@ -257,7 +263,7 @@ impl<'a> Spans<'a> {
                 let f = self.segment_light(k);
                 self.sum += f * v * (-self.st * a).exp() * segment_transmittance(self.st, end - a);
             }
-            a = end;
+            a = a.max(end);
             k += 1;
             if k >= self.steps {
                 break;
@@ -321,7 +327,7 @@ impl Default for Merge {
 /// and its in-scattering. Mirrors `shade` in traverse.wgsl.
 pub fn shade(
     desc: &FrameDesc,
-    settings: &MinMaxSettings,
+    settings: &MinmaxSettings,
     rect: &Rectification,
     tree: &[[f32; 2]],
     dir: Vec3,
@@ -413,7 +419,7 @@ impl WalkTotals {
 /// traverse.wgsl.
 pub fn traverse(
     frame: &CpuFrame,
-    settings: &MinMaxSettings,
+    settings: &MinmaxSettings,
     rect: &Rectification,
     tree: &[[f32; 2]],
     epipole: Option<[f32; 2]>,
@@ -448,7 +454,7 @@ pub fn traverse(
 /// what the `nodes` debug view draws. Row-major, the frame's size.
 pub fn walk_nodes(
     frame: &CpuFrame,
-    settings: &MinMaxSettings,
+    settings: &MinmaxSettings,
     rect: &Rectification,
     tree: &[[f32; 2]],
     epipole: Option<[f32; 2]>,
@@ -475,7 +481,7 @@ pub fn walk_nodes(
 /// only), else the shadow map is resampled (`prefiltered`'s pass `rectify`).
 pub fn passes(
     frame: &CpuFrame,
-    settings: &MinMaxSettings,
+    settings: &MinmaxSettings,
     host_depth: Option<&[f32]>,
 ) -> Result<(Passes, Vec<PassTime>), Error> {
     settings.validate()?;
@@ -516,7 +522,7 @@ pub fn passes(
 /// f32 rounding where a ray's depth meets a texel's.
 pub fn render_with(
     frame: &CpuFrame,
-    settings: &MinMaxSettings,
+    settings: &MinmaxSettings,
     host_depth: Option<&[f32]>,
 ) -> Result<(Image, TechniqueStats), Error> {
     frame.desc.single_light()?;

@@ -22,7 +22,7 @@
 pub mod cpu;
 pub mod settings;
 
-pub use settings::MinMaxSettings;
+pub use settings::MinmaxSettings;
 
 use crate::error::Error;
 use crate::frame::GpuFrame;
@@ -60,7 +60,7 @@ pub fn shaders() -> [(&'static str, String, &'static str); 3] {
 /// The uniform block of every pass: `prefiltered`'s (one band, one region), with the tree's
 /// levels and the node budget in `ints4.z` and `ints4.w`.
 pub fn params(
-    s: &MinMaxSettings,
+    s: &MinmaxSettings,
     rect: &Rectification,
     desc: &crate::FrameDesc,
     epipole: Option<[f32; 2]>,
@@ -84,7 +84,7 @@ pub fn params(
 /// once the walks are counted (`totals`) — nodes visited per ray (mean, max), lit and shadowed
 /// nodes per ray, and the rays that reached the node budget.
 pub(crate) fn stats_extra(
-    s: &MinMaxSettings,
+    s: &MinmaxSettings,
     rect: &Rectification,
     host: bool,
     totals: Option<&cpu::WalkTotals>,
@@ -200,21 +200,22 @@ impl TreeBuilder {
         maps + self.params_buffer.size() + self.rows_buffer.size()
     }
 
-    /// Records `rectify` (unless the host's raster serves) and `build` for `frame` under `s`;
-    /// `buffers` hold the frame's uniforms and lights.
+    /// Records `rectify` (unless `host_raster` and the frame's rectified raster serves) and
+    /// `build` for `frame` under `s`; `buffers` hold the frame's uniforms and lights.
     pub fn encode(
         &mut self,
         gpu: &GpuContext,
         rec: &mut Recorder,
         frame: &GpuFrame,
-        s: &MinMaxSettings,
+        s: &MinmaxSettings,
         buffers: &pass::FrameBuffers,
+        host_raster: bool,
     ) -> Result<TreeFrame, Error> {
         let desc = frame.desc;
         let [w, h] = s.map_size;
-        gpu.check_texture_size("minmax rectified map", w, h)?;
+        gpu.check_texture_size("minmax rectified map (map_size)", w, h)?;
         let rect = Rectification::new(desc, &s.rectify_options());
-        let host = frame.rectified_shadow_map().filter(|_| rect.mode == Mode::Projective);
+        let host = frame.rectified_shadow_map().filter(|_| host_raster && rect.mode == Mode::Projective);
         if self.maps.as_ref().is_none_or(|m| m.key != [w, h]) {
             let limit = gpu.device.limits().max_storage_buffer_binding_size;
             if s.tree_bytes() > limit {
@@ -308,7 +309,7 @@ impl TreeBuilder {
 /// The GPU side of `minmax`: the tree ([`TreeBuilder`]), the walk's pipelines and the counters.
 pub struct MinMax {
     /// Current settings; changes apply on the next render.
-    pub settings: MinMaxSettings,
+    pub settings: MinmaxSettings,
     tree: TreeBuilder,
     traverse_pipeline: wgpu::ComputePipeline,
     epipole_pipeline: wgpu::ComputePipeline,
@@ -335,7 +336,7 @@ impl Binds {
 
 impl MinMax {
     /// Builds the pipelines and buffers.
-    pub fn new(gpu: &GpuContext, settings: MinMaxSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub fn new(gpu: &GpuContext, settings: MinmaxSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.scoped("creating the minmax pipelines", || {
             let device = &gpu.device;
@@ -402,7 +403,7 @@ impl MinMax {
         let s = self.settings.clone();
         let desc = frame.desc;
         self.buffers.write(rec, desc);
-        let TreeFrame { rect, host } = self.tree.encode(gpu, rec, frame, &s, &self.buffers)?;
+        let TreeFrame { rect, host } = self.tree.encode(gpu, rec, frame, &s, &self.buffers, true)?;
         self.binds.tree_builds = self.tree.builds();
         let tree = self.tree.tree().expect("built by encode").clone();
         let mut key = pass::frame_key(frame, output);
@@ -466,7 +467,7 @@ impl MinMax {
     }
 }
 
-impl crate::techniques::Technique for MinMaxSettings {
+impl crate::techniques::Technique for MinmaxSettings {
     const INFO: crate::techniques::TechniqueInfo = crate::techniques::TechniqueInfo {
         name: "minmax",
         summary: "1D min-max mipmaps per row of a rectified shadow map: each view ray skips all-lit and all-shadowed spans and integrates its lit spans exactly (GPU: rectify, build, traverse; CPU mirror)",
@@ -476,7 +477,7 @@ impl crate::techniques::Technique for MinMaxSettings {
         per_light: true,
     };
     fn validate(&self) -> Result<(), Error> {
-        MinMaxSettings::validate(self)
+        MinmaxSettings::validate(self)
     }
     fn render_cpu(
         &self,
@@ -491,4 +492,4 @@ impl crate::techniques::Technique for MinMaxSettings {
     }
 }
 
-gpu_technique!(MinMax, MinMaxSettings);
+gpu_technique!(MinMax, MinmaxSettings);

@@ -11,7 +11,7 @@ pub const MAX_LEVELS: u32 = 13;
 /// Settings of `minmax` (`[render.minmax]` in a scene file).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct MinMaxSettings {
+pub struct MinmaxSettings {
     /// Size of the rectified shadow map [columns, rows]: columns along the view rays (a power of
     /// two, so that every level of the min-max tree halves its row exactly), rows one per
     /// epipolar slice. This is the resolution at which the result is exact (docs/MODEL.md §8):
@@ -29,8 +29,11 @@ pub struct MinMaxSettings {
     /// it, the rest of its row is no longer refined: it climbs as high as the tree allows and
     /// counts each remaining node as lit (minimum ≥ the ray's depth), shadowed (maximum below
     /// it) or, where mixed, half lit — an error of at most half the in-scattering of the
-    /// unrefined spans; `rays_over_budget` in the stats counts such rays. Default 512 (never
-    /// reached on the built-in scenes at the default map; see docs/RESULTS.md).
+    /// unrefined spans; `rays_over_budget` in the stats counts such rays. A bound on the cost
+    /// with the tree's full height (`levels` at its default): with fewer levels the rest of the
+    /// row is still walked node by node at the top level (columns / 2^levels nodes at most).
+    /// Default 512 (never reached on the built-in scenes at the default map; see
+    /// docs/RESULTS.md).
     pub max_nodes: u32,
     /// The rectification, as `prefiltered`'s (§4 of Klehm et al. 2014): `"auto"` (default),
     /// `"projective"` or `"epipolar"`.
@@ -59,7 +62,7 @@ pub struct MinMaxSettings {
     pub spot_denominator: f32,
 }
 
-impl Default for MinMaxSettings {
+impl Default for MinmaxSettings {
     fn default() -> Self {
         Self {
             map_size: [1024, 1024],
@@ -77,7 +80,7 @@ impl Default for MinMaxSettings {
     }
 }
 
-impl MinMaxSettings {
+impl MinmaxSettings {
     /// Checks the ranges; the error names the setting and value.
     pub fn validate(&self) -> Result<(), Error> {
         let [w, h] = self.map_size;

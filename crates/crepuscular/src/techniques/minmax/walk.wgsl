@@ -112,7 +112,7 @@ fn spans_add(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, v:
             let l = segment_light(f, sp, k);
             (*sp).sum += l * v * exp(-st * a) * segment_transmittance(st, end - a);
         }
-        a = end;
+        a = max(a, end);
         k += 1u;
         if k >= steps {
             break;
@@ -130,6 +130,20 @@ struct Walk {
 struct Shaded {
     l: vec3<f32>,
     walk: Walk,
+}
+
+// cpu.rs shade's `integrate`: a finished span (c0, c1, v) of columns, as distances along the ray
+// (the last one ends at the surface, s), into `sp`.
+fn flush(f: Frame, p: Params, sp: ptr<function, Spans>, span: vec3<f32>, theta: f32, c_b: f32, s: f32) {
+    if span.z < 0.0 {
+        return;
+    }
+    let t0 = min(column_distance(p, (*sp).dir, theta, span.x), s);
+    var t1 = s;
+    if span.y < c_b {
+        t1 = min(column_distance(p, (*sp).dir, theta, span.y), s);
+    }
+    spans_add(f, p, sp, t0, t1, span.z);
 }
 
 // cpu.rs shade and walk, with cpu.rs Merge as the pending span (c0, c1, v).
@@ -184,14 +198,7 @@ fn shade(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> Shaded {
             if pending.z == v && pending.y == c0 {
                 pending.y = c1;
             } else {
-                if pending.z >= 0.0 {
-                    let t0 = min(column_distance(p, dir, theta, pending.x), s);
-                    var t1 = s;
-                    if pending.y < c_b {
-                        t1 = min(column_distance(p, dir, theta, pending.y), s);
-                    }
-                    spans_add(f, p, &sp, t0, t1, pending.z);
-                }
+                flush(f, p, &sp, pending, theta, c_b, s);
                 pending = vec3<f32>(c0, c1, v);
             }
         }
@@ -201,14 +208,7 @@ fn shade(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> Shaded {
             level += 1u;
         }
     }
-    if pending.z >= 0.0 {
-        let t0 = min(column_distance(p, dir, theta, pending.x), s);
-        var t1 = s;
-        if pending.y < c_b {
-            t1 = min(column_distance(p, dir, theta, pending.y), s);
-        }
-        spans_add(f, p, &sp, t0, t1, pending.z);
-    }
+    flush(f, p, &sp, pending, theta, c_b, s);
     var out: Shaded;
     out.l = sp.sum;
     out.walk = w;

@@ -123,7 +123,7 @@ pub fn rectify(frame: &CpuFrame, rect: &Rectification) -> Vec<f32> {
     out
 }
 
-/// Mirrors `texel_depth` in prefilter.wgsl: a texel's depth, with the volume bias added when
+/// Mirrors `texel_depth` in geometry.wgsl: a texel's depth, with the volume bias added when
 /// the host rasterized the map (`bias` world units along the light, i.e. bias/(x·(r₁ − r₀)) in
 /// the projective depth).
 pub fn texel_depth(rect: &Rectification, stored: f32, col: u32, bias: Option<f32>) -> f32 {

@@ -214,7 +214,7 @@ fn bench_writes_json_markdown_and_plots_with_the_device() {
     // Presets are listed, and an unknown one fails with the list.
     let out = bin().args(["bench", "--list-presets"]).output().unwrap();
     let list = String::from_utf8_lossy(&out.stdout);
-    for preset in ["toth-interleaving", "klehm-table1", "klehm-table2", "klehm-scenes"] {
+    for preset in ["toth-interleaving", "klehm-table1", "klehm-table2", "klehm-fig5", "klehm-scenes"] {
         assert!(list.lines().any(|l| l.starts_with(preset)), "{preset} not listed: {list}");
     }
     let out = bin().args(["bench", "--preset", "nope", "--backend", "cpu"]).output().unwrap();
@@ -236,7 +236,8 @@ fn the_lights_preset_writes_its_table() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let r: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("bench.json")).unwrap()).unwrap();
     let recs = r["records"].as_array().unwrap();
-    assert_eq!(recs.len(), 5 * 5, "5 techniques × 5 light counts");
+    let techniques = crepuscular::techniques::TECHNIQUES.iter().filter(|t| t.gpu).count();
+    assert_eq!(recs.len(), techniques * 5, "every GPU technique × 5 light counts");
     for n in [0, 1, 2, 4, 8] {
         let scene = format!("night-street:lights={n}");
         let lights: Vec<f64> = recs
@@ -244,12 +245,12 @@ fn the_lights_preset_writes_its_table() {
             .filter(|x| x["scene"] == scene.as_str())
             .map(|x| x["extra"]["lights"].as_f64().unwrap())
             .collect();
-        assert_eq!(lights, vec![n as f64; 5], "{scene}: the lights that reach the view");
+        assert_eq!(lights, vec![n as f64; techniques], "{scene}: the lights that reach the view");
     }
     let md = std::fs::read_to_string(d.join("bench.md")).unwrap();
     let table = md.split("## Lights table").nth(1).unwrap_or_else(|| panic!("no lights table\n{md}"));
     let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| technique")).collect();
-    assert_eq!(rows.len(), 5, "{table}");
+    assert_eq!(rows.len(), techniques, "{table}");
     assert!(rows.iter().all(|r| r.split('|').filter(|c| c.trim() == "–").count() == 0), "{table}");
     for f in ["time_vs_lights.svg", "time_vs_lights.png", "psnr_vs_lights.svg"] {
         assert!(d.join(f).exists(), "{f} missing");

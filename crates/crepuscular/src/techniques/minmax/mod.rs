@@ -329,8 +329,11 @@ struct Binds {
 }
 
 impl Binds {
+    /// The times the frame's bind groups were (re)built: the traverse pass's are rebuilt with
+    /// every new input the tree's are (the tree buffer is in their key), and also for a new
+    /// output, so the larger count is the number of rebuilds.
     fn builds(&self) -> u64 {
-        self.traverse.builds() + self.tree_builds
+        self.traverse.builds().max(self.tree_builds)
     }
 }
 

@@ -30,14 +30,7 @@ fn ray(desc: &FrameDesc, x: u32, y: u32) -> (DVec3, f64) {
 }
 
 fn directional_closed_form(desc: &FrameDesc) -> Image {
-    let mut img = Image::new(W, H);
-    for y in 0..H {
-        for x in 0..W {
-            let l = wall_closed_form(desc, x, y);
-            img.pixels[(y * W + x) as usize] = [l.x as f32, l.y as f32, l.z as f32, 1.0];
-        }
-    }
-    img
+    common::image_of(W, H, |x, y| wall_closed_form(desc, x, y))
 }
 
 /// Composite Gauss–Legendre (5 points × 4096 panels) of the point-light integral, f64.
@@ -85,17 +78,7 @@ fn point_quadrature_of(desc: &FrameDesc, k: usize) -> Image {
 
 use crepuscular::testing::wall_media as media;
 
-fn sun() -> Light {
-    Light::Directional {
-        direction: Vec3::new(0.3, -0.2, 1.0).normalize(),
-        color: Vec3::new(1.0, 0.9, 0.8),
-        intensity: 4.0,
-    }
-}
-
-fn cpu_frame<'a>(d: &'a FrameDesc, depth: &'a [f32], sm: &'a ShadowMap) -> CpuFrame<'a> {
-    CpuFrame { desc: d, depth, shadow_maps: std::slice::from_ref(sm), surface: None }
-}
+use common::{cpu_frame, sun};
 
 #[test]
 fn directional_reference_matches_the_closed_form_tightly() {

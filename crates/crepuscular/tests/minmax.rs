@@ -11,33 +11,16 @@ use crepuscular::model::segment_transmittance;
 use crepuscular::techniques::AnyGpuTechnique;
 use crepuscular::techniques::minmax::{MinmaxSettings, cpu};
 use crepuscular::testing::{gpu_render, half_plane_frame, wall_closed_form, wall_frame, wall_media};
-use crepuscular::{CpuFrame, Image, Light, ShadowMap, TechniqueSettings};
+use crepuscular::{Image, Light, TechniqueSettings};
 use glam::Vec3;
 
 const W: u32 = 64;
 const H: u32 = 36;
 
-fn sun() -> Light {
-    Light::Directional {
-        direction: Vec3::new(0.3, -0.2, 1.0).normalize(),
-        color: Vec3::new(1.0, 0.9, 0.8),
-        intensity: 4.0,
-    }
-}
-
-fn cpu_frame<'a>(d: &'a FrameDesc, depth: &'a [f32], sm: &'a ShadowMap) -> CpuFrame<'a> {
-    CpuFrame { desc: d, depth, shadow_maps: std::slice::from_ref(sm), surface: None }
-}
+use common::{cpu_frame, sun};
 
 fn closed_form(desc: &FrameDesc) -> Image {
-    let mut img = Image::new(W, H);
-    for y in 0..H {
-        for x in 0..W {
-            let l = wall_closed_form(desc, x, y);
-            img.pixels[(y * W + x) as usize] = [l.x as f32, l.y as f32, l.z as f32, 1.0];
-        }
-    }
-    img
+    common::image_of(W, H, |x, y| wall_closed_form(desc, x, y))
 }
 
 fn settings(map: [u32; 2], levels: u32) -> MinmaxSettings {
@@ -219,13 +202,7 @@ fn epipolar_with_the_minmax_march_mirrors_and_beats_its_steps() {
     let (w, h) = (96, 54);
     let (d, depth, sm, plane) = half_plane_frame(m, w, h, 1024);
     let frame = cpu_frame(&d, &depth, &sm);
-    let mut exact = Image::new(w, h);
-    for y in 0..h {
-        for x in 0..w {
-            let l = plane.closed_form(&d, x, y);
-            exact.pixels[(y * w + x) as usize] = [l.x as f32, l.y as f32, l.z as f32, 1.0];
-        }
-    }
+    let exact = common::image_of(w, h, |x, y| plane.closed_form(&d, x, y));
     let peak = exact.pixels.iter().map(|p| p[1]).fold(0.0f32, f32::max);
     let mean_err = |img: &Image| {
         img.pixels.iter().zip(&exact.pixels).map(|(a, b)| (a[1] - b[1]).abs()).sum::<f32>()

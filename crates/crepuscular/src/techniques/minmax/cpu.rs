@@ -10,7 +10,7 @@ use crate::integrand::light_incident;
 use crate::march::{light_reach, march_interval, mean_extinction, step_offset};
 use crate::model::segment_transmittance;
 use crate::stats::{PassTime, TechniqueStats};
-use crate::techniques::prefiltered::cpu::{in_epipole_disc, march_epipole, rectify, texel_depth};
+use crate::techniques::prefiltered::cpu::{in_epipole_disc, march_epipole, rectified_depth, texel_depth};
 use crate::techniques::prefiltered::rectify::{Mode, Rectification, angle_between};
 use crate::techniques::prefiltered::{epipole_pixel, epipole_samples};
 use glam::Vec3;
@@ -492,19 +492,10 @@ pub fn passes(
     };
     let t = std::time::Instant::now();
     let rect = Rectification::new(desc, &settings.rectify_options());
-    let host = host_depth.filter(|_| rect.mode == Mode::Projective);
-    if let Some(d) = host
-        && d.len() != (rect.width * rect.height) as usize
-    {
-        return Err(Error::invalid("minmax host depth", d.len(), "must hold map_size[0]·map_size[1] texels"));
-    }
-    let depth = match host {
-        Some(d) => d.to_vec(),
-        None => rectify(frame, &rect),
-    };
+    let (depth, host) = rectified_depth(frame, &rect, host_depth, "minmax host depth")?;
     timed("rectify", t);
     let t = std::time::Instant::now();
-    let tree = build(&rect, &depth, host.map(|_| desc.lights[0].shadow_bias), settings.tree_levels());
+    let tree = build(&rect, &depth, host.then_some(desc.lights[0].shadow_bias), settings.tree_levels());
     timed("build", t);
     let t = std::time::Instant::now();
     let epipole = epipole_pixel(desc, settings.epipole_radius);

@@ -420,6 +420,25 @@ pub fn in_epipole_disc(epipole: Option<[f32; 2]>, radius: u32, x: u32, y: u32) -
     radius > 0 && dx * dx + dy * dy <= (radius * radius) as f32
 }
 
+/// The rectified map of `rect` for a frame: `host_depth` where the host rasterized it (a
+/// projective rectification only; its size is checked, the error naming `what`), else the
+/// shadow map resampled by [`rectify`]. Returns the map and whether it is the host's. Shared by
+/// `prefiltered`, `minmax` and `epipolar`'s min-max march.
+pub fn rectified_depth(
+    frame: &CpuFrame,
+    rect: &Rectification,
+    host_depth: Option<&[f32]>,
+    what: &str,
+) -> Result<(Vec<f32>, bool), Error> {
+    match host_depth.filter(|_| rect.mode == Mode::Projective) {
+        Some(d) if d.len() != (rect.width * rect.height) as usize => {
+            Err(Error::invalid(what, d.len(), "must hold map_size[0]·map_size[1] texels"))
+        }
+        Some(d) => Ok((d.to_vec(), true)),
+        None => Ok((rectify(frame, rect), false)),
+    }
+}
+
 /// Every pass of a frame; `host_depth` is a rectified map the host rasterized with
 /// [`Rectification::raster`] (projective frames only), else the shadow map is resampled.
 pub fn passes(
@@ -435,19 +454,10 @@ pub fn passes(
     };
     let t = std::time::Instant::now();
     let rect = Rectification::new(desc, &settings.rectify_options());
-    let host = host_depth.filter(|_| rect.mode == Mode::Projective);
-    if let Some(d) = host
-        && d.len() != (rect.width * rect.height) as usize
-    {
-        return Err(Error::invalid("prefiltered host depth", d.len(), "must hold map_size[0]·map_size[1] texels"));
-    }
-    let depth = match host {
-        Some(d) => d.to_vec(),
-        None => rectify(frame, &rect),
-    };
+    let (depth, host) = rectified_depth(frame, &rect, host_depth, "prefiltered host depth")?;
     timed("rectify", t);
     let t = std::time::Instant::now();
-    let (basis, cumw) = prefilter(desc, &rect, settings, &depth, host.map(|_| desc.lights[0].shadow_bias));
+    let (basis, cumw) = prefilter(desc, &rect, settings, &depth, host.then_some(desc.lights[0].shadow_bias));
     timed("prefilter", t);
     let t = std::time::Instant::now();
     let channels = settings.channels(&desc.lights[0].light);

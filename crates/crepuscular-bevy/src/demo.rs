@@ -1,0 +1,282 @@
+//! The plugin's demo scene — a colonnade in fog, lit by a low sun through its pillars (and
+//! optionally a spot and a point lamp) — and a headless app that renders it into an image: what
+//! the `shafts` and `versus` examples and the plugin's test run (docs/BEVY.md).
+
+use std::sync::{Arc, Mutex};
+
+use bevy::camera::{Hdr, RenderTarget};
+use bevy::light::{CascadeShadowConfigBuilder, DirectionalLightShadowMap, FogVolume, VolumetricFog, VolumetricLight};
+use bevy::prelude::*;
+use bevy::render::RenderApp;
+use bevy::render::pipelined_rendering::PipelinedRenderingPlugin;
+use bevy::render::render_resource::PipelineCache;
+use bevy::render::render_resource::TextureFormat;
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
+use bevy::window::{ExitCondition, WindowPlugin};
+
+use crate::{Crepuscular, CrepuscularLight, CrepuscularPlugin};
+
+/// Which volumetric effect the demo camera renders.
+#[derive(Clone, Debug)]
+pub enum Effect {
+    /// No fog at all (the scene alone: the baseline of the timings).
+    None,
+    /// The plugin, with this camera component.
+    Crepuscular(Crepuscular),
+    /// Bevy's own `VolumetricFog` at this many steps, over the same medium (docs/BEVY.md
+    /// "Bevy's fog, matched").
+    BevyFog {
+        /// `VolumetricFog::step_count`.
+        steps: u32,
+    },
+}
+
+/// What the demo renders.
+#[derive(Clone, Debug)]
+pub struct DemoOptions {
+    /// Image width, pixels. Default 320.
+    pub width: u32,
+    /// Image height, pixels. Default 180.
+    pub height: u32,
+    /// The effect. Default: the plugin at its defaults.
+    pub effect: Effect,
+    /// Adds a spot lamp and a point lamp (both scattering) to the sun. Default false.
+    pub lamps: bool,
+    /// Side of Bevy's directional (and spot) shadow maps, texels. Default 1024.
+    pub shadow_map_size: usize,
+}
+
+impl Default for DemoOptions {
+    fn default() -> Self {
+        Self {
+            width: 320,
+            height: 180,
+            effect: Effect::Crepuscular(Crepuscular::default()),
+            lamps: false,
+            shadow_map_size: 1024,
+        }
+    }
+}
+
+/// The sun's illuminance, lux (Bevy's full daylight is 10 000–100 000).
+pub const SUN_LUX: f32 = 10_000.0;
+
+/// The demo's image target, for screenshots.
+#[derive(Resource, Clone)]
+pub struct DemoTarget(pub Handle<Image>);
+
+/// A headless app (no window, no pipelined rendering: each `update` renders one whole frame)
+/// with the demo scene. Call `app.finish(); app.cleanup();` once, then `update` per frame (as
+/// [`render_frames`] does).
+pub fn headless_app(opts: &DemoOptions) -> App {
+    let mut app = App::new();
+    app.add_plugins(
+        DefaultPlugins
+            .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
+            .disable::<PipelinedRenderingPlugin>(),
+    )
+    .insert_resource(DirectionalLightShadowMap { size: opts.shadow_map_size })
+    .add_plugins(CrepuscularPlugin);
+    let opts = opts.clone();
+    app.add_systems(Startup, move |mut commands: Commands, mut meshes: ResMut<Assets<Mesh>>, mut materials: ResMut<Assets<StandardMaterial>>, mut images: ResMut<Assets<Image>>| {
+        let target = images.add(Image::new_target_texture(opts.width, opts.height, TextureFormat::Rgba8UnormSrgb, None));
+        commands.insert_resource(DemoTarget(target.clone()));
+        spawn_colonnade(&mut commands, &mut meshes, &mut materials, &opts, RenderTarget::Image(target.into()));
+    });
+    app
+}
+
+/// Side of the square ground plane (y = 0, centred on the origin), world units.
+pub const GROUND: f32 = 80.0;
+
+/// The colonnade's boxes (centre, size), world units: nine pillars 0.7 wide and 7 high every 2
+/// units along x at z = 0, the beam on them, and a low wall behind. With [`GROUND`] they are
+/// the whole scene, so a test can check that a depth buffer or shadow map, unprojected with the
+/// matrices the plugin hands the library, lands on them ([`surface_distance`]).
+pub const BOXES: [([f32; 3], [f32; 3]); 11] = [
+    ([-8.0, 3.5, 0.0], [0.7, 7.0, 0.7]),
+    ([-6.0, 3.5, 0.0], [0.7, 7.0, 0.7]),
+    ([-4.0, 3.5, 0.0], [0.7, 7.0, 0.7]),
+    ([-2.0, 3.5, 0.0], [0.7, 7.0, 0.7]),
+    ([0.0, 3.5, 0.0], [0.7, 7.0, 0.7]),
+    ([2.0, 3.5, 0.0], [0.7, 7.0, 0.7]),
+    ([4.0, 3.5, 0.0], [0.7, 7.0, 0.7]),
+    ([6.0, 3.5, 0.0], [0.7, 7.0, 0.7]),
+    ([8.0, 3.5, 0.0], [0.7, 7.0, 0.7]),
+    ([0.0, 7.4, 0.0], [18.0, 0.8, 1.4]),
+    ([0.0, 1.5, -12.0], [30.0, 3.0, 0.5]),
+];
+
+/// Distance from `p` to the nearest surface of the demo scene (the ground or a box's faces),
+/// world units.
+pub fn surface_distance(p: Vec3) -> f32 {
+    let half = GROUND / 2.0;
+    let ground = if p.x.abs() <= half && p.z.abs() <= half { p.y.abs() } else { f32::INFINITY };
+    BOXES.iter().fold(ground, |best, (c, s)| {
+        let q = (p - Vec3::from_array(*c)).abs() - Vec3::from_array(*s) / 2.0;
+        // Signed distance to the box; its magnitude is the distance to the surface.
+        let outside = q.max(Vec3::ZERO).length();
+        let inside = q.max_element().min(0.0);
+        best.min((outside + inside).abs())
+    })
+}
+
+/// The far end of the medium (and of Bevy's fog volume), world units.
+pub const FAR: f32 = 60.0;
+
+/// Spawns the colonnade, its lights and the camera (rendering into `target`).
+pub fn spawn_colonnade(
+    commands: &mut Commands,
+    meshes: &mut Assets<Mesh>,
+    materials: &mut Assets<StandardMaterial>,
+    opts: &DemoOptions,
+    target: RenderTarget,
+) {
+    let stone = materials.add(StandardMaterial { base_color: Color::srgb(0.72, 0.68, 0.6), perceptual_roughness: 0.9, ..default() });
+    let ground = materials.add(StandardMaterial { base_color: Color::srgb(0.35, 0.33, 0.3), perceptual_roughness: 1.0, ..default() });
+    commands.spawn((Mesh3d(meshes.add(Plane3d::default().mesh().size(GROUND, GROUND))), MeshMaterial3d(ground)));
+    for (center, size) in BOXES {
+        commands.spawn((
+            Mesh3d(meshes.add(Cuboid::from_size(Vec3::from_array(size)))),
+            MeshMaterial3d(stone.clone()),
+            Transform::from_translation(Vec3::from_array(center)),
+        ));
+    }
+
+    let scatter = !matches!(opts.effect, Effect::None);
+    let mut sun = commands.spawn((
+        DirectionalLight { illuminance: SUN_LUX, shadow_maps_enabled: true, ..default() },
+        // One cascade over the whole medium: the library reads one map per light (docs/BEVY.md).
+        CascadeShadowConfigBuilder { num_cascades: 1, minimum_distance: 0.1, maximum_distance: FAR, ..default() }.build(),
+        Transform::from_xyz(0.0, 10.0, -10.0).looking_to(Vec3::new(0.35, -0.45, 1.0), Vec3::Y),
+    ));
+    match &opts.effect {
+        Effect::Crepuscular(_) => {
+            sun.insert(CrepuscularLight::default());
+        }
+        Effect::BevyFog { .. } => {
+            sun.insert(VolumetricLight);
+        }
+        Effect::None => {}
+    }
+    if opts.lamps {
+        let mut spot = commands.spawn((
+            SpotLight {
+                intensity: 2.0e6,
+                range: FAR,
+                outer_angle: 0.5,
+                inner_angle: 0.35,
+                shadow_maps_enabled: true,
+                ..default()
+            },
+            Transform::from_xyz(-5.0, 7.0, 5.0).looking_at(Vec3::new(-3.0, 0.0, 1.0), Vec3::Y),
+        ));
+        if scatter {
+            spot.insert(CrepuscularLight::default());
+        }
+        let mut point = commands.spawn((
+            PointLight { intensity: 1.0e6, range: FAR, shadow_maps_enabled: true, ..default() },
+            Transform::from_xyz(3.0, 3.0, -1.5),
+        ));
+        if scatter {
+            point.insert(CrepuscularLight::default());
+        }
+    }
+
+    let mut camera = commands.spawn((
+        Camera3d::default(),
+        Hdr,
+        Msaa::Off,
+        target,
+        Projection::Perspective(PerspectiveProjection { fov: 55f32.to_radians(), near: 0.1, ..default() }),
+        Transform::from_xyz(-1.0, 2.2, 13.0).looking_at(Vec3::new(0.5, 3.2, 0.0), Vec3::Y),
+    ));
+    match &opts.effect {
+        Effect::Crepuscular(c) => {
+            camera.insert(c.clone());
+        }
+        Effect::BevyFog { steps } => {
+            camera.insert(VolumetricFog { step_count: *steps, ambient_intensity: 0.0, jitter: 0.0, ..default() });
+        }
+        Effect::None => {}
+    }
+    if let Effect::BevyFog { .. } = opts.effect {
+        // Bevy's fog over the same medium as the plugin's default (docs/BEVY.md "Bevy's fog,
+        // matched"): σs and σa as `scattering` and `absorption` at density 1, HG g as the
+        // asymmetry, and the light scaled by exp(σt·R) to cancel the attenuation Bevy applies
+        // to the light over the volume's bounding radius R (the library's sun arrives
+        // unattenuated, docs/MODEL.md §1).
+        let c = Crepuscular::default();
+        let size = 2.0 * FAR;
+        let radius = (Vec3::splat(0.5 * size)).length();
+        let sigma_t = c.scattering.x + c.absorption.x;
+        commands.spawn((
+            FogVolume {
+                density_factor: 1.0,
+                scattering: c.scattering.x,
+                absorption: c.absorption.x,
+                scattering_asymmetry: match c.phase {
+                    crepuscular::Phase::HenyeyGreenstein { g } => g,
+                    _ => 0.0,
+                },
+                light_intensity: (sigma_t * radius).exp(),
+                ..default()
+            },
+            Transform::from_xyz(-1.0, 2.2, 13.0).with_scale(Vec3::splat(size)),
+        ));
+    }
+}
+
+/// Runs at least `frames` frames of a headless demo app, and on until Bevy has built every
+/// pipeline it queued (Bevy compiles pipelines in the background and skips what is not ready:
+/// until then the frame lacks meshes), then captures its image (sRGB 8-bit RGBA, after Bevy's
+/// tone mapping). Errors when the pipelines are not ready within two minutes or no frame
+/// arrives.
+pub fn render_frames(app: &mut App, frames: u32) -> Result<Image, String> {
+    settle(app, frames)?;
+    capture(app)
+}
+
+/// Updates at least `frames` times and until no pipeline has been waiting for three frames.
+pub fn settle(app: &mut App, frames: u32) -> Result<(), String> {
+    let start = std::time::Instant::now();
+    let (mut n, mut ready) = (0u32, 0u32);
+    while n < frames || ready < 3 {
+        app.update();
+        n += 1;
+        let waiting = app.sub_app(RenderApp).world().resource::<PipelineCache>().waiting_pipelines().count();
+        ready = if waiting == 0 { ready + 1 } else { 0 };
+        if start.elapsed().as_secs() > 120 {
+            return Err(format!("{waiting} of Bevy's pipelines were still compiling after 120 s ({n} frames)"));
+        }
+    }
+    Ok(())
+}
+
+/// Captures the demo target's current image (a few frames of Bevy's screenshot readback).
+pub fn capture(app: &mut App) -> Result<Image, String> {
+    let slot: Arc<Mutex<Option<Image>>> = Arc::default();
+    let target = app.world().get_resource::<DemoTarget>().ok_or("the demo scene was not spawned")?.0.clone();
+    let sink = slot.clone();
+    app.world_mut().spawn(Screenshot::image(target)).observe(move |captured: On<ScreenshotCaptured>| {
+        if let Ok(mut s) = sink.lock() {
+            *s = Some(captured.image.clone());
+        }
+    });
+    for _ in 0..10 {
+        app.update();
+        if let Some(img) = slot.lock().ok().and_then(|mut s| s.take()) {
+            return Ok(img);
+        }
+    }
+    Err("the screenshot did not arrive within 10 frames".into())
+}
+
+/// Writes an 8-bit image as PNG atomically (a temporary file beside `path`, then a rename).
+pub fn save_png(img: &Image, path: &std::path::Path) -> Result<(), String> {
+    let dynamic = img.clone().try_into_dynamic().map_err(|e| format!("{}: {e}", path.display()))?;
+    let rgb = dynamic.to_rgb8();
+    let tmp = path.with_extension("png.tmp");
+    rgb.save_with_format(&tmp, image::ImageFormat::Png).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+}

@@ -1,0 +1,441 @@
+//! A Bevy plugin for [crepuscular](crepuscular): light shafts in fog (single scattering) by any
+//! of the library's techniques — epipolar sampling, prefiltered shadow maps, 1D min-max
+//! mipmaps, brute-force and interleaved ray marching — inside Bevy's own frame.
+//!
+//! ```no_run
+//! use bevy::prelude::*;
+//! use crepuscular_bevy::{Crepuscular, CrepuscularLight, CrepuscularPlugin};
+//!
+//! fn setup(mut commands: Commands) {
+//!     // The camera chooses the technique and the medium…
+//!     commands.spawn((Camera3d::default(), Crepuscular::default()));
+//!     // …and each light that scatters carries the marker (its shadows must be on).
+//!     commands.spawn((DirectionalLight { shadow_maps_enabled: true, ..default() }, CrepuscularLight::default()));
+//! }
+//! App::new().add_plugins((DefaultPlugins, CrepuscularPlugin)).add_systems(Startup, setup).run();
+//! ```
+//!
+//! What the plugin does each frame, per camera with [`Crepuscular`] (docs/BEVY.md):
+//! 1. copies the shadow maps Bevy rendered for the marked lights (the chosen cascade of a
+//!    directional light, a spot's map, a point light's six cube faces) into one `R32Float`
+//!    array, the form the library reads (`shadow_copy.wgsl`);
+//! 2. describes the frame to the library with Bevy's own matrices: the camera's reversed-Z
+//!    infinite projection (jittered if TAA jitters it) and each shadow view's projection;
+//! 3. records the technique ([`crepuscular::Scattering::encode`]) into Bevy's command encoder,
+//!    reading Bevy's depth buffer after the main opaque pass;
+//! 4. composites L = T(s)·L_surface + L_scatt into Bevy's HDR view target with the library's
+//!    [`crepuscular::Composite`], before Bevy's tone mapping.
+//!
+//! Nothing is submitted or waited for by the plugin: Bevy submits its encoder as usual.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+use bevy::core_pipeline::core_3d::prepare_core_3d_depth_textures;
+use bevy::core_pipeline::schedule::{Core3d, Core3dSystems};
+use bevy::ecs::query::QueryItem;
+use bevy::pbr::{
+    ExtractedDirectionalLight, ExtractedPointLight, GlobalClusterableObjectMeta, PointAndSpotLightViewEntities,
+    ViewShadowBindings,
+};
+use bevy::prelude::*;
+use bevy::render::camera::ExtractedCamera;
+use bevy::render::extract_component::{ExtractComponent, ExtractComponentPlugin};
+use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery};
+use bevy::render::sync_component::SyncComponent;
+use bevy::camera::visibility::RenderLayers;
+use bevy::render::view::{ExtractedView, Msaa, ViewDepthTexture, ViewTarget};
+use bevy::render::{Render, RenderApp, RenderSystems};
+use crepuscular::{
+    Composite, CompositeInputs, CompositeTarget, DepthConvention, FrameCamera, FrameDesc, GpuFrame, Medium, Phase,
+    Scattering, StatsMode, TechniqueSettings,
+};
+
+pub mod demo;
+mod convert;
+mod shadow_copy;
+
+pub use convert::to_glam;
+use shadow_copy::ShadowCopy;
+
+/// Adds light shafts to every 3D camera that has a [`Crepuscular`] component, from every light
+/// that has a [`CrepuscularLight`] component (and shadow maps enabled).
+pub struct CrepuscularPlugin;
+
+/// The camera's effect: which technique and settings, and the medium the camera looks through.
+/// Put it on a `Camera3d` entity (with `Msaa::Off`: the library reads a single-sample depth
+/// buffer). Changing it at run time switches technique or settings in place; pipelines are
+/// rebuilt only where the technique changes (`Scattering::update`).
+#[derive(Component, Clone, Debug)]
+pub struct Crepuscular {
+    /// The technique and its settings, as the library names them (every technique and every
+    /// preset: `TechniqueSettings::named("epipolar")`, `Preset::Fast.settings("prefiltered")`).
+    /// Default: epipolar at its balanced settings (K = 32 slices of 64 steps).
+    pub technique: TechniqueSettings,
+    /// Scattering coefficient σs per RGB channel, m⁻¹ (world units⁻¹). Must be finite and ≥ 0.
+    /// Default 0.02 m⁻¹ (grey). Cost: none (the medium is homogeneous; docs/MODEL.md §1).
+    pub scattering: Vec3,
+    /// Absorption coefficient σa per RGB channel, m⁻¹. Must be finite and ≥ 0. Default 0.005.
+    pub absorption: Vec3,
+    /// The phase function (docs/MODEL.md §1). Default Henyey–Greenstein g = 0.7.
+    pub phase: Phase,
+    /// Where the rays of pixels with no geometry (the sky) and the medium end, world units:
+    /// Bevy's projection has no far plane. Default 200. Cost: none; precision of the techniques
+    /// that sample along rays falls as it grows.
+    pub far: f32,
+    /// Which of a directional light's shadow cascades the effect reads (docs/BEVY.md
+    /// "Cascades"). Default [`CascadeChoice::Farthest`].
+    pub cascade: CascadeChoice,
+    /// Format of the in-scattering texture: `Rgba16Float` (default; half the memory and
+    /// bandwidth, within one half-float ulp of `Rgba32Float`, README "Rgba16Float output") or
+    /// `Rgba32Float`.
+    pub output_format: wgpu::TextureFormat,
+}
+
+impl Default for Crepuscular {
+    fn default() -> Self {
+        Self {
+            technique: TechniqueSettings::named("epipolar").expect("epipolar is a built-in technique"),
+            scattering: Vec3::splat(0.02),
+            absorption: Vec3::splat(0.005),
+            phase: Phase::HenyeyGreenstein { g: 0.7 },
+            far: 200.0,
+            cascade: CascadeChoice::Farthest,
+            output_format: wgpu::TextureFormat::Rgba16Float,
+        }
+    }
+}
+
+impl Crepuscular {
+    /// The library's medium of this camera.
+    pub fn medium(&self) -> Medium {
+        Medium { scattering: to_glam(self.scattering), absorption: to_glam(self.absorption), phase: self.phase }
+    }
+}
+
+/// Which cascade of a directional light's cascaded shadow map the effect reads. The library
+/// reads one map per light; Bevy's cascades each cover a slice of the view frustum. The
+/// farthest cascade covers the farthest slice at the coarsest texels; view samples outside the
+/// chosen cascade's box are unshadowed. For shafts over the whole view give the scattering sun
+/// one cascade (`CascadeShadowConfigBuilder { num_cascades: 1, maximum_distance: far, .. }`),
+/// as the plugin's examples do.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum CascadeChoice {
+    /// The last cascade (the largest box). Default.
+    #[default]
+    Farthest,
+    /// Cascade `i` (0 is the nearest); clamped to the light's cascade count.
+    Index(usize),
+}
+
+/// Marks a light (`DirectionalLight`, `SpotLight` or `PointLight`, with `shadow_maps_enabled`)
+/// as scattering in the fog of cameras with [`Crepuscular`]. At most 16 lights reach the
+/// effect per view (the library's limit).
+#[derive(Component, Clone, Copy, Debug)]
+pub struct CrepuscularLight {
+    /// Scale of this light's in-scattering (1 scatters as the light shines, 0 opts out).
+    /// Finite, ≥ 0. Default 1.
+    pub scattering: f32,
+    /// Volume shadow bias, world units along the light's depth axis (the library's
+    /// `FrameLight::shadow_bias`; Bevy's own depth and normal biases already apply to the
+    /// map). Default 0.02.
+    pub shadow_bias: f32,
+}
+
+impl Default for CrepuscularLight {
+    fn default() -> Self {
+        Self { scattering: 1.0, shadow_bias: 0.02 }
+    }
+}
+
+impl SyncComponent for Crepuscular {
+    type Target = Self;
+}
+impl ExtractComponent for Crepuscular {
+    type QueryData = &'static Crepuscular;
+    type QueryFilter = ();
+    type Out = Self;
+    fn extract_component(item: QueryItem<'_, '_, Self::QueryData>) -> Option<Self> {
+        Some(item.clone())
+    }
+}
+impl SyncComponent for CrepuscularLight {
+    type Target = Self;
+}
+impl ExtractComponent for CrepuscularLight {
+    type QueryData = &'static CrepuscularLight;
+    type QueryFilter = ();
+    type Out = Self;
+    fn extract_component(item: QueryItem<'_, '_, Self::QueryData>) -> Option<Self> {
+        Some(*item)
+    }
+}
+
+/// A copy of one frame's inputs and output, for tests and tools that check the plugin against
+/// the library: insert a `CrepuscularCapture` resource into the app, run frames, then
+/// [`CrepuscularCapture::take`] the newest captured frame. Costs three texture copies per frame
+/// while the resource exists.
+#[derive(Resource, Clone, Default)]
+pub struct CrepuscularCapture(Arc<Mutex<Option<CapturedFrame>>>);
+
+impl CrepuscularCapture {
+    /// The newest frame captured, if one was.
+    pub fn take(&self) -> Option<CapturedFrame> {
+        self.0.lock().ok()?.take()
+    }
+}
+
+/// One frame as the plugin handed it to the library.
+pub struct CapturedFrame {
+    /// The frame description (camera, lights with their projections and layers, medium, size).
+    pub desc: FrameDesc,
+    /// The technique settings used.
+    pub technique: TechniqueSettings,
+    /// Bevy's depth buffer after the main pass (`Depth32Float`).
+    pub depth: wgpu::Texture,
+    /// The shadow array the library read (`R32Float`, the lights' layers).
+    pub shadow_maps: wgpu::Texture,
+    /// The in-scattering the plugin computed (in `Crepuscular::output_format`).
+    pub inscatter: wgpu::Texture,
+}
+
+impl Plugin for CrepuscularPlugin {
+    fn build(&self, app: &mut App) {
+        app.add_plugins((
+            ExtractComponentPlugin::<Crepuscular>::default(),
+            ExtractComponentPlugin::<CrepuscularLight>::default(),
+        ));
+        let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+            return;
+        };
+        render_app
+            .init_resource::<ViewStates>()
+            .add_systems(bevy::render::ExtractSchedule, extract_capture)
+            .add_systems(
+                Render,
+                depth_texture_binding.in_set(RenderSystems::Prepare).before(prepare_core_3d_depth_textures),
+            )
+            .add_systems(Core3d, scatter.after(Core3dSystems::MainPass).before(Core3dSystems::EarlyPostProcess));
+    }
+}
+
+fn extract_capture(mut commands: Commands, capture: bevy::render::Extract<Option<Res<CrepuscularCapture>>>) {
+    match capture.as_ref() {
+        Some(c) => commands.insert_resource((**c).clone()),
+        None => commands.remove_resource::<CrepuscularCapture>(),
+    }
+}
+
+/// The library samples Bevy's depth buffer: it needs `TEXTURE_BINDING` (Bevy's own volumetric
+/// fog asks for the same).
+fn depth_texture_binding(mut cameras: Query<&mut Camera3d, With<Crepuscular>>) {
+    for mut camera in &mut cameras {
+        camera.depth_texture_usages.0 |= wgpu::TextureUsages::TEXTURE_BINDING.bits();
+    }
+}
+
+/// Per view: the technique, the composite, the shadow copy and the textures they own, built
+/// on the first frame and kept (rebuilt only on resize or a format change; a settings change
+/// goes through `Scattering::update`).
+#[derive(Resource, Default)]
+struct ViewStates(Mutex<HashMap<Entity, ViewState>>);
+
+struct ViewState {
+    scattering: Scattering,
+    composite: Composite,
+    shadow_copy: ShadowCopy,
+    inscatter: Option<wgpu::Texture>,
+    technique: TechniqueSettings,
+    /// The last error, logged once until it changes.
+    last_error: Option<String>,
+}
+
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn scatter(
+    view: ViewQuery<(
+        Entity,
+        &ExtractedView,
+        &ExtractedCamera,
+        &ViewTarget,
+        &ViewDepthTexture,
+        &Crepuscular,
+        Option<&ViewShadowBindings>,
+        Option<&Msaa>,
+        Option<&RenderLayers>,
+    )>,
+    directional: Query<(Entity, &ExtractedDirectionalLight, Option<&RenderLayers>, Option<&CrepuscularLight>)>,
+    points: Query<(Entity, &ExtractedPointLight, &PointAndSpotLightViewEntities, Option<&CrepuscularLight>)>,
+    shadow_views: Query<&ExtractedView>,
+    cluster_meta: Option<Res<GlobalClusterableObjectMeta>>,
+    capture: Option<Res<CrepuscularCapture>>,
+    states: Res<ViewStates>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    mut ctx: RenderContext,
+) {
+    let (entity, extracted, camera, target, depth, settings, shadows, msaa, layers) = view.into_inner();
+    let device_w = device.wgpu_device();
+    let queue_w: &wgpu::Queue = &queue.0;
+    let Some(size) = camera.physical_viewport_size else { return };
+    let (width, height) = (size.x, size.y);
+    if width == 0 || height == 0 {
+        return;
+    }
+    let Ok(mut states) = states.0.lock() else { return };
+    let state = match states.get_mut(&entity) {
+        Some(s) => s,
+        None => match new_state(device_w, queue_w, settings) {
+            Ok(s) => states.entry(entity).or_insert(s),
+            Err(e) => {
+                error!("crepuscular: {e}");
+                return;
+            }
+        },
+    };
+    let result = (|| -> Result<(), String> {
+        if msaa.is_some_and(|m| *m != Msaa::Off) {
+            return Err("the camera must have Msaa::Off (the effect reads a single-sample depth buffer)".into());
+        }
+        let Some(shadows) = shadows else { return Err("the view has no shadow bindings yet".into()) };
+        if state.technique != settings.technique {
+            state.scattering.update(&settings.technique).map_err(|e| e.to_string())?;
+            state.technique = settings.technique.clone();
+        }
+        if state.scattering.output_format() != settings.output_format {
+            state.scattering = new_scattering(device_w, queue_w, settings)?;
+            state.inscatter = None;
+        }
+        // The lights and where their maps are (docs/BEVY.md "Shadow maps").
+        let lights = convert::LightsInView {
+            view: entity,
+            view_layers: layers.cloned().unwrap_or_default(),
+            cascade: settings.cascade,
+            exposure: camera.exposure,
+            directional_size: shadows.directional_light_depth_texture.width(),
+            point_size: shadows.point_light_depth_texture.width(),
+        };
+        let directional: Vec<_> = directional.iter().collect();
+        let points: Vec<_> = points.iter().collect();
+        let (frame_lights, jobs) = lights.collect(&directional, &points, &shadow_views, cluster_meta.as_deref())?;
+        if frame_lights.is_empty() {
+            return Err("no light with CrepuscularLight and shadow maps enabled reaches this camera".into());
+        }
+        let world_from_view = extracted.world_from_view.to_matrix();
+        let frame_camera = FrameCamera::new(
+            to_glam_mat(world_from_view.inverse()),
+            to_glam_mat(extracted.clip_from_view),
+            DepthConvention::Reversed,
+            Some(settings.far),
+        )
+        .map_err(|e| e.to_string())?;
+        let desc = FrameDesc { camera: frame_camera, lights: frame_lights, medium: settings.medium(), width, height };
+        let encoder = ctx.command_encoder();
+        let shadow_array = state.shadow_copy.encode(device_w, encoder, shadows, &jobs)?;
+        let inscatter = match &state.inscatter {
+            Some(t) if (t.width(), t.height()) == (width, height) => t.clone(),
+            _ => {
+                let t = device_w.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("crepuscular inscatter"),
+                    size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: settings.output_format,
+                    usage: wgpu::TextureUsages::STORAGE_BINDING
+                        | wgpu::TextureUsages::TEXTURE_BINDING
+                        | wgpu::TextureUsages::COPY_SRC,
+                    view_formats: &[],
+                });
+                state.inscatter = Some(t.clone());
+                t
+            }
+        };
+        let inscatter_view = inscatter.create_view(&Default::default());
+        let depth_view = depth.texture.create_view(&wgpu::TextureViewDescriptor {
+            aspect: wgpu::TextureAspect::DepthOnly,
+            ..Default::default()
+        });
+        let shadow_view = shadow_array.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let frame =
+            GpuFrame { desc: &desc, depth: &depth_view, shadow_maps: &shadow_view, spot_textures: None, rectified_shadow_maps: &[] };
+        state.scattering.encode(encoder, &frame, &inscatter_view).map_err(|e| e.to_string())?;
+        // L = T(s)·L_surface + L_scatt into Bevy's HDR target, before its tone mapping.
+        let post = target.post_process_write();
+        let inputs = CompositeInputs { desc: &desc, depth: &depth_view, inscatter: &inscatter_view, surface: post.source };
+        state.composite.encode(encoder, &inputs, CompositeTarget::Into(post.destination), None).map_err(|e| e.to_string())?;
+        if let Some(capture) = &capture {
+            let frame = capture_frame(device_w, encoder, &desc, &settings.technique, &depth.texture, &shadow_array, &inscatter);
+            if let Ok(mut slot) = capture.0.lock() {
+                *slot = Some(frame);
+            }
+        }
+        Ok(())
+    })();
+    match result {
+        Ok(()) => state.last_error = None,
+        Err(e) => {
+            if state.last_error.as_deref() != Some(e.as_str()) {
+                error!("crepuscular (camera {entity}): {e}");
+                state.last_error = Some(e);
+            }
+        }
+    }
+}
+
+fn new_scattering(device: &wgpu::Device, queue: &wgpu::Queue, settings: &Crepuscular) -> Result<Scattering, String> {
+    Scattering::new(device, queue, settings.technique.clone())
+        .and_then(|s| s.with_stats(StatsMode::Off))
+        .and_then(|s| s.with_output_format(settings.output_format))
+        .map_err(|e| e.to_string())
+}
+
+fn new_state(device: &wgpu::Device, queue: &wgpu::Queue, settings: &Crepuscular) -> Result<ViewState, String> {
+    Ok(ViewState {
+        scattering: new_scattering(device, queue, settings)?,
+        composite: Composite::new(device),
+        shadow_copy: ShadowCopy::new(device),
+        inscatter: None,
+        technique: settings.technique.clone(),
+        last_error: None,
+    })
+}
+
+fn copy_of(device: &wgpu::Device, encoder: &mut wgpu::CommandEncoder, src: &wgpu::Texture, label: &str) -> wgpu::Texture {
+    let t = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: src.size(),
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: src.format(),
+        usage: wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::TEXTURE_BINDING,
+        view_formats: &[],
+    });
+    encoder.copy_texture_to_texture(src.as_image_copy(), t.as_image_copy(), src.size());
+    t
+}
+
+fn capture_frame(
+    device: &wgpu::Device,
+    encoder: &mut wgpu::CommandEncoder,
+    desc: &FrameDesc,
+    technique: &TechniqueSettings,
+    depth: &wgpu::Texture,
+    shadow_maps: &wgpu::Texture,
+    inscatter: &wgpu::Texture,
+) -> CapturedFrame {
+    CapturedFrame {
+        desc: desc.clone(),
+        technique: technique.clone(),
+        depth: copy_of(device, encoder, depth, "crepuscular capture depth"),
+        shadow_maps: copy_of(device, encoder, shadow_maps, "crepuscular capture shadow maps"),
+        inscatter: copy_of(device, encoder, inscatter, "crepuscular capture inscatter"),
+    }
+}
+
+pub(crate) fn to_glam_mat(m: Mat4) -> glam::Mat4 {
+    glam::Mat4::from_cols_array(&m.to_cols_array())
+}

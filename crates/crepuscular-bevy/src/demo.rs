@@ -44,6 +44,9 @@ pub struct DemoOptions {
     pub lamps: bool,
     /// Side of Bevy's directional (and spot) shadow maps, texels. Default 1024.
     pub shadow_map_size: usize,
+    /// Installs Bevy's `LogPlugin` (a process-wide logger: tests that build several apps in one
+    /// process turn it off). Default true.
+    pub log: bool,
 }
 
 impl Default for DemoOptions {
@@ -54,6 +57,7 @@ impl Default for DemoOptions {
             effect: Effect::Crepuscular(Crepuscular::default()),
             lamps: false,
             shadow_map_size: 1024,
+            log: true,
         }
     }
 }
@@ -70,11 +74,13 @@ pub struct DemoTarget(pub Handle<Image>);
 /// [`render_frames`] does).
 pub fn headless_app(opts: &DemoOptions) -> App {
     let mut app = App::new();
-    app.add_plugins(
-        DefaultPlugins
-            .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
-            .disable::<PipelinedRenderingPlugin>(),
-    )
+    let mut plugins = DefaultPlugins
+        .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
+        .disable::<PipelinedRenderingPlugin>();
+    if !opts.log {
+        plugins = plugins.disable::<bevy::log::LogPlugin>();
+    }
+    app.add_plugins(plugins)
     .insert_resource(DirectionalLightShadowMap { size: opts.shadow_map_size })
     .add_plugins(CrepuscularPlugin);
     let opts = opts.clone();
@@ -162,7 +168,7 @@ pub fn spawn_colonnade(
     if opts.lamps {
         let mut spot = commands.spawn((
             SpotLight {
-                intensity: 2.0e6,
+                intensity: 2.0e7,
                 range: FAR,
                 outer_angle: 0.5,
                 inner_angle: 0.35,
@@ -244,6 +250,9 @@ pub fn settle(app: &mut App, frames: u32) -> Result<(), String> {
     while n < frames || ready < 3 {
         app.update();
         n += 1;
+        if let Some(exit) = app.should_exit() {
+            return Err(format!("the app quit after {n} frames ({exit:?}; Bevy logged why)"));
+        }
         let waiting = app.sub_app(RenderApp).world().resource::<PipelineCache>().waiting_pipelines().count();
         ready = if waiting == 0 { ready + 1 } else { 0 };
         if start.elapsed().as_secs() > 120 {

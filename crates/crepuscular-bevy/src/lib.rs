@@ -227,10 +227,14 @@ fn extract_capture(mut commands: Commands, capture: bevy::render::Extract<Option
 }
 
 /// The library samples Bevy's depth buffer: it needs `TEXTURE_BINDING` (Bevy's own volumetric
-/// fog asks for the same).
-fn depth_texture_binding(mut cameras: Query<&mut Camera3d, With<Crepuscular>>) {
+/// fog asks for the same), and a capture copies it (`COPY_SRC`).
+fn depth_texture_binding(mut cameras: Query<&mut Camera3d, With<Crepuscular>>, capture: Option<Res<CrepuscularCapture>>) {
+    let mut usage = wgpu::TextureUsages::TEXTURE_BINDING;
+    if capture.is_some() {
+        usage |= wgpu::TextureUsages::COPY_SRC;
+    }
     for mut camera in &mut cameras {
-        camera.depth_texture_usages.0 |= wgpu::TextureUsages::TEXTURE_BINDING.bits();
+        camera.depth_texture_usages.0 |= usage.bits();
     }
 }
 
@@ -297,14 +301,15 @@ fn scatter(
             return Err("the camera must have Msaa::Off (the effect reads a single-sample depth buffer)".into());
         }
         let Some(shadows) = shadows else { return Err("the view has no shadow bindings yet".into()) };
-        if state.technique != settings.technique {
-            state.scattering.update(&settings.technique).map_err(|e| e.to_string())?;
-            state.technique = settings.technique.clone();
-        }
-        if state.scattering.output_format() != settings.output_format {
+        // Settings of the same technique change in place (pipelines kept); another technique
+        // or output format builds its pipelines once, here.
+        let same_technique = state.technique == settings.technique
+            || state.scattering.update(&settings.technique).map_err(|e| e.to_string())?;
+        if !same_technique || state.scattering.output_format() != settings.output_format {
             state.scattering = new_scattering(device_w, queue_w, settings)?;
             state.inscatter = None;
         }
+        state.technique = settings.technique.clone();
         // The lights and where their maps are (docs/BEVY.md "Shadow maps").
         let lights = convert::LightsInView {
             view: entity,

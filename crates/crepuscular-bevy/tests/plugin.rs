@@ -1,0 +1,279 @@
+//! The Bevy plugin, headless on the test adapter (docs/BEVY.md "Tests"):
+//! - the matrices it hands the library are Bevy's: Bevy's depth buffer and every marked light's
+//!   shadow layers, unprojected with them, land on the demo scene's surfaces (a closed form:
+//!   the scene is a ground plane and boxes), and each point-light face holds its own axis;
+//! - every GPU technique's in-scattering inside Bevy's frame equals the library's own result on
+//!   the same depth and shadow maps (same device, same settings) to f32 rounding — including
+//!   after a technique switch at run time;
+//! - the shafts are where the scene has them: the pillars' shadows cut the in-scattering along
+//!   the ground into stripes, and shadows only ever remove light;
+//! - the composite lands in Bevy's picture.
+
+use std::sync::Mutex;
+
+use bevy::prelude::*;
+use crepuscular::{GpuContext, GpuFrame, Scattering, StatsMode, TechniqueSettings};
+use crepuscular_bevy::demo::{self, DemoOptions, Effect};
+use crepuscular_bevy::{CapturedFrame, Crepuscular, CrepuscularCapture};
+
+/// One Bevy app at a time: each opens its own device, and two at once only slow each other.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+const W: u32 = 160;
+const H: u32 = 90;
+
+fn adapter(test: &str) -> bool {
+    crepuscular::gpu::test_gpu(test).is_some()
+}
+
+fn options(effect: Effect, lamps: bool) -> DemoOptions {
+    DemoOptions { width: W, height: H, effect, lamps, shadow_map_size: 512, log: true }
+}
+
+fn full_float(technique: TechniqueSettings) -> Crepuscular {
+    Crepuscular { technique, output_format: wgpu::TextureFormat::Rgba32Float, ..Default::default() }
+}
+
+/// A settled app with the capture on, and its newest captured frame.
+fn app_with_capture(effect: Effect, lamps: bool) -> (App, CapturedFrame) {
+    let mut app = demo::headless_app(&options(effect, lamps));
+    app.insert_resource(CrepuscularCapture::default());
+    app.finish();
+    app.cleanup();
+    demo::settle(&mut app, 3).expect("the demo settles");
+    let frame = take_capture(&mut app);
+    (app, frame)
+}
+
+fn take_capture(app: &mut App) -> CapturedFrame {
+    app.update();
+    app.world().resource::<CrepuscularCapture>().take().expect("the plugin captured a frame (see its logged error)")
+}
+
+fn gpu_of(app: &App) -> GpuContext {
+    let device = app.world().resource::<bevy::render::renderer::RenderDevice>().wgpu_device().clone();
+    let queue: wgpu::Queue = (**app.world().resource::<bevy::render::renderer::RenderQueue>().0).clone();
+    GpuContext::from_device(&device, &queue)
+}
+
+/// The library's own in-scattering of a captured frame: a fresh `Scattering` on the same
+/// device, reading the captured depth and shadow maps.
+fn library_result(gpu: &GpuContext, c: &CapturedFrame, shadow_maps: &wgpu::Texture) -> crepuscular::Image {
+    let mut s = Scattering::from_gpu(gpu, c.technique.clone())
+        .and_then(|s| s.with_stats(StatsMode::Off))
+        .and_then(|s| s.with_output_format(wgpu::TextureFormat::Rgba32Float))
+        .expect("the technique builds");
+    let out = gpu.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("library inscatter"),
+        size: wgpu::Extent3d { width: c.desc.width, height: c.desc.height, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba32Float,
+        usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::TEXTURE_BINDING,
+        view_formats: &[],
+    });
+    let depth = c.depth.create_view(&wgpu::TextureViewDescriptor {
+        aspect: wgpu::TextureAspect::DepthOnly,
+        ..Default::default()
+    });
+    let shadows = shadow_maps.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    });
+    let frame = GpuFrame { desc: &c.desc, depth: &depth, shadow_maps: &shadows, spot_textures: None, rectified_shadow_maps: &[] };
+    s.render(&frame, &out.create_view(&Default::default())).expect("the library renders the captured frame");
+    gpu.read_image(&out).expect("readback")
+}
+
+fn max_abs_diff(a: &crepuscular::Image, b: &crepuscular::Image) -> (f32, f32) {
+    let diff = a.pixels.iter().zip(&b.pixels).flat_map(|(p, q)| (0..3).map(move |c| (p[c] - q[c]).abs())).fold(0f32, f32::max);
+    let peak = a.pixels.iter().flat_map(|p| p[..3].iter().copied()).fold(0f32, f32::max);
+    (diff, peak)
+}
+
+/// Unprojects NDC (x, y, depth) with a world → clip matrix.
+fn unproject(view_proj: glam::Mat4, x: f32, y: f32, d: f32) -> glam::Vec3 {
+    let p = view_proj.inverse() * glam::Vec4::new(x, y, d, 1.0);
+    p.truncate() / p.w
+}
+
+fn on_scene(p: glam::Vec3, eye_distance: f32) -> bool {
+    demo::surface_distance(Vec3::new(p.x, p.y, p.z)) <= 0.02 + 0.002 * eye_distance
+}
+
+#[test]
+fn matrices_put_bevys_depth_and_shadow_maps_on_the_scene() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !adapter("matrices_put_bevys_depth_and_shadow_maps_on_the_scene") {
+        return;
+    }
+    let effect = Effect::Crepuscular(full_float(TechniqueSettings::named("brute-force").unwrap()));
+    let (app, c) = app_with_capture(effect, true);
+    let gpu = gpu_of(&app);
+    let desc = &c.desc;
+    assert_eq!(desc.lights.len(), 3, "sun, spot and point lamp reach the effect");
+
+    // The camera: every covered pixel of Bevy's depth buffer is a scene surface.
+    let depth = gpu.read_texture_f32(&c.depth, 0).expect("depth readback");
+    let vp = desc.camera.view_proj();
+    let eye = desc.camera.inv_view().w_axis.truncate();
+    let (mut covered, mut on) = (0usize, 0usize);
+    for y in 0..H {
+        for x in 0..W {
+            let d = depth[(y * W + x) as usize];
+            if d <= 0.0 {
+                continue; // sky (reversed-Z clear)
+            }
+            let ndc = desc.pixel_ndc(x, y);
+            let p = unproject(vp, ndc.x, ndc.y, d);
+            covered += 1;
+            on += on_scene(p, (p - eye).length()) as usize;
+        }
+    }
+    let fraction = on as f64 / covered as f64;
+    eprintln!("camera: {on} of {covered} covered pixels on the scene ({fraction:.4})");
+    assert!(covered > (W * H / 2) as usize, "the colonnade and ground cover most of the view ({covered})");
+    assert!(fraction >= 0.995, "camera depth unprojected off the scene: {fraction}");
+
+    // Every light's layers: each drawn texel, unprojected with the light's matrix of that
+    // layer, is a scene surface; a point light's face f holds the directions whose major axis is f.
+    for (k, fl) in desc.lights.iter().enumerate() {
+        let s = &fl.shadow;
+        let side = c.shadow_maps.width();
+        let light_pos = match &fl.light {
+            crepuscular::Light::Point { position, .. } | crepuscular::Light::Spot { position, .. } => Some(*position),
+            crepuscular::Light::Directional { .. } => None,
+        };
+        let (mut drawn, mut on, mut right_face) = (0usize, 0usize, 0usize);
+        for layer in 0..s.layers {
+            let texels = gpu.read_texture_f32(&c.shadow_maps, fl.shadow_layer + layer).expect("shadow readback");
+            for ty in (0..s.size).step_by(3) {
+                for tx in (0..s.size).step_by(3) {
+                    let d = texels[(ty * side + tx) as usize];
+                    if s.is_empty(d) {
+                        continue;
+                    }
+                    let x = (tx as f32 + 0.5) / s.size as f32 * 2.0 - 1.0;
+                    let y = 1.0 - (ty as f32 + 0.5) / s.size as f32 * 2.0;
+                    let p = unproject(s.view_proj[layer as usize], x, y, d);
+                    let dist = light_pos.map_or(0.0, |l| (p - l).length());
+                    drawn += 1;
+                    on += on_scene(p, dist) as usize;
+                    if let (6, Some(l)) = (s.layers, light_pos) {
+                        right_face += (crepuscular::shadow::cube_face(p - l) == layer) as usize;
+                    } else {
+                        right_face += 1;
+                    }
+                }
+            }
+        }
+        let fraction = on as f64 / drawn.max(1) as f64;
+        let faces = right_face as f64 / drawn.max(1) as f64;
+        eprintln!("light {k} ({}): {on} of {drawn} texels on the scene ({fraction:.4}), on their face {faces:.4}", fl.light.kind_name());
+        assert!(drawn > 1000, "light {k}: its map holds the scene ({drawn} texels)");
+        assert!(fraction >= 0.99, "light {k}: shadow texels unprojected off the scene: {fraction}");
+        assert!(faces >= 0.99, "light {k}: texels on another cube face's axis: {faces}");
+    }
+}
+
+#[test]
+fn every_technique_in_bevy_equals_the_library_on_the_same_maps() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !adapter("every_technique_in_bevy_equals_the_library_on_the_same_maps") {
+        return;
+    }
+    let techniques: Vec<TechniqueSettings> = crepuscular::techniques::TECHNIQUES
+        .iter()
+        .filter_map(|t| TechniqueSettings::named(t.name).ok())
+        .filter(|t| t.has_gpu())
+        .collect();
+    assert!(techniques.len() >= 6, "every GPU technique: {:?}", techniques.iter().map(|t| t.name()).collect::<Vec<_>>());
+    let (mut app, first) = app_with_capture(Effect::Crepuscular(full_float(techniques[0].clone())), true);
+    let gpu = gpu_of(&app);
+    let mut captured = Some(first);
+    for technique in &techniques {
+        let c = match captured.take() {
+            Some(c) => c,
+            None => {
+                // A technique switch at run time, through the camera component.
+                let mut q = app.world_mut().query::<&mut Crepuscular>();
+                for mut cam in q.iter_mut(app.world_mut()) {
+                    cam.technique = technique.clone();
+                }
+                app.update();
+                take_capture(&mut app)
+            }
+        };
+        assert_eq!(c.technique.name(), technique.name());
+        let plugin = gpu.read_image(&c.inscatter).expect("readback");
+        let library = library_result(&gpu, &c, &c.shadow_maps);
+        let (diff, peak) = max_abs_diff(&plugin, &library);
+        eprintln!("{}: plugin vs library max |Δ| = {diff:e} (peak {peak:.4})", technique.name());
+        assert!(peak > 1e-3, "{}: the in-scattering is not black (peak {peak})", technique.name());
+        assert!(
+            plugin.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())),
+            "{}: no NaN or infinity in the plugin's output",
+            technique.name()
+        );
+        assert!(diff <= 1e-5 * peak, "{}: plugin and library differ by {diff} (peak {peak})", technique.name());
+    }
+}
+
+#[test]
+fn shafts_are_where_the_pillars_cast_them() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !adapter("shafts_are_where_the_pillars_cast_them") {
+        return;
+    }
+    let effect = Effect::Crepuscular(full_float(TechniqueSettings::named("brute-force").unwrap()));
+    let (mut app, c) = app_with_capture(effect, false);
+    let gpu = gpu_of(&app);
+    let shadowed = gpu.read_image(&c.inscatter).expect("readback");
+    // The same frame with empty shadow maps (reversed-Z clear: 0): the unshadowed in-scattering.
+    let empty = gpu
+        .upload_texture(
+            "empty shadow maps",
+            wgpu::TextureFormat::R32Float,
+            c.shadow_maps.width(),
+            c.shadow_maps.height(),
+            c.shadow_maps.depth_or_array_layers(),
+            4,
+            &vec![0u8; (c.shadow_maps.width() * c.shadow_maps.height() * c.shadow_maps.depth_or_array_layers() * 4) as usize],
+        );
+    let lit = library_result(&gpu, &c, &empty);
+    let ratio = |x: u32, y: u32| {
+        let (s, l) = (shadowed.pixels[(y * W + x) as usize], lit.pixels[(y * W + x) as usize]);
+        s[1] / l[1].max(1e-9)
+    };
+    // Shadows only remove light.
+    let over = (0..H).flat_map(|y| (0..W).map(move |x| (x, y))).filter(|&(x, y)| ratio(x, y) > 1.0 + 1e-4).count();
+    assert_eq!(over, 0, "{over} pixels gain light from shadows");
+    // Along a row through the colonnade (at 45 % of the height: the pillars and the gaps
+    // between them), the pillars' shadows alternate with the sun's shafts: each of the nine
+    // pillars' shadows crosses the row's mid ratio twice (measured: 18 crossings, ratio 0..0.92).
+    let y = H * 45 / 100;
+    let row: Vec<f32> = (0..W).map(|x| ratio(x, y)).collect();
+    let (lo, hi) = row.iter().fold((f32::MAX, 0f32), |(a, b), &r| (a.min(r), b.max(r)));
+    let mid = 0.5 * (lo + hi);
+    let crossings = row.windows(2).filter(|w| (w[0] < mid) != (w[1] < mid)).count();
+    eprintln!("row {y}: shadowed / unshadowed {lo:.3}..{hi:.3}, {crossings} crossings of {mid:.3}");
+    assert!(hi - lo > 0.5, "the row has shadowed and lit rays ({lo}..{hi})");
+    assert!((12..=30).contains(&crossings), "the nine pillars' shafts cross the row: {crossings} crossings");
+
+    // The composite lands in Bevy's picture: the fog brightens the picture against the same
+    // scene without the effect.
+    let with = demo::capture(&mut app).expect("screenshot");
+    drop(app);
+    let mut bare = demo::headless_app(&options(Effect::None, false));
+    bare.finish();
+    bare.cleanup();
+    let without = demo::render_frames(&mut bare, 3).expect("screenshot");
+    let mean = |img: &Image| {
+        let d = img.data.as_ref().expect("screenshot data");
+        d.chunks_exact(4).map(|p| p[0] as f64 + p[1] as f64 + p[2] as f64).sum::<f64>() / (d.len() / 4) as f64 / 3.0
+    };
+    let (m_with, m_without) = (mean(&with), mean(&without));
+    eprintln!("mean sRGB value: {m_with:.1} with the effect, {m_without:.1} without");
+    assert!(m_with > m_without + 10.0, "the fog brightens the picture ({m_with} vs {m_without})");
+}

@@ -10,7 +10,8 @@ use bevy::render::view::ExtractedView;
 use crepuscular::{DepthConvention, FrameLight, Light, ShadowProjection};
 
 use crate::shadow_copy::{CopyJobs, Job};
-use crate::{CascadeChoice, CrepuscularLight, to_glam_mat};
+use crate::{CascadeChoice, CrepuscularGobo, CrepuscularLight, to_glam_mat};
+use std::sync::Arc;
 
 /// A Bevy (glam 0.32) vector as the library's (glam 0.30).
 pub fn to_glam(v: Vec3) -> glam::Vec3 {
@@ -28,8 +29,13 @@ const MAX_SPOT_DEGREES: f32 = 89.0;
 
 pub(crate) type DirectionalItem<'a> =
     (Entity, &'a ExtractedDirectionalLight, Option<&'a RenderLayers>, Option<&'a CrepuscularLight>);
-pub(crate) type PointItem<'a> =
-    (Entity, &'a ExtractedPointLight, &'a PointAndSpotLightViewEntities, Option<&'a CrepuscularLight>);
+pub(crate) type PointItem<'a> = (
+    Entity,
+    &'a ExtractedPointLight,
+    &'a PointAndSpotLightViewEntities,
+    Option<&'a CrepuscularLight>,
+    Option<&'a CrepuscularGobo>,
+);
 
 /// What the conversion needs to know of the view.
 pub(crate) struct LightsInView {
@@ -53,16 +59,18 @@ fn view_proj(v: &ExtractedView) -> Mat4 {
 }
 
 impl LightsInView {
-    /// The marked lights of the view, in the order Bevy assigns their shadow layers, and the
-    /// copies that gather their maps into the plugin's array.
+    /// The marked lights of the view, in the order Bevy assigns their shadow layers, the
+    /// copies that gather their maps into the plugin's array, and the spots' gobos (light
+    /// `texture_layer` i is gobo i).
     pub fn collect(
         &self,
         directional: &[DirectionalItem],
         points: &[PointItem],
         shadow_views: &Query<&ExtractedView>,
         meta: Option<&GlobalClusterableObjectMeta>,
-    ) -> Result<(Vec<FrameLight>, CopyJobs), String> {
+    ) -> Result<(Vec<FrameLight>, CopyJobs, Vec<Arc<crepuscular::RgbTexture>>), String> {
         let mut lights = Vec::new();
+        let mut gobos: Vec<Arc<crepuscular::RgbTexture>> = Vec::new();
         let mut jobs = CopyJobs::default();
         let mut next_layer = 0u32;
         let mut dir_size = 0u32;
@@ -138,7 +146,7 @@ impl LightsInView {
         if any_marked {
             let meta = meta.ok_or("Bevy's clustered-light table is missing")?;
             let point_count = points.iter().filter(|p| p.1.spot_light_angles.is_none()).count();
-            for &(entity, light, views, marker) in points {
+            for &(entity, light, views, marker, gobo) in points {
                 let Some(marker) = marker else { continue };
                 if !light.shadow_maps_enabled {
                     return Err(format!("light {entity} has CrepuscularLight but no shadow maps"));
@@ -175,10 +183,15 @@ impl LightsInView {
                             inner_angle_degrees: inner.to_degrees().min(outer_deg),
                             color,
                             intensity,
-                            texture: None,
+                            texture: gobo.map(|g| g.texture.clone()),
                         };
                         let src = base + (index - point_count.min(index)) as u32;
-                        lights.push(self.frame_light(l, shadow, marker, next_layer));
+                        let mut fl = self.frame_light(l, shadow, marker, next_layer);
+                        if let Some(g) = gobo {
+                            fl.texture_layer = gobos.len() as u32;
+                            gobos.push(g.texture.clone());
+                        }
+                        lights.push(fl);
                         jobs.directional.push(Job { src_layer: src, dst_layer: next_layer, size: self.directional_size, _pad: 0 });
                         dir_size = self.directional_size;
                         next_layer += 1;
@@ -227,7 +240,7 @@ impl LightsInView {
         }
         jobs.layers = next_layer;
         jobs.size = dir_size.max(point_size);
-        Ok((lights, jobs))
+        Ok((lights, jobs, gobos))
     }
 
     fn frame_light(&self, light: Light, shadow: ShadowProjection, marker: &CrepuscularLight, layer: u32) -> FrameLight {

@@ -87,7 +87,8 @@ pub fn headless_app(opts: &DemoOptions) -> App {
     app.add_systems(Startup, move |mut commands: Commands, mut meshes: ResMut<Assets<Mesh>>, mut materials: ResMut<Assets<StandardMaterial>>, mut images: ResMut<Assets<Image>>| {
         let target = images.add(Image::new_target_texture(opts.width, opts.height, TextureFormat::Rgba8UnormSrgb, None));
         commands.insert_resource(DemoTarget(target.clone()));
-        spawn_colonnade(&mut commands, &mut meshes, &mut materials, &opts, RenderTarget::Image(target.into()));
+        let gobo = images.add(stained_glass());
+        spawn_colonnade(&mut commands, &mut meshes, &mut materials, &opts, RenderTarget::Image(target.into()), gobo);
     });
     app
 }
@@ -137,6 +138,7 @@ pub fn spawn_colonnade(
     materials: &mut Assets<StandardMaterial>,
     opts: &DemoOptions,
     target: RenderTarget,
+    gobo: Handle<Image>,
 ) {
     let stone = materials.add(StandardMaterial { base_color: Color::srgb(0.72, 0.68, 0.6), perceptual_roughness: 0.9, ..default() });
     let ground = materials.add(StandardMaterial { base_color: Color::srgb(0.35, 0.33, 0.3), perceptual_roughness: 1.0, ..default() });
@@ -178,7 +180,7 @@ pub fn spawn_colonnade(
             Transform::from_xyz(-5.0, 7.0, 5.0).looking_at(Vec3::new(-3.0, 0.0, 1.0), Vec3::Y),
         ));
         if scatter {
-            spot.insert(CrepuscularLight::default());
+            spot.insert(CrepuscularLight { texture: Some(gobo), ..default() });
         }
         let mut point = commands.spawn((
             PointLight { intensity: 1.0e6, range: FAR, shadow_maps_enabled: true, ..default() },
@@ -231,6 +233,26 @@ pub fn spawn_colonnade(
             Transform::from_xyz(-1.0, 2.2, 13.0).with_scale(Vec3::splat(size)),
         ));
     }
+}
+
+/// A 4×4 "stained glass" of saturated panes (sRGB), the demo spot's gobo.
+pub fn stained_glass() -> Image {
+    use bevy::asset::RenderAssetUsages;
+    use bevy::render::render_resource::{Extent3d, TextureDimension};
+    const PANES: [[u8; 4]; 4] = [[230, 40, 40, 255], [40, 200, 60, 255], [50, 80, 240, 255], [240, 210, 40, 255]];
+    let mut data = Vec::new();
+    for y in 0..4 {
+        for x in 0..4 {
+            data.extend_from_slice(&PANES[(x + y) % 4]);
+        }
+    }
+    Image::new(
+        Extent3d { width: 4, height: 4, depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        data,
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
+    )
 }
 
 /// Runs at least `frames` frames of a headless demo app, and on until Bevy has built every

@@ -131,7 +131,7 @@ pub enum CascadeChoice {
 /// Marks a light (`DirectionalLight`, `SpotLight` or `PointLight`, with `shadow_maps_enabled`)
 /// as scattering in the fog of cameras with [`Crepuscular`]. At most 16 lights reach the
 /// effect per view (the library's limit).
-#[derive(Component, Clone, Copy, Debug)]
+#[derive(Component, Clone, Debug)]
 pub struct CrepuscularLight {
     /// Scale of this light's in-scattering (1 scatters as the light shines, 0 opts out).
     /// Finite, ≥ 0. Default 1.
@@ -140,12 +140,28 @@ pub struct CrepuscularLight {
     /// `FrameLight::shadow_bias`; Bevy's own depth and normal biases already apply to the
     /// map). Default 0.02.
     pub shadow_bias: f32,
+    /// A spot light's projected texture ("gobo", stained glass): a Bevy image, mapped over the
+    /// spot's square shadow frustum, its RGB multiplying the light (linear; an sRGB image is
+    /// decoded). Read into the effect once it is loaded and whenever the handle changes; any
+    /// format Bevy can convert to RGBA (`Image::try_into_dynamic`). Ignored on other lights.
+    /// Default None. Cost: one bilinear lookup per light sample.
+    pub texture: Option<Handle<Image>>,
 }
 
 impl Default for CrepuscularLight {
     fn default() -> Self {
-        Self { scattering: 1.0, shadow_bias: 0.02 }
+        Self { scattering: 1.0, shadow_bias: 0.02, texture: None }
     }
+}
+
+/// A spot light's gobo as the library reads it (linear RGB texels), made by the plugin from
+/// [`CrepuscularLight::texture`] once the image is loaded.
+#[derive(Component, Clone, Debug)]
+pub struct CrepuscularGobo {
+    /// The image it was read from.
+    pub image: AssetId<Image>,
+    /// Its linear texels.
+    pub texture: Arc<crepuscular::RgbTexture>,
 }
 
 impl SyncComponent for Crepuscular {
@@ -167,8 +183,73 @@ impl ExtractComponent for CrepuscularLight {
     type QueryFilter = ();
     type Out = Self;
     fn extract_component(item: QueryItem<'_, '_, Self::QueryData>) -> Option<Self> {
-        Some(*item)
+        Some(item.clone())
     }
+}
+impl SyncComponent for CrepuscularGobo {
+    type Target = Self;
+}
+impl ExtractComponent for CrepuscularGobo {
+    type QueryData = &'static CrepuscularGobo;
+    type QueryFilter = ();
+    type Out = Self;
+    fn extract_component(item: QueryItem<'_, '_, Self::QueryData>) -> Option<Self> {
+        Some(item.clone())
+    }
+}
+
+/// Reads each marked light's gobo image into a [`CrepuscularGobo`] when it is loaded or the
+/// handle changes; an image that cannot be read is logged once, naming the light and format.
+fn read_gobos(
+    mut commands: Commands,
+    lights: Query<(Entity, &CrepuscularLight, Option<&CrepuscularGobo>)>,
+    images: Res<Assets<Image>>,
+    mut failed: Local<HashMap<Entity, AssetId<Image>>>,
+) {
+    for (entity, light, gobo) in &lights {
+        match (&light.texture, gobo) {
+            (None, Some(_)) => {
+                commands.entity(entity).remove::<CrepuscularGobo>();
+            }
+            (Some(handle), g) if g.is_none_or(|g| g.image != handle.id()) => {
+                let Some(image) = images.get(handle) else { continue };
+                if failed.get(&entity) == Some(&handle.id()) {
+                    continue;
+                }
+                match gobo_texels(image) {
+                    Ok(texture) => {
+                        failed.remove(&entity);
+                        commands.entity(entity).insert(CrepuscularGobo { image: handle.id(), texture: Arc::new(texture) });
+                    }
+                    Err(e) => {
+                        error!("crepuscular: light {entity}: CrepuscularLight::texture: {e}");
+                        failed.insert(entity, handle.id());
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+/// A Bevy image as linear RGB texels (sRGB formats decoded).
+pub fn gobo_texels(image: &Image) -> Result<crepuscular::RgbTexture, String> {
+    let format = image.texture_descriptor.format;
+    let dynamic = image.clone().try_into_dynamic().map_err(|e| format!("an image of format {format:?}: {e}"))?;
+    let rgba = dynamic.to_rgba32f();
+    let decode = |c: f32| if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) };
+    let srgb = format.is_srgb();
+    let texels = rgba
+        .pixels()
+        .map(|p| {
+            let [r, g, b, a] = p.0;
+            if srgb { [decode(r), decode(g), decode(b), a] } else { [r, g, b, a] }
+        })
+        .collect::<Vec<_>>();
+    if texels.iter().any(|t| t.iter().any(|v| !v.is_finite() || *v < 0.0)) {
+        return Err(format!("an image of format {format:?} with negative or non-finite texels"));
+    }
+    Ok(crepuscular::RgbTexture { width: rgba.width(), height: rgba.height(), texels })
 }
 
 /// A copy of one frame's inputs and output, for tests and tools that check the plugin against
@@ -204,7 +285,9 @@ impl Plugin for CrepuscularPlugin {
         app.add_plugins((
             ExtractComponentPlugin::<Crepuscular>::default(),
             ExtractComponentPlugin::<CrepuscularLight>::default(),
-        ));
+            ExtractComponentPlugin::<CrepuscularGobo>::default(),
+        ))
+        .add_systems(PostUpdate, read_gobos);
         let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
             return;
         };
@@ -249,6 +332,9 @@ struct ViewState {
     composite: Composite,
     shadow_copy: ShadowCopy,
     inscatter: Option<wgpu::Texture>,
+    /// The gobos of the last frame and their array.
+    gobos: Vec<Arc<crepuscular::RgbTexture>>,
+    gobo_array: Option<wgpu::TextureView>,
     technique: TechniqueSettings,
     /// The last error, logged once until it changes.
     last_error: Option<String>,
@@ -268,7 +354,13 @@ fn scatter(
         Option<&RenderLayers>,
     )>,
     directional: Query<(Entity, &ExtractedDirectionalLight, Option<&RenderLayers>, Option<&CrepuscularLight>)>,
-    points: Query<(Entity, &ExtractedPointLight, &PointAndSpotLightViewEntities, Option<&CrepuscularLight>)>,
+    points: Query<(
+        Entity,
+        &ExtractedPointLight,
+        &PointAndSpotLightViewEntities,
+        Option<&CrepuscularLight>,
+        Option<&CrepuscularGobo>,
+    )>,
     shadow_views: Query<&ExtractedView>,
     cluster_meta: Option<Res<GlobalClusterableObjectMeta>>,
     capture: Option<Res<CrepuscularCapture>>,
@@ -321,7 +413,7 @@ fn scatter(
         };
         let directional: Vec<_> = directional.iter().collect();
         let points: Vec<_> = points.iter().collect();
-        let (frame_lights, jobs) = lights.collect(&directional, &points, &shadow_views, cluster_meta.as_deref())?;
+        let (frame_lights, jobs, gobos) = lights.collect(&directional, &points, &shadow_views, cluster_meta.as_deref())?;
         if frame_lights.is_empty() {
             return Err("no light with CrepuscularLight and shadow maps enabled reaches this camera".into());
         }
@@ -364,8 +456,27 @@ fn scatter(
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
         });
-        let frame =
-            GpuFrame { desc: &desc, depth: &depth_view, shadow_maps: &shadow_view, spot_textures: None, rectified_shadow_maps: &[] };
+        // The gobos, one layer each, uploaded when the set changes.
+        let same = state.gobos.len() == gobos.len() && state.gobos.iter().zip(&gobos).all(|(a, b)| Arc::ptr_eq(a, b));
+        if !same {
+            let refs: Vec<&crepuscular::RgbTexture> = gobos.iter().map(|g| g.as_ref()).collect();
+            state.gobo_array = (!gobos.is_empty()).then(|| {
+                crepuscular::GpuContext::from_device(device_w, queue_w).upload_spot_textures(&refs).create_view(
+                    &wgpu::TextureViewDescriptor {
+                        dimension: Some(wgpu::TextureViewDimension::D2Array),
+                        ..Default::default()
+                    },
+                )
+            });
+            state.gobos = gobos;
+        }
+        let frame = GpuFrame {
+            desc: &desc,
+            depth: &depth_view,
+            shadow_maps: &shadow_view,
+            spot_textures: state.gobo_array.as_ref(),
+            rectified_shadow_maps: &[],
+        };
         state.scattering.encode(encoder, &frame, &inscatter_view).map_err(|e| e.to_string())?;
         // L = T(s)·L_surface + L_scatt into Bevy's HDR target, before its tone mapping.
         let post = target.post_process_write();
@@ -403,6 +514,8 @@ fn new_state(device: &wgpu::Device, queue: &wgpu::Queue, settings: &Crepuscular)
         composite: Composite::new(device),
         shadow_copy: ShadowCopy::new(device),
         inscatter: None,
+        gobos: Vec::new(),
+        gobo_array: None,
         technique: settings.technique.clone(),
         last_error: None,
     })

@@ -81,7 +81,24 @@ fn library_result(gpu: &GpuContext, c: &CapturedFrame, shadow_maps: &wgpu::Textu
         dimension: Some(wgpu::TextureViewDimension::D2Array),
         ..Default::default()
     });
-    let frame = GpuFrame { desc: &c.desc, depth: &depth, shadow_maps: &shadows, spot_textures: None, rectified_shadow_maps: &[] };
+    // The spots' gobos, uploaded by the library's own helper in their texture_layer order.
+    let mut gobos: Vec<(u32, &crepuscular::RgbTexture)> =
+        c.desc.lights.iter().filter_map(|l| Some((l.texture_layer, l.spot_texture()?))).collect();
+    gobos.sort_by_key(|g| g.0);
+    let gobo_array = (!gobos.is_empty()).then(|| {
+        let refs: Vec<_> = gobos.iter().map(|g| g.1).collect();
+        gpu.upload_spot_textures(&refs).create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        })
+    });
+    let frame = GpuFrame {
+        desc: &c.desc,
+        depth: &depth,
+        shadow_maps: &shadows,
+        spot_textures: gobo_array.as_ref(),
+        rectified_shadow_maps: &[],
+    };
     s.render(&frame, &out.create_view(&Default::default())).expect("the library renders the captured frame");
     gpu.read_image(&out).expect("readback")
 }
@@ -113,6 +130,13 @@ fn matrices_put_bevys_depth_and_shadow_maps_on_the_scene() {
     let gpu = gpu_of(&app);
     let desc = &c.desc;
     assert_eq!(desc.lights.len(), 3, "sun, spot and point lamp reach the effect");
+    let gobo = desc.lights.iter().find_map(|l| l.spot_texture()).expect("the spot's gobo reaches the effect");
+    // The demo's 4×4 sRGB panes, decoded to linear: pane (0, 0) is sRGB (230, 40, 40).
+    let srgb = |c: f32| ((c / 255.0 + 0.055) / 1.055).powf(2.4);
+    assert_eq!((gobo.width, gobo.height), (4, 4));
+    for (got, want) in gobo.texels[0][..3].iter().zip([srgb(230.0), srgb(40.0), srgb(40.0)]) {
+        assert!((got - want).abs() < 1e-5, "gobo texel (0, 0): {got} against {want}");
+    }
 
     // The camera: every covered pixel of Bevy's depth buffer is a scene surface.
     let depth = gpu.read_texture_f32(&c.depth, 0).expect("depth readback");

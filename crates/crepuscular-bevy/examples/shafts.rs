@@ -1,14 +1,17 @@
-//! The plugin in a Bevy app: the demo colonnade with light shafts, rendered headless into a PNG.
+//! The plugin in a Bevy app: the demo colonnade with light shafts, in a window (T switches to
+//! the next technique, Escape quits), or headless into a PNG with `--screenshot`.
 //!
 //! ```text
-//! cargo run --release -p crepuscular-bevy --example shafts -- --screenshot shafts.png
+//! cargo run --release -p crepuscular-bevy --example shafts                       # a window
+//! cargo run --release -p crepuscular-bevy --example shafts -- --screenshot shafts.png --frames 4
 //! cargo run --release -p crepuscular-bevy --example shafts -- --technique prefiltered --preset fast --lamps --screenshot p.png
 //! cargo run --release -p crepuscular-bevy --example shafts -- --bevy-fog 64 --screenshot bevy.png
 //! ```
-//! In a window (`--features window`), T switches to the next technique.
 
 use std::path::PathBuf;
 
+use bevy::prelude::*;
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use clap::Parser;
 use crepuscular::TechniqueSettings;
 use crepuscular::techniques::presets::Preset;
@@ -33,15 +36,19 @@ struct Args {
     /// Add a spot and a point lamp to the sun (both scatter).
     #[arg(long)]
     lamps: bool,
-    /// Image size, WIDTHxHEIGHT.
-    #[arg(long, default_value = "640x360")]
+    /// Image (or window) size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "960x540")]
     size: String,
-    /// Frames to render before the screenshot.
+    /// Headless: frames to render (at least; on until Bevy's pipelines are built) before the screenshot.
     #[arg(long, default_value_t = 4)]
     frames: u32,
-    /// Where to write the PNG (headless).
-    #[arg(long, default_value = "shafts.png")]
-    screenshot: PathBuf,
+    /// Render headless and write the picture to this PNG (without it: a window).
+    #[arg(long)]
+    screenshot: Option<PathBuf>,
+    /// In the window: after `--frames` frames, save the window's picture to this PNG and quit
+    /// (to check the windowed path without a person, e.g. under Xvfb).
+    #[arg(long)]
+    window_screenshot: Option<PathBuf>,
 }
 
 fn main() {
@@ -76,12 +83,42 @@ fn run(args: Args) -> Result<(), String> {
         Effect::Crepuscular(Crepuscular { technique, ..Default::default() })
     };
     let opts = DemoOptions { width, height, effect, lamps: args.lamps, ..Default::default() };
+    let Some(screenshot) = args.screenshot else {
+        let mut app = demo::windowed_app(&opts);
+        if let Some(path) = args.window_screenshot {
+            let frames = args.frames;
+            app.add_systems(Update, move |mut n: Local<u32>, mut commands: Commands| {
+                *n += 1;
+                if *n == frames {
+                    let path = path.clone();
+                    commands.spawn(Screenshot::primary_window()).observe(
+                        move |captured: On<ScreenshotCaptured>, mut exit: MessageWriter<AppExit>| {
+                            match demo::save_png(&captured.image, &path) {
+                                Ok(()) => {
+                                    eprintln!("wrote {}", path.display());
+                                    exit.write(AppExit::Success);
+                                }
+                                Err(e) => {
+                                    eprintln!("error: {e}");
+                                    exit.write(AppExit::error());
+                                }
+                            }
+                        },
+                    );
+                }
+            });
+        }
+        return match app.run() {
+            AppExit::Success => Ok(()),
+            AppExit::Error(code) => Err(format!("the app exited with code {code}")),
+        };
+    };
     let mut app = demo::headless_app(&opts);
     app.finish();
     app.cleanup();
     eprintln!("rendering {} frames at {width}x{height} …", args.frames);
     let image = demo::render_frames(&mut app, args.frames)?;
-    demo::save_png(&image, &args.screenshot)?;
-    eprintln!("wrote {}", args.screenshot.display());
+    demo::save_png(&image, &screenshot)?;
+    eprintln!("wrote {}", screenshot.display());
     Ok(())
 }

@@ -76,21 +76,79 @@ pub fn headless_app(opts: &DemoOptions) -> App {
     let mut app = App::new();
     let mut plugins = DefaultPlugins
         .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
+        .disable::<bevy::winit::WinitPlugin>()
         .disable::<PipelinedRenderingPlugin>();
     if !opts.log {
         plugins = plugins.disable::<bevy::log::LogPlugin>();
     }
-    app.add_plugins(plugins)
-    .insert_resource(DirectionalLightShadowMap { size: opts.shadow_map_size })
-    .add_plugins(CrepuscularPlugin);
-    let opts = opts.clone();
-    app.add_systems(Startup, move |mut commands: Commands, mut meshes: ResMut<Assets<Mesh>>, mut materials: ResMut<Assets<StandardMaterial>>, mut images: ResMut<Assets<Image>>| {
-        let target = images.add(Image::new_target_texture(opts.width, opts.height, TextureFormat::Rgba8UnormSrgb, None));
-        commands.insert_resource(DemoTarget(target.clone()));
-        let gobo = images.add(stained_glass());
-        spawn_colonnade(&mut commands, &mut meshes, &mut materials, &opts, RenderTarget::Image(target.into()), gobo);
-    });
+    app.add_plugins(plugins);
+    add_scene(&mut app, opts, None);
     app
+}
+
+/// The demo in a window of the options' size (run it with `app.run()`): T switches the camera
+/// to the next GPU technique (at the same preset), Escape quits.
+pub fn windowed_app(opts: &DemoOptions) -> App {
+    let mut app = App::new();
+    app.add_plugins(DefaultPlugins.set(WindowPlugin {
+        primary_window: Some(Window {
+            title: "crepuscular-bevy: T switches technique".into(),
+            resolution: bevy::window::WindowResolution::new(opts.width, opts.height),
+            ..default()
+        }),
+        ..default()
+    }));
+    add_scene(&mut app, opts, Some(()));
+    app.add_systems(Update, keys);
+    app
+}
+
+fn add_scene(app: &mut App, opts: &DemoOptions, window: Option<()>) {
+    app.insert_resource(DirectionalLightShadowMap { size: opts.shadow_map_size }).add_plugins(CrepuscularPlugin);
+    let opts = opts.clone();
+    app.add_systems(
+        Startup,
+        move |mut commands: Commands,
+              mut meshes: ResMut<Assets<Mesh>>,
+              mut materials: ResMut<Assets<StandardMaterial>>,
+              mut images: ResMut<Assets<Image>>| {
+            let target = match window {
+                Some(()) => RenderTarget::Window(bevy::window::WindowRef::Primary),
+                None => {
+                    let image = Image::new_target_texture(opts.width, opts.height, TextureFormat::Rgba8UnormSrgb, None);
+                    let handle = images.add(image);
+                    commands.insert_resource(DemoTarget(handle.clone()));
+                    RenderTarget::Image(handle.into())
+                }
+            };
+            let gobo = images.add(stained_glass());
+            spawn_colonnade(&mut commands, &mut meshes, &mut materials, &opts, target, gobo);
+        },
+    );
+}
+
+/// T: the next GPU technique (same preset); Escape: quit.
+fn keys(keys: Res<ButtonInput<KeyCode>>, mut cameras: Query<&mut Crepuscular>, mut exit: MessageWriter<AppExit>) {
+    if keys.just_pressed(KeyCode::Escape) {
+        exit.write(AppExit::Success);
+    }
+    if keys.just_pressed(KeyCode::KeyT) {
+        for mut c in &mut cameras {
+            c.technique = next_technique(&c.technique);
+            info!("crepuscular: technique {}", c.technique.name());
+        }
+    }
+}
+
+/// The GPU technique after `t` in the library's list (wrapping), at its default settings.
+pub fn next_technique(t: &crepuscular::TechniqueSettings) -> crepuscular::TechniqueSettings {
+    let gpu: Vec<_> = crepuscular::techniques::TECHNIQUES
+        .iter()
+        .filter_map(|i| crepuscular::TechniqueSettings::named(i.name).ok())
+        .filter(|s| s.has_gpu())
+        .collect();
+    let at = gpu.iter().position(|s| s.name() == t.name()).unwrap_or(gpu.len() - 1);
+    gpu[(at + 1) % gpu.len()].clone()
 }
 
 /// Side of the square ground plane (y = 0, centred on the origin), world units.
@@ -151,7 +209,6 @@ pub fn spawn_colonnade(
         ));
     }
 
-    let scatter = !matches!(opts.effect, Effect::None);
     let mut sun = commands.spawn((
         DirectionalLight { illuminance: SUN_LUX, shadow_maps_enabled: true, ..default() },
         // One cascade over the whole medium: the library reads one map per light (docs/BEVY.md).
@@ -179,15 +236,27 @@ pub fn spawn_colonnade(
             },
             Transform::from_xyz(-5.0, 7.0, 5.0).looking_at(Vec3::new(-3.0, 0.0, 1.0), Vec3::Y),
         ));
-        if scatter {
-            spot.insert(CrepuscularLight { texture: Some(gobo), ..default() });
+        match opts.effect {
+            Effect::Crepuscular(_) => {
+                spot.insert(CrepuscularLight { texture: Some(gobo), ..default() });
+            }
+            Effect::BevyFog { .. } => {
+                spot.insert(VolumetricLight);
+            }
+            Effect::None => {}
         }
         let mut point = commands.spawn((
             PointLight { intensity: 1.0e6, range: FAR, shadow_maps_enabled: true, ..default() },
             Transform::from_xyz(3.0, 3.0, -1.5),
         ));
-        if scatter {
-            point.insert(CrepuscularLight::default());
+        match opts.effect {
+            Effect::Crepuscular(_) => {
+                point.insert(CrepuscularLight::default());
+            }
+            Effect::BevyFog { .. } => {
+                point.insert(VolumetricLight);
+            }
+            Effect::None => {}
         }
     }
 
@@ -213,7 +282,7 @@ pub fn spawn_colonnade(
         // matched"): σs and σa as `scattering` and `absorption` at density 1, HG g as the
         // asymmetry, and the light scaled by exp(σt·R) to cancel the attenuation Bevy applies
         // to the light over the volume's bounding radius R (the library's sun arrives
-        // unattenuated, docs/MODEL.md §1).
+        // unattenuated, docs/MODEL.md §2).
         let c = Crepuscular::default();
         let size = 2.0 * FAR;
         let radius = (Vec3::splat(0.5 * size)).length();

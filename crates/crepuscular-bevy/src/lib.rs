@@ -296,7 +296,10 @@ impl Plugin for CrepuscularPlugin {
             .add_systems(bevy::render::ExtractSchedule, extract_capture)
             .add_systems(
                 Render,
-                depth_texture_binding.in_set(RenderSystems::Prepare).before(prepare_core_3d_depth_textures),
+                (
+                    depth_texture_binding.in_set(RenderSystems::Prepare).before(prepare_core_3d_depth_textures),
+                    forget_views.in_set(RenderSystems::Prepare),
+                ),
             )
             .add_systems(Core3d, scatter.after(Core3dSystems::MainPass).before(Core3dSystems::EarlyPostProcess));
     }
@@ -318,6 +321,14 @@ fn depth_texture_binding(mut cameras: Query<&mut Camera3d, With<Crepuscular>>, c
     }
     for mut camera in &mut cameras {
         camera.depth_texture_usages.0 |= usage.bits();
+    }
+}
+
+/// Drops the state of cameras that no longer have [`Crepuscular`] (or no longer exist): their
+/// pipelines and textures are freed.
+fn forget_views(states: Res<ViewStates>, views: Query<Entity, With<Crepuscular>>) {
+    if let Ok(mut states) = states.0.lock() {
+        states.retain(|e, _| views.contains(*e));
     }
 }
 

@@ -301,3 +301,44 @@ fn shafts_are_where_the_pillars_cast_them() {
     eprintln!("mean sRGB value: {m_with:.1} with the effect, {m_without:.1} without");
     assert!(m_with > m_without + 10.0, "the fog brightens the picture ({m_with} vs {m_without})");
 }
+
+#[test]
+fn bad_input_is_a_logged_error_and_the_frame_goes_on() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !adapter("bad_input_is_a_logged_error_and_the_frame_goes_on") {
+        return;
+    }
+    let effect = Effect::Crepuscular(full_float(TechniqueSettings::named("epipolar").unwrap()));
+    let (mut app, _) = app_with_capture(effect, false);
+    let capture = app.world().resource::<CrepuscularCapture>().clone();
+    // A marked sun without shadow maps: the effect skips the frame with an error; Bevy renders on.
+    let mut suns = app.world_mut().query::<&mut DirectionalLight>();
+    for mut s in suns.iter_mut(app.world_mut()) {
+        s.shadow_maps_enabled = false;
+    }
+    demo::settle(&mut app, 3).expect("Bevy renders on");
+    let _ = capture.take();
+    app.update();
+    assert!(capture.take().is_none(), "no in-scattering from a light without shadow maps");
+    // Settings out of range: an error naming them, not a panic.
+    for mut s in suns.iter_mut(app.world_mut()) {
+        s.shadow_maps_enabled = true;
+    }
+    let mut cams = app.world_mut().query::<&mut Crepuscular>();
+    for mut c in cams.iter_mut(app.world_mut()) {
+        c.far = f32::NAN;
+    }
+    demo::settle(&mut app, 3).expect("Bevy renders on");
+    let _ = capture.take();
+    app.update();
+    assert!(capture.take().is_none(), "no in-scattering with a NaN far distance");
+    // Back to valid settings: the effect resumes.
+    for mut c in cams.iter_mut(app.world_mut()) {
+        c.far = 60.0;
+    }
+    app.update();
+    let c = take_capture(&mut app);
+    let img = gpu_of(&app).read_image(&c.inscatter).expect("readback");
+    assert!(img.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())), "finite in-scattering after recovery");
+    assert!(app.should_exit().is_none(), "the app never quit");
+}

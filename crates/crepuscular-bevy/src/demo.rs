@@ -335,19 +335,29 @@ pub fn render_frames(app: &mut App, frames: u32) -> Result<Image, String> {
 }
 
 /// Updates at least `frames` times and until no pipeline has been waiting for three frames.
+/// Gives up when the pipelines are still not built after two minutes plus twenty times the
+/// slowest frame (a slow effect's frames hold the CPU that a software adapter's pipeline
+/// compiles need).
 pub fn settle(app: &mut App, frames: u32) -> Result<(), String> {
     let start = std::time::Instant::now();
     let (mut n, mut ready) = (0u32, 0u32);
+    let mut slowest = std::time::Duration::ZERO;
     while n < frames || ready < 3 {
+        let t0 = std::time::Instant::now();
         app.update();
+        slowest = slowest.max(t0.elapsed());
         n += 1;
         if let Some(exit) = app.should_exit() {
             return Err(format!("the app quit after {n} frames ({exit:?}; Bevy logged why)"));
         }
         let waiting = app.sub_app(RenderApp).world().resource::<PipelineCache>().waiting_pipelines().count();
         ready = if waiting == 0 { ready + 1 } else { 0 };
-        if start.elapsed().as_secs() > 120 {
-            return Err(format!("{waiting} of Bevy's pipelines were still compiling after 120 s ({n} frames)"));
+        let limit = std::time::Duration::from_secs(120) + slowest * 20;
+        if start.elapsed() > limit {
+            return Err(format!(
+                "{waiting} of Bevy's pipelines were still compiling after {:.0} s ({n} frames)",
+                start.elapsed().as_secs_f64()
+            ));
         }
     }
     Ok(())

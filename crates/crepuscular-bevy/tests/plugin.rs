@@ -342,3 +342,31 @@ fn bad_input_is_a_logged_error_and_the_frame_goes_on() {
     assert!(img.pixels.iter().all(|p| p.iter().all(|v| v.is_finite())), "finite in-scattering after recovery");
     assert!(app.should_exit().is_none(), "the app never quit");
 }
+
+#[test]
+fn a_resized_target_is_followed() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !adapter("a_resized_target_is_followed") {
+        return;
+    }
+    let effect = Effect::Crepuscular(full_float(TechniqueSettings::named("epipolar").unwrap()));
+    let (mut app, before) = app_with_capture(effect, false);
+    assert_eq!((before.desc.width, before.desc.height), (W, H));
+    let target = app.world().resource::<demo::DemoTarget>().0.clone();
+    let (w2, h2) = (W / 2 + 8, H / 2 + 4);
+    app.world_mut()
+        .resource_mut::<Assets<Image>>()
+        .get_mut(&target)
+        .expect("the target image")
+        .resize(bevy::render::render_resource::Extent3d { width: w2, height: h2, depth_or_array_layers: 1 });
+    demo::settle(&mut app, 3).expect("Bevy renders on");
+    let after = take_capture(&mut app);
+    assert_eq!((after.desc.width, after.desc.height), (w2, h2), "the frame follows the target's size");
+    assert_eq!((after.inscatter.width(), after.inscatter.height()), (w2, h2));
+    let gpu = gpu_of(&app);
+    let plugin = gpu.read_image(&after.inscatter).expect("readback");
+    let library = library_result(&gpu, &after, &after.shadow_maps);
+    let (diff, peak) = max_abs_diff(&plugin, &library);
+    eprintln!("resized to {w2}x{h2}: plugin vs library max |Δ| = {diff:e} (peak {peak:.4})");
+    assert!(peak > 1e-3 && diff <= 1e-5 * peak, "after the resize: Δ {diff}, peak {peak}");
+}

@@ -198,6 +198,16 @@ impl ExtractComponent for CrepuscularGobo {
     }
 }
 
+/// The camera's HDR main textures take `COPY_DST`: if the composite ever fails after Bevy's
+/// main texture flipped, the plugin copies Bevy's picture across instead of leaving it black.
+fn main_texture_copy_dst(mut cameras: Query<&mut bevy::camera::CameraMainTextureUsages, With<Crepuscular>>) {
+    for mut usages in &mut cameras {
+        if !usages.0.contains(wgpu::TextureUsages::COPY_DST) {
+            usages.0 |= wgpu::TextureUsages::COPY_DST;
+        }
+    }
+}
+
 /// Reads each marked light's gobo image into a [`CrepuscularGobo`] when it is loaded or the
 /// handle changes; an image that cannot be read is logged once, naming the light and format.
 fn read_gobos(
@@ -287,7 +297,7 @@ impl Plugin for CrepuscularPlugin {
             ExtractComponentPlugin::<CrepuscularLight>::default(),
             ExtractComponentPlugin::<CrepuscularGobo>::default(),
         ))
-        .add_systems(PostUpdate, read_gobos);
+        .add_systems(PostUpdate, (read_gobos, main_texture_copy_dst));
         let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
             return;
         };
@@ -492,7 +502,15 @@ fn scatter(
         // L = T(s)·L_surface + L_scatt into Bevy's HDR target, before its tone mapping.
         let post = target.post_process_write();
         let inputs = CompositeInputs { desc: &desc, depth: &depth_view, inscatter: &inscatter_view, surface: post.source };
-        state.composite.encode(encoder, &inputs, CompositeTarget::Into(post.destination), None).map_err(|e| e.to_string())?;
+        if let Err(e) = state.composite.encode(encoder, &inputs, CompositeTarget::Into(post.destination), None) {
+            // The main texture has already flipped to `destination`: keep Bevy's picture in it.
+            encoder.copy_texture_to_texture(
+                post.source_texture.as_image_copy(),
+                post.destination_texture.as_image_copy(),
+                post.source_texture.size(),
+            );
+            return Err(e.to_string());
+        }
         if let Some(capture) = &capture {
             let frame = capture_frame(device_w, encoder, &desc, &settings.technique, &depth.texture, &shadow_array, &inscatter);
             if let Ok(mut slot) = capture.0.lock() {

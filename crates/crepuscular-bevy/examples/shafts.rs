@@ -92,16 +92,17 @@ fn run(args: Args) -> Result<(), String> {
                 if *n == frames {
                     let path = path.clone();
                     commands.spawn(Screenshot::primary_window()).observe(
-                        move |captured: On<ScreenshotCaptured>, mut exit: MessageWriter<AppExit>| {
-                            match demo::save_png(&captured.image, &path) {
-                                Ok(()) => {
-                                    eprintln!("wrote {}", path.display());
-                                    exit.write(AppExit::Success);
-                                }
-                                Err(e) => {
-                                    eprintln!("error: {e}");
-                                    exit.write(AppExit::error());
-                                }
+                        move |captured: On<ScreenshotCaptured>, mut exit: MessageWriter<AppExit>| match demo::save_png(
+                            &captured.image,
+                            &path,
+                        ) {
+                            Ok(()) => {
+                                eprintln!("wrote {}", path.display());
+                                exit.write(AppExit::Success);
+                            }
+                            Err(e) => {
+                                eprintln!("error: {e}");
+                                exit.write(AppExit::error());
                             }
                         },
                     );

@@ -19,8 +19,8 @@ use std::time::Instant;
 
 use bevy::prelude::*;
 use clap::Parser;
-use crepuscular::techniques::presets::Preset;
 use crepuscular::TechniqueSettings;
+use crepuscular::techniques::presets::Preset;
 use crepuscular_bevy::Crepuscular;
 use crepuscular_bevy::demo::{self, DemoOptions, Effect};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -82,14 +82,19 @@ fn run(args: Args) -> Result<(), String> {
     if let Some(s) = args.steps.iter().find(|&&s| s == 0) {
         return Err(format!("--steps {s}: step counts must be at least 1"));
     }
-    let presets = args.presets.iter().map(|p| Preset::parse(p).map_err(|e| e.to_string())).collect::<Result<Vec<_>, _>>()?;
+    let presets =
+        args.presets.iter().map(|p| Preset::parse(p).map_err(|e| e.to_string())).collect::<Result<Vec<_>, _>>()?;
     std::fs::create_dir_all(&args.output).map_err(|e| format!("{}: {e}", args.output.display()))?;
 
     let mut configs: Vec<(String, &'static str, Effect)> = vec![("no fog".into(), "baseline", Effect::None)];
     for &s in &args.steps {
         configs.push((format!("Bevy VolumetricFog {s} steps"), "bevy", Effect::BevyFog { steps: s }));
     }
-    configs.push(("Bevy VolumetricFog 1024 steps (converged)".into(), "bevy-converged", Effect::BevyFog { steps: 1024 }));
+    configs.push((
+        "Bevy VolumetricFog 1024 steps (converged)".into(),
+        "bevy-converged",
+        Effect::BevyFog { steps: 1024 },
+    ));
     let mut converged = crepuscular::techniques::presets::Preset::ReferenceLike.brute_force();
     converged.steps = 1024;
     configs.push((
@@ -112,9 +117,7 @@ fn run(args: Args) -> Result<(), String> {
     }
 
     let bar = ProgressBar::new(configs.len() as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed} {msg}").map_err(|e| e.to_string())?,
-    );
+    bar.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed} {msg}").map_err(|e| e.to_string())?);
     let mut runs = Vec::new();
     let mut adapter = String::new();
     for (label, family, effect) in configs {
@@ -128,7 +131,10 @@ fn run(args: Args) -> Result<(), String> {
         let device = app.world().resource::<bevy::render::renderer::RenderDevice>().wgpu_device().clone();
         if adapter.is_empty() {
             let info = app.world().resource::<bevy::render::renderer::RenderAdapterInfo>();
-            adapter = format!("{} ({:?}, {:?}, driver {} {})", info.name, info.backend, info.device_type, info.driver, info.driver_info);
+            adapter = format!(
+                "{} ({:?}, {:?}, driver {} {})",
+                info.name, info.backend, info.device_type, info.driver, info.driver_info
+            );
         }
         crepuscular::gpu::wait_idle(&device).map_err(|e| e.to_string())?;
         let mut times = Vec::new();
@@ -164,8 +170,14 @@ fn run(args: Args) -> Result<(), String> {
     write_atomic(&args.output.join("versus.md"), md.as_bytes())?;
     write_atomic(&args.output.join("versus.json"), json(&rows, &adapter, width, height, base).as_bytes())?;
     // One picture of both: Bevy at 64 steps (its default) beside the plugin's default technique.
-    let left = runs.iter().find(|r| r.label == "Bevy VolumetricFog 64 steps").or_else(|| runs.iter().find(|r| r.family == "bevy"));
-    let right = runs.iter().find(|r| r.label == "crepuscular epipolar (balanced)").or_else(|| runs.iter().find(|r| r.family == "ours"));
+    let left = runs
+        .iter()
+        .find(|r| r.label == "Bevy VolumetricFog 64 steps")
+        .or_else(|| runs.iter().find(|r| r.family == "bevy"));
+    let right = runs
+        .iter()
+        .find(|r| r.label == "crepuscular epipolar (balanced)")
+        .or_else(|| runs.iter().find(|r| r.family == "ours"));
     if let (Some(l), Some(r)) = (left, right) {
         side_by_side(&l.image, &r.image, &args.output.join("side-by-side.png"))?;
     }
@@ -259,7 +271,12 @@ fn markdown(rows: &[Row], adapter: &str, w: u32, h: u32, frames: u32, base: f64)
                     r.cost_ms / b.cost_ms
                 )
             }
-            None => s += &format!("| {} | {:.1} | {:.1} | none measured reaches it | – | – |\n", r.label, r.cost_ms, r.psnr_db),
+            None => {
+                s += &format!(
+                    "| {} | {:.1} | {:.1} | none measured reaches it | – | – |\n",
+                    r.label, r.cost_ms, r.psnr_db
+                )
+            }
         }
     }
     s

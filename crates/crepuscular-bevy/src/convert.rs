@@ -1,11 +1,11 @@
 //! Bevy's lights and shadow views as the library's `FrameLight`s (docs/BEVY.md).
 
+use bevy::camera::visibility::RenderLayers;
 use bevy::pbr::{
     ExtractedDirectionalLight, ExtractedPointLight, GlobalClusterableObjectMeta, MAX_CASCADES_PER_LIGHT,
     MAX_DIRECTIONAL_LIGHTS, PointAndSpotLightViewEntities,
 };
 use bevy::prelude::*;
-use bevy::camera::visibility::RenderLayers;
 use bevy::render::view::ExtractedView;
 use crepuscular::{DepthConvention, FrameLight, Light, ShadowProjection};
 
@@ -79,10 +79,8 @@ impl LightsInView {
         // Directional lights: Bevy sorts them by (volumetric, shadows enabled, entity) and gives
         // each shadowed light's cascades consecutive layers of the directional texture, from 0,
         // for the lights on the view's render layers (bevy_pbr prepare_lights).
-        let mut dirs: Vec<&DirectionalItem> = directional
-            .iter()
-            .filter(|d| d.2.cloned().unwrap_or_default().intersects(&self.view_layers))
-            .collect();
+        let mut dirs: Vec<&DirectionalItem> =
+            directional.iter().filter(|d| d.2.cloned().unwrap_or_default().intersects(&self.view_layers)).collect();
         dirs.sort_by_key(|d| (d.1.volumetric, d.1.shadow_maps_enabled, d.0));
         let mut base = 0u32;
         for d in dirs.into_iter().take(MAX_DIRECTIONAL_LIGHTS) {
@@ -133,7 +131,12 @@ impl LightsInView {
                     intensity: light.illuminance * self.exposure,
                 };
                 lights.push(self.frame_light(l, shadow, marker, next_layer));
-                jobs.directional.push(Job { src_layer: base + k as u32, dst_layer: next_layer, size: self.directional_size, _pad: 0 });
+                jobs.directional.push(Job {
+                    src_layer: base + k as u32,
+                    dst_layer: next_layer,
+                    size: self.directional_size,
+                    _pad: 0,
+                });
                 dir_size = self.directional_size;
                 next_layer += 1;
             }
@@ -173,7 +176,8 @@ impl LightsInView {
                             far: near * INFINITE_FAR_OVER_NEAR,
                             orthographic: false,
                             size: self.directional_size,
-                            texel_world: 2.0 * outer.min(MAX_SPOT_DEGREES.to_radians()).tan() / self.directional_size as f32,
+                            texel_world: 2.0 * outer.min(MAX_SPOT_DEGREES.to_radians()).tan()
+                                / self.directional_size as f32,
                             depth: DepthConvention::Reversed,
                         };
                         let l = Light::Spot {
@@ -192,7 +196,12 @@ impl LightsInView {
                             gobos.push(g.texture.clone());
                         }
                         lights.push(fl);
-                        jobs.directional.push(Job { src_layer: src, dst_layer: next_layer, size: self.directional_size, _pad: 0 });
+                        jobs.directional.push(Job {
+                            src_layer: src,
+                            dst_layer: next_layer,
+                            size: self.directional_size,
+                            _pad: 0,
+                        });
                         dir_size = self.directional_size;
                         next_layer += 1;
                     }
@@ -205,7 +214,9 @@ impl LightsInView {
                         let mut view_proj = [glam::Mat4::IDENTITY; 6];
                         let mut seen = [false; 6];
                         for (face, e) in views.iter().enumerate() {
-                            let v = shadow_views.get(*e).map_err(|_| format!("point light {entity}: face {face} has no view"))?;
+                            let v = shadow_views
+                                .get(*e)
+                                .map_err(|_| format!("point light {entity}: face {face} has no view"))?;
                             let forward = to_glam(v.world_from_view.forward().into());
                             let slot = crepuscular::shadow::cube_face(forward) as usize;
                             if seen[slot] {

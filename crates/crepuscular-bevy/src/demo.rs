@@ -198,8 +198,16 @@ pub fn spawn_colonnade(
     target: RenderTarget,
     gobo: Handle<Image>,
 ) {
-    let stone = materials.add(StandardMaterial { base_color: Color::srgb(0.72, 0.68, 0.6), perceptual_roughness: 0.9, ..default() });
-    let ground = materials.add(StandardMaterial { base_color: Color::srgb(0.35, 0.33, 0.3), perceptual_roughness: 1.0, ..default() });
+    let stone = materials.add(StandardMaterial {
+        base_color: Color::srgb(0.72, 0.68, 0.6),
+        perceptual_roughness: 0.9,
+        ..default()
+    });
+    let ground = materials.add(StandardMaterial {
+        base_color: Color::srgb(0.35, 0.33, 0.3),
+        perceptual_roughness: 1.0,
+        ..default()
+    });
     commands.spawn((Mesh3d(meshes.add(Plane3d::default().mesh().size(GROUND, GROUND))), MeshMaterial3d(ground)));
     for (center, size) in BOXES {
         commands.spawn((
@@ -212,7 +220,8 @@ pub fn spawn_colonnade(
     let mut sun = commands.spawn((
         DirectionalLight { illuminance: SUN_LUX, shadow_maps_enabled: true, ..default() },
         // One cascade over the whole medium: the library reads one map per light (docs/BEVY.md).
-        CascadeShadowConfigBuilder { num_cascades: 1, minimum_distance: 0.1, maximum_distance: FAR, ..default() }.build(),
+        CascadeShadowConfigBuilder { num_cascades: 1, minimum_distance: 0.1, maximum_distance: FAR, ..default() }
+            .build(),
         Transform::from_xyz(0.0, 10.0, -10.0).looking_to(Vec3::new(0.35, -0.45, 1.0), Vec3::Y),
     ));
     match &opts.effect {

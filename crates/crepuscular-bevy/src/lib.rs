@@ -31,6 +31,7 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
+use bevy::camera::visibility::RenderLayers;
 use bevy::core_pipeline::core_3d::prepare_core_3d_depth_textures;
 use bevy::core_pipeline::schedule::{Core3d, Core3dSystems};
 use bevy::ecs::query::QueryItem;
@@ -43,7 +44,6 @@ use bevy::render::camera::ExtractedCamera;
 use bevy::render::extract_component::{ExtractComponent, ExtractComponentPlugin};
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery};
 use bevy::render::sync_component::SyncComponent;
-use bevy::camera::visibility::RenderLayers;
 use bevy::render::view::{ExtractedView, Msaa, ViewDepthTexture, ViewTarget};
 use bevy::render::{Render, RenderApp, RenderSystems};
 use crepuscular::{
@@ -51,8 +51,8 @@ use crepuscular::{
     Scattering, StatsMode, TechniqueSettings,
 };
 
-pub mod demo;
 mod convert;
+pub mod demo;
 mod shadow_copy;
 
 pub use convert::to_glam;
@@ -229,7 +229,9 @@ fn read_gobos(
                 match gobo_texels(image) {
                     Ok(texture) => {
                         failed.remove(&entity);
-                        commands.entity(entity).insert(CrepuscularGobo { image: handle.id(), texture: Arc::new(texture) });
+                        commands
+                            .entity(entity)
+                            .insert(CrepuscularGobo { image: handle.id(), texture: Arc::new(texture) });
                     }
                     Err(e) => {
                         error!("crepuscular: light {entity}: CrepuscularLight::texture: {e}");
@@ -324,7 +326,10 @@ fn extract_capture(mut commands: Commands, capture: bevy::render::Extract<Option
 
 /// The library samples Bevy's depth buffer: it needs `TEXTURE_BINDING` (Bevy's own volumetric
 /// fog asks for the same), and a capture copies it (`COPY_SRC`).
-fn depth_texture_binding(mut cameras: Query<&mut Camera3d, With<Crepuscular>>, capture: Option<Res<CrepuscularCapture>>) {
+fn depth_texture_binding(
+    mut cameras: Query<&mut Camera3d, With<Crepuscular>>,
+    capture: Option<Res<CrepuscularCapture>>,
+) {
     let mut usage = wgpu::TextureUsages::TEXTURE_BINDING;
     if capture.is_some() {
         usage |= wgpu::TextureUsages::COPY_SRC;
@@ -434,7 +439,8 @@ fn scatter(
         };
         let directional: Vec<_> = directional.iter().collect();
         let points: Vec<_> = points.iter().collect();
-        let (frame_lights, jobs, gobos) = lights.collect(&directional, &points, &shadow_views, cluster_meta.as_deref())?;
+        let (frame_lights, jobs, gobos) =
+            lights.collect(&directional, &points, &shadow_views, cluster_meta.as_deref())?;
         if frame_lights.is_empty() {
             return Err("no light with CrepuscularLight and shadow maps enabled reaches this camera".into());
         }
@@ -469,10 +475,9 @@ fn scatter(
             }
         };
         let inscatter_view = inscatter.create_view(&Default::default());
-        let depth_view = depth.texture.create_view(&wgpu::TextureViewDescriptor {
-            aspect: wgpu::TextureAspect::DepthOnly,
-            ..Default::default()
-        });
+        let depth_view = depth
+            .texture
+            .create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() });
         let shadow_view = shadow_array.create_view(&wgpu::TextureViewDescriptor {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
@@ -501,7 +506,8 @@ fn scatter(
         state.scattering.encode(encoder, &frame, &inscatter_view).map_err(|e| e.to_string())?;
         // L = T(s)·L_surface + L_scatt into Bevy's HDR target, before its tone mapping.
         let post = target.post_process_write();
-        let inputs = CompositeInputs { desc: &desc, depth: &depth_view, inscatter: &inscatter_view, surface: post.source };
+        let inputs =
+            CompositeInputs { desc: &desc, depth: &depth_view, inscatter: &inscatter_view, surface: post.source };
         if let Err(e) = state.composite.encode(encoder, &inputs, CompositeTarget::Into(post.destination), None) {
             // The main texture has already flipped to `destination`: keep Bevy's picture in it.
             encoder.copy_texture_to_texture(
@@ -512,7 +518,8 @@ fn scatter(
             return Err(e.to_string());
         }
         if let Some(capture) = &capture {
-            let frame = capture_frame(device_w, encoder, &desc, &settings.technique, &depth.texture, &shadow_array, &inscatter);
+            let frame =
+                capture_frame(device_w, encoder, &desc, &settings.technique, &depth.texture, &shadow_array, &inscatter);
             if let Ok(mut slot) = capture.0.lock() {
                 *slot = Some(frame);
             }
@@ -550,7 +557,12 @@ fn new_state(device: &wgpu::Device, queue: &wgpu::Queue, settings: &Crepuscular)
     })
 }
 
-fn copy_of(device: &wgpu::Device, encoder: &mut wgpu::CommandEncoder, src: &wgpu::Texture, label: &str) -> wgpu::Texture {
+fn copy_of(
+    device: &wgpu::Device,
+    encoder: &mut wgpu::CommandEncoder,
+    src: &wgpu::Texture,
+    label: &str,
+) -> wgpu::Texture {
     let t = device.create_texture(&wgpu::TextureDescriptor {
         label: Some(label),
         size: src.size(),

@@ -70,13 +70,14 @@ fn library_result(gpu: &GpuContext, c: &CapturedFrame, shadow_maps: &wgpu::Textu
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
         format: wgpu::TextureFormat::Rgba32Float,
-        usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::TEXTURE_BINDING,
+        usage: wgpu::TextureUsages::STORAGE_BINDING
+            | wgpu::TextureUsages::COPY_SRC
+            | wgpu::TextureUsages::TEXTURE_BINDING,
         view_formats: &[],
     });
-    let depth = c.depth.create_view(&wgpu::TextureViewDescriptor {
-        aspect: wgpu::TextureAspect::DepthOnly,
-        ..Default::default()
-    });
+    let depth = c
+        .depth
+        .create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() });
     let shadows = shadow_maps.create_view(&wgpu::TextureViewDescriptor {
         dimension: Some(wgpu::TextureViewDimension::D2Array),
         ..Default::default()
@@ -104,7 +105,8 @@ fn library_result(gpu: &GpuContext, c: &CapturedFrame, shadow_maps: &wgpu::Textu
 }
 
 fn max_abs_diff(a: &crepuscular::Image, b: &crepuscular::Image) -> (f32, f32) {
-    let diff = a.pixels.iter().zip(&b.pixels).flat_map(|(p, q)| (0..3).map(move |c| (p[c] - q[c]).abs())).fold(0f32, f32::max);
+    let diff =
+        a.pixels.iter().zip(&b.pixels).flat_map(|(p, q)| (0..3).map(move |c| (p[c] - q[c]).abs())).fold(0f32, f32::max);
     let peak = a.pixels.iter().flat_map(|p| p[..3].iter().copied()).fold(0f32, f32::max);
     (diff, peak)
 }
@@ -194,7 +196,10 @@ fn matrices_put_bevys_depth_and_shadow_maps_on_the_scene() {
         }
         let fraction = on as f64 / drawn.max(1) as f64;
         let faces = right_face as f64 / drawn.max(1) as f64;
-        eprintln!("light {k} ({}): {on} of {drawn} texels on the scene ({fraction:.4}), on their face {faces:.4}", fl.light.kind_name());
+        eprintln!(
+            "light {k} ({}): {on} of {drawn} texels on the scene ({fraction:.4}), on their face {faces:.4}",
+            fl.light.kind_name()
+        );
         assert!(drawn > 1000, "light {k}: its map holds the scene ({drawn} texels)");
         assert!(fraction >= 0.99, "light {k}: shadow texels unprojected off the scene: {fraction}");
         assert!(faces >= 0.99, "light {k}: texels on another cube face's axis: {faces}");
@@ -212,7 +217,11 @@ fn every_technique_in_bevy_equals_the_library_on_the_same_maps() {
         .filter_map(|t| TechniqueSettings::named(t.name).ok())
         .filter(|t| t.has_gpu())
         .collect();
-    assert!(techniques.len() >= 6, "every GPU technique: {:?}", techniques.iter().map(|t| t.name()).collect::<Vec<_>>());
+    assert!(
+        techniques.len() >= 6,
+        "every GPU technique: {:?}",
+        techniques.iter().map(|t| t.name()).collect::<Vec<_>>()
+    );
     let (mut app, first) = app_with_capture(Effect::Crepuscular(full_float(techniques[0].clone())), true);
     let gpu = gpu_of(&app);
     let mut captured = Some(first);
@@ -255,16 +264,18 @@ fn shafts_are_where_the_pillars_cast_them() {
     let gpu = gpu_of(&app);
     let shadowed = gpu.read_image(&c.inscatter).expect("readback");
     // The same frame with empty shadow maps (reversed-Z clear: 0): the unshadowed in-scattering.
-    let empty = gpu
-        .upload_texture(
-            "empty shadow maps",
-            wgpu::TextureFormat::R32Float,
-            c.shadow_maps.width(),
-            c.shadow_maps.height(),
-            c.shadow_maps.depth_or_array_layers(),
-            4,
-            &vec![0u8; (c.shadow_maps.width() * c.shadow_maps.height() * c.shadow_maps.depth_or_array_layers() * 4) as usize],
-        );
+    let empty = gpu.upload_texture(
+        "empty shadow maps",
+        wgpu::TextureFormat::R32Float,
+        c.shadow_maps.width(),
+        c.shadow_maps.height(),
+        c.shadow_maps.depth_or_array_layers(),
+        4,
+        &vec![
+            0u8;
+            (c.shadow_maps.width() * c.shadow_maps.height() * c.shadow_maps.depth_or_array_layers() * 4) as usize
+        ],
+    );
     let lit = library_result(&gpu, &c, &empty);
     let ratio = |x: u32, y: u32| {
         let (s, l) = (shadowed.pixels[(y * W + x) as usize], lit.pixels[(y * W + x) as usize]);

@@ -59,12 +59,7 @@ fn main() {
 }
 
 fn run(args: Args) -> Result<(), String> {
-    let (width, height) = args
-        .size
-        .split_once('x')
-        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
-        .filter(|&(w, h)| w > 0 && h > 0)
-        .ok_or_else(|| format!("--size {}: expected WIDTHxHEIGHT, e.g. 640x360", args.size))?;
+    let (width, height) = demo::parse_size(&args.size)?;
     let effect = if args.no_fog {
         Effect::None
     } else if let Some(steps) = args.bevy_fog {

@@ -67,15 +67,8 @@ fn main() {
     }
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    s.split_once('x')
-        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
-        .filter(|&(w, h)| w > 0 && h > 0)
-        .ok_or_else(|| format!("--size {s}: expected WIDTHxHEIGHT, e.g. 1920x1080"))
-}
-
 fn run(args: Args) -> Result<(), String> {
-    let (width, height) = parse_size(&args.size)?;
+    let (width, height) = demo::parse_size(&args.size)?;
     if args.frames == 0 {
         return Err("--frames 0: at least one timed frame".into());
     }

@@ -313,6 +313,14 @@ pub fn spawn_colonnade(
     }
 }
 
+/// Parses a `--size` value `WIDTHxHEIGHT` (both at least 1); the error names the value.
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    s.split_once('x')
+        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+        .filter(|&(w, h)| w > 0 && h > 0)
+        .ok_or_else(|| format!("--size {s}: expected WIDTHxHEIGHT, e.g. 960x540"))
+}
+
 /// A 4×4 "stained glass" of saturated panes (sRGB), the demo spot's gobo.
 pub fn stained_glass() -> Image {
     use bevy::asset::RenderAssetUsages;

@@ -225,9 +225,9 @@ fn side_by_side(left: &Image, right: &Image, path: &Path) -> Result<(), String> 
             out.put_pixel(w + gap + x, y, image::Rgb([r[i], r[i + 1], r[i + 2]]));
         }
     }
-    let tmp = path.with_extension("png.tmp");
-    out.save_with_format(&tmp, image::ImageFormat::Png).map_err(|e| format!("{}: {e}", tmp.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+    let mut png = std::io::Cursor::new(Vec::new());
+    out.write_to(&mut png, image::ImageFormat::Png).map_err(|e| format!("{}: {e}", path.display()))?;
+    write_atomic(path, png.get_ref())
 }
 
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {

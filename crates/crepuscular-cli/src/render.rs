@@ -566,8 +566,8 @@ fn prefiltered_debug_view(
 }
 
 /// `minmax`'s `nodes` view: the frame rendered on the backend (with the host's rectified raster
-/// where the rectification is projective), its rectified map and tree read back, every pixel's
-/// walk counted on the CPU over them.
+/// where the rectification is projective), its tree read back, every pixel's walk counted on the
+/// CPU over it.
 fn minmax_debug_view(scene: &Scene, gpu: Option<&GpuContext>, settings: &minmax::MinmaxSettings) -> Result<Image> {
     let desc = debug_desc(scene);
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
@@ -582,7 +582,7 @@ fn minmax_debug_view(scene: &Scene, gpu: Option<&GpuContext>, settings: &minmax:
             let views = tex.views();
             render_gpu(&mut runner, Some(&host), &views.frame(&desc), &out.create_view(&Default::default()))?;
             let AnyGpuTechnique::Minmax(t) = runner.technique() else { unreachable!("built above") };
-            (gpu.read_texture_f32(&tex.depth, 0)?, t.read_maps(gpu)?.1)
+            (gpu.read_texture_f32(&tex.depth, 0)?, t.read_tree(gpu)?)
         }
         None => {
             let frame =
@@ -593,7 +593,7 @@ fn minmax_debug_view(scene: &Scene, gpu: Option<&GpuContext>, settings: &minmax:
     };
     let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &h.shadow_maps, surface: None };
     let epipole = prefiltered::epipole_pixel(&desc, settings.epipole_radius);
-    let nodes = minmax::cpu::walk_nodes(&frame, settings, &rect, &tree, epipole);
+    let nodes = minmax::cpu::traverse(&frame, settings, &rect, &tree, epipole).2;
     let most = nodes.iter().copied().filter(|&n| n != u32::MAX).max().unwrap_or(1).max(1);
     let mut img = Image::new(desc.width, desc.height);
     for (p, &n) in img.pixels.iter_mut().zip(&nodes) {

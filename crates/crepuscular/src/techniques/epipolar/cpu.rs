@@ -794,7 +794,7 @@ pub fn march_minmax(
             let (x, y) = (pixel % desc.width, pixel / desc.width);
             let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(frame.depth[pixel as usize], dir);
-            let (l, _) = crate::techniques::minmax::cpu::shade(desc, settings, rect, tree, dir, s);
+            let (l, _) = crate::techniques::minmax::cpu::shade(frame, settings, rect, tree, dir, s);
             (pixel as usize, [l.x, l.y, l.z, s])
         })
         .collect();
@@ -839,14 +839,11 @@ pub fn render_with_debug(
     timed("refine", start);
     let minmax = settings.march == super::EpipolarMarch::Minmax;
     let marched = if minmax {
-        // The tree (minmax's passes `rectify` and `build`), then the walk per sample.
+        // The tree (minmax's pass `build`), then the walk per sample.
         let mm = settings.minmax();
         let start = std::time::Instant::now();
         let rect = crate::techniques::prefiltered::Rectification::new(desc, &mm.rectify_options());
-        let depth = crate::techniques::prefiltered::cpu::rectify(frame, &rect);
-        timed("rectify", start);
-        let start = std::time::Instant::now();
-        let tree = crate::techniques::minmax::cpu::build(&rect, &depth, None, mm.tree_levels());
+        let tree = crate::techniques::minmax::cpu::build(frame, &rect, None, mm.tree_levels());
         timed("build", start);
         let start = std::time::Instant::now();
         let marched = march_minmax(&march_frame, &mm, &rect, &tree, &refined.list);

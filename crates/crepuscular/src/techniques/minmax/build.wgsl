@@ -1,13 +1,15 @@
 // minmax pass `build` (cpu.rs build, level_offset): Chen, Baran, Durand & Jarosz 2011 §3.1, the
 // 1D min-max mipmap of each row of the rectified shadow map. One workgroup per row: level 0 the
-// texels' depths (with the volume bias where the host rasterized the map), then each coarser
-// level the (min, max) of two children, a barrier between levels. Row r's nodes are
-// tree[r·2W ..], level k from 2W − 2W/2^k on.
+// host's rasterized depths (with the volume bias) or, where the map resamples the standard
+// shadow map, the bounds of the standard texels each rectified texel covers (bounds.wgsl); then
+// each coarser level the (min, max) of two children, a barrier between levels. Row r's nodes
+// are tree[r·2W ..], level k from 2W − 2W/2^k on.
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<uniform> params: Params;
 @group(0) @binding(2) var depth_map: texture_2d<f32>;
 @group(0) @binding(3) var<storage, read_write> tree: array<vec2<f32>>;
+@group(0) @binding(4) var shadow_map: texture_2d_array<f32>;
 
 fn band_value(i: u32) -> f32 {
     return 0.0;
@@ -22,9 +24,15 @@ fn build(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
     let row = wg.x;
     let w = params.ints.z;
     let base = row * 2u * w;
+    let host = (params.ints2.w & 4u) != 0u && params.ints.x == 0u;
+    let light = lights.items[0];
     for (var c = li; c < w; c += 64u) {
-        let d = texel_depth(params, textureLoad(depth_map, vec2<i32>(i32(c), i32(row)), 0).r, c);
-        tree[base + c] = vec2<f32>(d, d);
+        if host {
+            let d = texel_depth(params, textureLoad(depth_map, vec2<i32>(i32(c), i32(row)), 0).r, c);
+            tree[base + c] = vec2<f32>(d, d);
+        } else {
+            tree[base + c] = texel_bounds(params, light, c, row);
+        }
     }
     let levels = params.ints4.z;
     for (var l = 1u; l <= levels; l++) {

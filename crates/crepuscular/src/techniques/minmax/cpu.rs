@@ -6,14 +6,15 @@ use super::settings::MinmaxSettings;
 use crate::error::Error;
 use crate::frame::{CpuFrame, FrameDesc};
 use crate::image::Image;
-use crate::integrand::light_incident;
+use crate::integrand::{light_incident, light_position};
 use crate::march::{light_reach, march_interval, mean_extinction, step_offset};
 use crate::model::segment_transmittance;
+use crate::shadow::{ShadowMap, cube_face};
 use crate::stats::{PassTime, TechniqueStats};
-use crate::techniques::prefiltered::cpu::{in_epipole_disc, march_epipole, rectified_depth, texel_depth};
+use crate::techniques::prefiltered::cpu::{in_epipole_disc, march_epipole, texel_depth};
 use crate::techniques::prefiltered::rectify::{Mode, Rectification, angle_between};
 use crate::techniques::prefiltered::{epipole_pixel, epipole_samples};
-use glam::Vec3;
+use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use std::f32::consts::PI;
 
@@ -24,23 +25,142 @@ pub fn level_offset(width: u32, level: u32) -> usize {
     (2 * width - ((2 * width) >> level)) as usize
 }
 
-/// Pass `build` (Chen et al. 2011 §3.1, "1D min-max mipmap"): per row of the rectified map,
-/// level 0 the texels' depths (with the volume bias where the host rasterized the map, as
-/// `prefiltered` adds it), each of the `levels` coarser levels the (min, max) of two children.
-/// `2·width` (min, max) pairs per row, row-major. Mirrors build.wgsl.
-pub fn build(rect: &Rectification, depth: &[f32], bias: Option<f32>, levels: u32) -> Vec<[f32; 2]> {
-    let w = rect.width as usize;
-    build_rows(rect.width, rect.height, levels, |row, c| texel_depth(rect, depth[row * w + c], c as u32, bias))
+/// Bounds of a rectified texel whose footprint in the standard shadow map is not bounded (wider
+/// than [`MAX_FOOTPRINT`] texels, behind a spot's plane, or across a cube face's edge): below
+/// every ray's depth and above it, so the texel is mixed for every ray and its spans look the
+/// standard map up (exact, only slower).
+pub const UNBOUNDED: [f32; 2] = [-1.0, 2.0];
+
+/// The most standard-map texels one rectified texel's bounds read: a footprint of up to 8×8.
+/// Near the camera a rectified texel can cover more of the standard map (its light lines spread
+/// apart); such a texel is [`UNBOUNDED`].
+pub const MAX_FOOTPRINT: u32 = 64;
+
+/// The visibility `walk` emits for a mixed texel within the node budget: not a visibility, a
+/// request to resolve the span against the standard shadow map ([`resolve_mixed`]).
+pub const MIXED: f32 = -1.0;
+
+/// Level 0 of the tree where the rectified map resamples the standard shadow map (the issue's
+/// "conservative level 0"): bounds on the normalised depth of the occluders of every light line
+/// through rectified texel (`col`, `row`). The texel's patch of light lines (columns
+/// [col, col + 1], rows [row, row + 1]) is sampled at its corners, edge midpoints and centre;
+/// each line projects to one point of the shadow map (a directional light's line in its
+/// orthographic map, a ray from a local light in its perspective one). Every standard texel in
+/// the bounding box of those nine points is read: the nearest and farthest occluder depths
+/// (light space; the clear value, or a footprint partly outside the map, adds "no occluder",
+/// 1). Along any light line the rectified depth grows with the light depth, so the bounds are
+/// the least rectified depth of the nearest occluder and the greatest of the farthest over the
+/// nine lines. A ray whose depth is at most the minimum is lit at every standard texel it
+/// crosses inside the texel, one above the maximum shadowed at every one — up to the
+/// curvature of the rectified depth across one texel between the nine lines (docs/MODEL.md
+/// §8). Mirrors `texel_bounds` in bounds.wgsl.
+pub fn texel_bounds(
+    rect: &Rectification,
+    shadow: &ShadowMap,
+    light_pos: Vec3,
+    bias: f32,
+    col: u32,
+    row: u32,
+) -> [f32; 2] {
+    let pr = &shadow.projection;
+    let (_, centre) = rect.texel_line(col as f32 + 0.5, row as f32 + 0.5);
+    let layer = if pr.layers == 6 { cube_face(centre) } else { 0 };
+    let m = pr.view_proj[layer as usize];
+    let n = pr.size as f32;
+    let (mut lo, mut hi) = (Vec2::splat(f32::MAX), Vec2::splat(f32::MIN));
+    // The nine lines: column coordinate, point, direction, clip position of the point the map
+    // projects (the line point itself in an orthographic map, a unit step from a local light).
+    let mut lines = [(0.0f32, Vec3::ZERO, Vec3::ZERO, Vec4::ZERO); 9];
+    for (k, line) in lines.iter_mut().enumerate() {
+        let c = col as f32 + 0.5 * (k % 3) as f32;
+        let (p, dir) = rect.texel_line(c, row as f32 + 0.5 * (k / 3) as f32);
+        let layer_k = if pr.layers == 6 { cube_face(dir) } else { 0 };
+        let q = m * (if pr.orthographic { p } else { light_pos + dir }).extend(1.0);
+        if q.w <= 0.0 || layer_k != layer {
+            return UNBOUNDED;
+        }
+        let uv = Vec2::new((q.x / q.w * 0.5 + 0.5) * n, (0.5 - q.y / q.w * 0.5) * n);
+        lo = lo.min(uv);
+        hi = hi.max(uv);
+        *line = (c, p, dir, q);
+    }
+    // The occluder depths (light space) of the footprint, and whether some line has none.
+    let (mut near, mut far) = (f32::MAX, f32::MIN);
+    let mut open = lo.x < 0.0 || lo.y < 0.0 || hi.x > n || hi.y > n;
+    if !(hi.x < 0.0 || hi.y < 0.0 || lo.x >= n || lo.y >= n) {
+        let [x0, y0] = [lo.x, lo.y].map(|v| v.floor().clamp(0.0, n - 1.0) as u32);
+        let [x1, y1] = [hi.x, hi.y].map(|v| v.floor().clamp(0.0, n - 1.0) as u32);
+        if (x1 - x0 + 1) * (y1 - y0 + 1) > MAX_FOOTPRINT {
+            return UNBOUNDED;
+        }
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let d = shadow.texel(layer, x, y);
+                if pr.is_empty(d) {
+                    open = true;
+                } else {
+                    let stored = pr.linear(d);
+                    near = near.min(stored);
+                    far = far.max(stored);
+                }
+            }
+        }
+    }
+    let mut bounds = [f32::MAX, f32::MIN];
+    if open {
+        bounds = [1.0, 1.0];
+    }
+    if near <= far {
+        // The rectified depth of the occluder at light depth `stored` on line (c, p, dir, q).
+        let depth = |(c, p, dir, q): (f32, Vec3, Vec3, Vec4), stored: f32| {
+            let o = if pr.orthographic {
+                p + dir * (stored - pr.linear(q.z / q.w))
+            } else {
+                light_pos + dir * (stored / q.w)
+            };
+            rect.occluder_depth(c, o + dir * bias)
+        };
+        for line in lines {
+            bounds = [bounds[0].min(depth(line, near)), bounds[1].max(depth(line, far))];
+        }
+    }
+    bounds
 }
 
-/// [`build`] from the level-0 depth of each (row, column).
-pub fn build_rows(width: u32, height: u32, levels: u32, texel: impl Fn(usize, usize) -> f32 + Sync) -> Vec<[f32; 2]> {
+/// Pass `build` (Chen et al. 2011 §3.1, "1D min-max mipmap"): per row of the rectified map,
+/// level 0 the host's rasterized depths (`host_depth`, with the volume bias, as `prefiltered`
+/// adds it; min = max) or, where the map resamples the standard shadow map, the conservative
+/// [`texel_bounds`] of each texel; each of the `levels` coarser levels the (min, max) of two
+/// children. `2·width` (min, max) pairs per row, row-major. Mirrors build.wgsl.
+pub fn build(frame: &CpuFrame, rect: &Rectification, host_depth: Option<&[f32]>, levels: u32) -> Vec<[f32; 2]> {
+    let w = rect.width as usize;
+    let fl = &frame.desc.lights[0];
+    match host_depth {
+        Some(depth) => build_rows(rect.width, rect.height, levels, |row, c| {
+            let d = texel_depth(rect, depth[row * w + c], c as u32, Some(fl.shadow_bias));
+            [d, d]
+        }),
+        None => {
+            let (shadow, light_pos) = (&frame.shadow_maps[0], light_position(&fl.light));
+            build_rows(rect.width, rect.height, levels, |row, c| {
+                texel_bounds(rect, shadow, light_pos, fl.shadow_bias, c as u32, row as u32)
+            })
+        }
+    }
+}
+
+/// [`build`] from the level-0 (min, max) of each (row, column).
+pub fn build_rows(
+    width: u32,
+    height: u32,
+    levels: u32,
+    texel: impl Fn(usize, usize) -> [f32; 2] + Sync,
+) -> Vec<[f32; 2]> {
     let w = width as usize;
     let mut tree = vec![[0.0f32; 2]; 2 * w * height as usize];
     tree.par_chunks_mut(2 * w).enumerate().for_each(|(row, nodes)| {
         for c in 0..w {
-            let d = texel(row, c);
-            nodes[c] = [d, d];
+            nodes[c] = texel(row, c);
         }
         for l in 1..=levels {
             let (below, at) = (level_offset(width, l - 1), level_offset(width, l));
@@ -64,6 +184,9 @@ pub struct Walk {
     pub shadowed: u32,
     /// 1 when the ray reached `max_nodes` and the rest of its row was not refined.
     pub over_budget: u32,
+    /// Mixed texels (level 0, within the budget) whose span was resolved against the standard
+    /// shadow map ([`resolve_mixed`]).
+    pub mixed: u32,
 }
 
 /// The view ray's row (the nearest; wrapped when the slices cover the full circle). Mirrors
@@ -78,11 +201,12 @@ pub fn ray_row(rect: &Rectification, row: f32) -> u32 {
 /// power-of-two `width`; more are clamped) for a ray of normalised depth
 /// `z` over the column interval [`c_a`, `c_b`]: a node whose minimum is at least `z` is lit over
 /// its whole span, one whose maximum is below `z` is shadowed, any other is descended into
-/// (a texel is never mixed: its minimum is its maximum). After a span the walk moves to the next
-/// node and climbs while that node is a left child (the parent starts where it does), so a ray
-/// visits O(log width) nodes per change of visibility. `emit(c0, c1, v)` receives each
-/// non-shadowed span clipped to [c_a, c_b], in order, with its visibility v (1, or ½ for a mixed
-/// node left unrefined once `max_nodes` is reached). Mirrors `walk` in traverse.wgsl.
+/// down to the texels. After a span the walk moves to the next node and climbs while that node is
+/// a left child (the parent starts where it does), so a ray visits O(log width) nodes per change
+/// of visibility. `emit(c0, c1, v)` receives each non-shadowed span clipped to [c_a, c_b], in
+/// order, with its visibility v: 1; ½ for a mixed node left unrefined once `max_nodes` is
+/// reached; [`MIXED`] for a texel whose bounds (conservative, [`texel_bounds`]) hold the ray's
+/// depth, which the caller resolves against the standard map. Mirrors `shade` in walk.wgsl.
 #[allow(clippy::too_many_arguments)]
 pub fn walk(
     tree: &[[f32; 2]],
@@ -124,8 +248,11 @@ pub fn walk(
             emit(c0, c1, 1.0);
         } else if z > hi {
             out.shadowed += 1;
-        } else if coarse || level == 0 {
+        } else if coarse {
             emit(c0, c1, 0.5);
+        } else if level == 0 {
+            out.mixed += 1;
+            emit(c0, c1, MIXED);
         } else {
             level -= 1;
             i *= 2;
@@ -301,7 +428,7 @@ impl Merge {
     /// Adds span [c0, c1] of visibility v; returns the finished span it closes, if any.
     pub fn push(&mut self, c0: f32, c1: f32, v: f32) -> Option<(f32, f32, f32)> {
         match self.pending {
-            Some((a, b, pv)) if b == c0 && pv == v => {
+            Some((a, b, pv)) if b == c0 && pv == v && v != MIXED => {
                 self.pending = Some((a, c1, v));
                 None
             }
@@ -323,27 +450,208 @@ impl Default for Merge {
     }
 }
 
+/// The most texel-edge steps one mixed texel's span takes in [`resolve_mixed`]: a cost bound.
+/// A span that crosses more standard-texel edges (a rectified texel covering a long stretch of
+/// the standard map along the ray) has the rest of each of its pieces decided by one lookup at
+/// the rest's midpoint.
+pub const MAX_PIECES: u32 = 64;
+
+/// The ray point o + t·dir's position in the light's clip space, linear in t: (C, D) with
+/// clip(t) = C + t·D for layer `layer`'s view-projection.
+fn clip_line(shadow: &ShadowMap, layer: u32, o: Vec3, dir: Vec3) -> (Vec4, Vec4) {
+    let m = shadow.projection.view_proj[layer as usize];
+    (m * o.extend(1.0), m * dir.extend(0.0))
+}
+
+/// The t at which a + b·t = 0 (infinite when b = 0).
+fn root(a: f32, b: f32) -> f32 {
+    if b != 0.0 { -a / b } else { f32::INFINITY }
+}
+
+/// Where the span [t0, t1] of the ray o + t·dir may change the face or the validity of its
+/// shadow-map lookup, sorted, inside (t0, t1): the light's w = 0 plane, the map's depth planes
+/// ndc z = 0 and 1 (linear in t in clip space), and for a cube map the six planes through the
+/// light where the dominant axis changes (|x| = |y|, |x| = |z|, |y| = |z|). Between two of them
+/// the texel column and row the ray falls in are monotonic in t. Mirrors `span_breaks` in
+/// walk.wgsl.
+fn span_breaks(shadow: &ShadowMap, light_pos: Vec3, o: Vec3, dir: Vec3, t0: f32, t1: f32) -> ([f32; 9], usize) {
+    let pr = &shadow.projection;
+    let mut out = [0.0f32; 9];
+    let mut n = 0;
+    let mut push = |t: f32| {
+        if t > t0 && t < t1 {
+            out[n] = t;
+            n += 1;
+        }
+    };
+    // A one-layer map's planes; a cube map's face changes (its faces' w stays positive, and its
+    // near and far planes, a light-sized sphere and the scene's bounds, are not breaks: a piece
+    // across one is decided at its midpoint).
+    if pr.layers == 1 {
+        let (c, d) = clip_line(shadow, 0, o, dir);
+        push(root(c.w, d.w));
+        push(root(c.z, d.z));
+        push(root(c.z - c.w, d.z - d.w));
+    } else {
+        let (q, v) = (o - light_pos, dir);
+        for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+            push(root(q[i] - q[j], v[i] - v[j]));
+            push(root(q[i] + q[j], v[i] + v[j]));
+        }
+    }
+    // Insertion sort (at most nine values).
+    for i in 1..n {
+        let mut k = i;
+        while k > 0 && out[k - 1] > out[k] {
+            out.swap(k - 1, k);
+            k -= 1;
+        }
+    }
+    (out, n)
+}
+
+/// The exact visibility of a mixed texel's span [t0, t1] of the ray from `origin` along `dir`
+/// (distances) against the standard shadow map, the test the reference makes at every point
+/// (`ShadowMap::visibility`: the texel the point falls in, lit where its light depth is at most
+/// the texel's plus the bias; outside the map lit). The span is cut where its lookup can change
+/// face or validity ([`span_breaks`]) and where it crosses a texel edge (the texel column and
+/// row are monotonic in t between breaks, each edge x = k solved in clip space, linear in t);
+/// in each piece the texel is fixed and the light depth linear in t, so its lit part is one
+/// interval, found in closed form, and added to `spans` exactly. At most [`MAX_PIECES`] edge
+/// steps. Mirrors `resolve_mixed` in walk.wgsl.
+#[allow(clippy::too_many_arguments)]
+pub fn resolve_mixed(
+    spans: &mut Spans,
+    shadow: &ShadowMap,
+    light_pos: Vec3,
+    bias: f32,
+    origin: Vec3,
+    dir: Vec3,
+    t0: f32,
+    t1: f32,
+) {
+    if !(t1 > t0) {
+        return;
+    }
+    let pr = &shadow.projection;
+    let size = pr.size as f32;
+    let (breaks, nb) = span_breaks(shadow, light_pos, origin, dir, t0, t1);
+    // The edge steps taken: at most MAX_PIECES, then the rest of each piece is one.
+    let mut steps = 0u32;
+    // One piece [a, b] of fixed texel: its lit part.
+    let piece = |a: f32, b: f32, spans: &mut Spans| {
+        let mid = origin + dir * (0.5 * (a + b));
+        let Some((layer, tx, ty, _)) = shadow.coord(light_pos, mid) else {
+            spans.add(a, b, 1.0);
+            return;
+        };
+        let limit = pr.linear(shadow.texel(layer, tx, ty)) + bias;
+        let (c, d) = clip_line(shadow, layer, origin, dir);
+        let depth = |t: f32| {
+            let q = c + d * t;
+            pr.linear(q.z / q.w)
+        };
+        let (da, db) = (depth(a), depth(b));
+        match (da <= limit, db <= limit) {
+            (true, true) => spans.add(a, b, 1.0),
+            (false, false) => {}
+            (lit_a, _) => {
+                let t = (a + (b - a) * (limit - da) / (db - da)).clamp(a, b);
+                if lit_a { spans.add(a, t, 1.0) } else { spans.add(t, b, 1.0) }
+            }
+        }
+    };
+    let mut a = t0;
+    for k in 0..=nb {
+        let b = if k < nb { breaks[k] } else { t1 };
+        if !(b > a) {
+            continue;
+        }
+        // Between breaks: the face is fixed and w > 0 or w ≤ 0 throughout.
+        let mid = origin + dir * (0.5 * (a + b));
+        let layer = if pr.layers == 6 { cube_face(mid - light_pos) } else { 0 };
+        let (c, d) = clip_line(shadow, layer, origin, dir);
+        if (c + d * (0.5 * (a + b))).w <= 0.0 {
+            spans.add(a, b, 1.0);
+            a = b;
+            continue;
+        }
+        // Texel coordinates X = n·(x/w·½ + ½), Y = n·(½ − y/w·½) at t; the edge X = k is at
+        // x = (2k/n − 1)·w, Y = k at y = (1 − 2k/n)·w, both linear in t.
+        let xy = |t: f32| {
+            let q = c + d * t;
+            Vec2::new(size * (q.x / q.w * 0.5 + 0.5), size * (0.5 - q.y / q.w * 0.5))
+        };
+        let edge_x = |k: f32| root(c.x - (2.0 * k / size - 1.0) * c.w, d.x - (2.0 * k / size - 1.0) * d.w);
+        let edge_y = |k: f32| root(c.y - (1.0 - 2.0 * k / size) * c.w, d.y - (1.0 - 2.0 * k / size) * d.w);
+        let (pa, pb) = (xy(a), xy(b));
+        // The next edge after the start in each axis, and its step.
+        // Only the edges 0..=n matter: outside the map every point is lit.
+        let first =
+            |u: f32, v: f32| if v > u { ((u.floor() + 1.0).max(0.0), 1.0) } else { ((u.ceil() - 1.0).min(size), -1.0) };
+        let (mut kx, sx) = first(pa.x, pb.x);
+        let (mut ky, sy) = first(pa.y, pb.y);
+        let past = |k: f32, s: f32, end: f32| if s > 0.0 { k >= end || k > size } else { k <= end || k < 0.0 };
+        let mut t = a;
+        loop {
+            let tx = if past(kx, sx, pb.x) { f32::INFINITY } else { edge_x(kx) };
+            let ty = if past(ky, sy, pb.y) { f32::INFINITY } else { edge_y(ky) };
+            let mut e = tx.min(ty).min(b);
+            if !(e > t) {
+                // An edge at or before t (rounding): step past it.
+                e = t;
+            }
+            steps += 1;
+            if steps >= MAX_PIECES {
+                e = b;
+            }
+            if e > t {
+                piece(t, e, spans);
+                t = e;
+            }
+            if t >= b {
+                break;
+            }
+            if tx <= ty {
+                kx += sx;
+            } else {
+                ky += sy;
+            }
+        }
+        a = b;
+    }
+}
+
 /// One pixel: its ray into the rectified map (row, depth, the columns it crosses), the walk,
-/// and its in-scattering. Mirrors `shade` in traverse.wgsl.
+/// and its in-scattering; mixed texels are resolved against the frame's standard shadow map.
+/// Mirrors `shade` in walk.wgsl.
 pub fn shade(
-    desc: &FrameDesc,
+    frame: &CpuFrame,
     settings: &MinmaxSettings,
     rect: &Rectification,
     tree: &[[f32; 2]],
     dir: Vec3,
     s: f32,
 ) -> (Vec3, Walk) {
-    let (row, c_b, _, z) = rect.rectify_point(desc.camera.position + dir * s, dir);
+    let desc = frame.desc;
+    let fl = &desc.lights[0];
+    let (shadow, light_pos) = (&frame.shadow_maps[0], light_position(&fl.light));
+    let origin = desc.camera.position;
+    let (row, c_b, _, z) = rect.rectify_point(origin + dir * s, dir);
     let theta = if rect.mode == Mode::Epipolar { angle_between(dir, rect.axes[2]) } else { 0.0 };
-    let mut spans = Spans::new(desc, settings, dir, s);
-    let mut merge = Merge::new();
-    let integrate = |span: Option<(f32, f32, f32)>, spans: &mut Spans| {
-        if let Some((c0, c1, v)) = span {
-            let t0 = column_distance(rect, dir, theta, c0).min(s);
-            let t1 = if c1 >= c_b { s } else { column_distance(rect, dir, theta, c1).min(s) };
+    // A finished span (c0, c1, v) of columns, as distances along the ray (the last one ends at
+    // the surface, s), into `spans`.
+    let integrate = |(c0, c1, v): (f32, f32, f32), spans: &mut Spans| {
+        let t0 = column_distance(rect, dir, theta, c0).min(s);
+        let t1 = if c1 >= c_b { s } else { column_distance(rect, dir, theta, c1).min(s) };
+        if v == MIXED {
+            resolve_mixed(spans, shadow, light_pos, fl.shadow_bias, origin, dir, t0, t1);
+        } else {
             spans.add(t0, t1, v);
         }
     };
+    let mut spans = Spans::new(desc, settings, dir, s);
+    let mut merge = Merge::new();
     let walk = walk(
         tree,
         rect.width,
@@ -354,11 +662,14 @@ pub fn shade(
         0.0,
         c_b,
         |c0, c1, v| {
-            let done = merge.push(c0, c1, v);
-            integrate(done, &mut spans);
+            if let Some(span) = merge.push(c0, c1, v) {
+                integrate(span, &mut spans);
+            }
         },
     );
-    integrate(merge.finish(), &mut spans);
+    if let Some(span) = merge.finish() {
+        integrate(span, &mut spans);
+    }
     (spans.sum, walk)
 }
 
@@ -367,15 +678,16 @@ pub fn shade(
 pub struct Passes {
     /// The rectification of the frame.
     pub rect: Rectification,
-    /// The rectified shadow map: normalised depths, `width × height`, row-major.
-    pub depth: Vec<f32>,
     /// The min-max tree ([`build`]).
     pub tree: Vec<[f32; 2]>,
     /// The in-scattering.
     pub image: Image,
-    /// The walks' totals: rays, nodes, lit nodes, shadowed nodes, rays over budget, and the
-    /// most nodes one ray visited.
+    /// The walks' totals: rays, nodes, lit nodes, shadowed nodes, mixed texels, rays over
+    /// budget, and the most nodes one ray visited.
     pub totals: WalkTotals,
+    /// The nodes each pixel's walk visited (`u32::MAX` in the epipole disc): the `nodes` debug
+    /// view. Row-major, the frame's size.
+    pub nodes: Vec<u32>,
 }
 
 /// The walks of a frame, added up.
@@ -393,6 +705,8 @@ pub struct WalkTotals {
     pub shadowed: u64,
     /// Rays that reached `max_nodes`.
     pub over_budget: u64,
+    /// Mixed texels resolved against the standard shadow map.
+    pub mixed: u64,
 }
 
 impl WalkTotals {
@@ -403,6 +717,7 @@ impl WalkTotals {
         self.lit += w.lit as u64;
         self.shadowed += w.shadowed as u64;
         self.over_budget += w.over_budget as u64;
+        self.mixed += w.mixed as u64;
     }
     fn merge(mut self, o: WalkTotals) -> WalkTotals {
         self.rays += o.rays;
@@ -411,74 +726,52 @@ impl WalkTotals {
         self.lit += o.lit;
         self.shadowed += o.shadowed;
         self.over_budget += o.over_budget;
+        self.mixed += o.mixed;
         self
     }
 }
 
-/// Pass `traverse`: every pixel outside the epipole disc shaded by [`shade`]. Mirrors
-/// traverse.wgsl.
+/// Pass `traverse`: every pixel outside the epipole disc shaded by [`shade`]; also the nodes
+/// each pixel's walk visited (`u32::MAX` in the epipole disc, which is ray-marched), what the
+/// `nodes` debug view draws. Mirrors traverse.wgsl.
 pub fn traverse(
     frame: &CpuFrame,
     settings: &MinmaxSettings,
     rect: &Rectification,
     tree: &[[f32; 2]],
     epipole: Option<[f32; 2]>,
-) -> (Image, WalkTotals) {
+) -> (Image, WalkTotals, Vec<u32>) {
     let desc = frame.desc;
     let w = desc.width as usize;
     let mut image = Image::new(desc.width, desc.height);
+    let mut nodes = vec![u32::MAX; w * desc.height as usize];
     let totals = image
         .pixels
         .par_chunks_mut(w)
+        .zip(nodes.par_chunks_mut(w))
         .enumerate()
-        .map(|(y, line)| {
+        .map(|(y, (line, counts))| {
             let mut t = WalkTotals::default();
-            for (x, out) in line.iter_mut().enumerate() {
+            for (x, (out, count)) in line.iter_mut().zip(counts).enumerate() {
                 let (x, y) = (x as u32, y as u32);
                 if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
                     continue;
                 }
                 let dir = desc.pixel_ray(x, y);
                 let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
-                let (l, walk) = shade(desc, settings, rect, tree, dir, s);
+                let (l, walk) = shade(frame, settings, rect, tree, dir, s);
                 t.add(walk);
+                *count = walk.nodes;
                 *out = [l.x, l.y, l.z, 1.0];
             }
             t
         })
         .reduce(WalkTotals::default, WalkTotals::merge);
-    (image, totals)
-}
-
-/// The nodes each pixel's walk visits (`u32::MAX` in the epipole disc, which is ray-marched):
-/// what the `nodes` debug view draws. Row-major, the frame's size.
-pub fn walk_nodes(
-    frame: &CpuFrame,
-    settings: &MinmaxSettings,
-    rect: &Rectification,
-    tree: &[[f32; 2]],
-    epipole: Option<[f32; 2]>,
-) -> Vec<u32> {
-    let desc = frame.desc;
-    let w = desc.width as usize;
-    let mut out = vec![0u32; w * desc.height as usize];
-    out.par_chunks_mut(w).enumerate().for_each(|(y, line)| {
-        for (x, n) in line.iter_mut().enumerate() {
-            let (x, y) = (x as u32, y as u32);
-            *n = if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
-                u32::MAX
-            } else {
-                let dir = desc.pixel_ray(x, y);
-                let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
-                shade(desc, settings, rect, tree, dir, s).1.nodes
-            };
-        }
-    });
-    out
+    (image, totals, nodes)
 }
 
 /// Every pass of a frame; `host_depth` is a rectified map the host rasterized (projective frames
-/// only), else the shadow map is resampled (`prefiltered`'s pass `rectify`).
+/// only), else level 0 of the tree bounds the standard shadow map's texels ([`texel_bounds`]).
 pub fn passes(
     frame: &CpuFrame,
     settings: &MinmaxSettings,
@@ -492,21 +785,24 @@ pub fn passes(
     };
     let t = std::time::Instant::now();
     let rect = Rectification::new(desc, &settings.rectify_options());
-    let (depth, host) = rectified_depth(frame, &rect, host_depth, "minmax host depth")?;
-    timed("rectify", t);
-    let t = std::time::Instant::now();
-    let tree = build(&rect, &depth, host.then_some(desc.lights[0].shadow_bias), settings.tree_levels());
+    let host = host_depth.filter(|_| rect.mode == Mode::Projective);
+    if let Some(d) = host
+        && d.len() != (rect.width * rect.height) as usize
+    {
+        return Err(Error::invalid("minmax host depth", d.len(), "must hold map_size[0]·map_size[1] texels"));
+    }
+    let tree = build(frame, &rect, host, settings.tree_levels());
     timed("build", t);
     let t = std::time::Instant::now();
     let epipole = epipole_pixel(desc, settings.epipole_radius);
-    let (mut image, totals) = traverse(frame, settings, &rect, &tree, epipole);
+    let (mut image, totals, nodes) = traverse(frame, settings, &rect, &tree, epipole);
     timed("traverse", t);
     if epipole.is_some() {
         let t = std::time::Instant::now();
         march_epipole(frame, &settings.rectified(), epipole, &mut image);
         timed("epipole", t);
     }
-    Ok((Passes { rect, depth, tree, image, totals }, times))
+    Ok((Passes { rect, tree, image, totals, nodes }, times))
 }
 
 /// Renders `frame` on the CPU (one light); the result matches [`super::MinMax::encode`] up to
@@ -568,7 +864,7 @@ mod tests {
         let (w, h) = (256u32, 9u32);
         let depth = rows(w, h, 7);
         let levels = 8;
-        let tree = build_rows(w, h, levels, |r, c| depth[r * w as usize + c]);
+        let tree = build_rows(w, h, levels, |r, c| [depth[r * w as usize + c]; 2]);
         for r in 0..h as usize {
             for l in 0..=levels {
                 for i in 0..(w >> l) as usize {
@@ -603,7 +899,7 @@ mod tests {
         let mut nodes_full = 0u64;
         let mut columns = 0u64;
         for levels in [0, 1, 3, 9] {
-            let tree = build_rows(w, h, levels, |r, c| depth[r * w as usize + c]);
+            let tree = build_rows(w, h, levels, |r, c| [depth[r * w as usize + c]; 2]);
             for r in 0..h {
                 for (z, c_b) in [(0.0, 512.0), (0.3, 511.5), (0.5, 100.25), (0.95, 37.0), (1.0, 512.0), (0.62, 0.5)] {
                     let texel = |c: u32| depth[(r * w + c) as usize];
@@ -630,7 +926,7 @@ mod tests {
         let (w, h) = (512u32, 4u32);
         let depth = rows(w, h, 11);
         let levels = 9;
-        let tree = build_rows(w, h, levels, |r, c| depth[r * w as usize + c]);
+        let tree = build_rows(w, h, levels, |r, c| [depth[r * w as usize + c]; 2]);
         for budget in [1u32, 4, 16] {
             for r in 0..h {
                 let z = 0.5;

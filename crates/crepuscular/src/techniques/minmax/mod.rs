@@ -4,19 +4,24 @@
 //! (prefiltered/rectify.rs: every view ray runs along one row at one constant depth), each row
 //! gets a binary tree of (min, max) depths; a view ray walks its row from the camera to its
 //! surface, skipping every node that is entirely lit or entirely shadowed for its depth, and
-//! integrates its lit spans in closed form. The result is exact at the map's resolution
+//! integrates its lit spans in closed form. Where the rectified map resamples the standard
+//! shadow map, a texel of the tree's level 0 holds the min and max of the standard texels it
+//! covers (conservative), and a ray that a texel leaves undecided (a shadow edge crosses it)
+//! looks the standard map up along its span there; so the result is exact at the standard
+//! map's resolution, and where the host rasterized the map, at the rectified map's
 //! (docs/MODEL.md §8): no step count, and a cost that grows with how often the visibility along
 //! the ray changes, not with the ray's length.
 //!
 //! Passes (GPU, and their CPU mirror in `cpu.rs`):
 //!
-//! 1. `rectify` (`prefiltered`'s rectify.wgsl): the rectified shadow map, resampled from the
-//!    standard shadow map — skipped when the host rasterized the projective map itself
-//!    ([`crate::techniques::Technique::raster_request`]).
-//! 2. `build` (build.wgsl): the min-max tree of every row, one workgroup per row.
-//! 3. `traverse` (traverse.wgsl): per pixel, the walk (Chen et al. 2011 §3.2) and the exact
-//!    integral of its lit spans; the walks' counts go to a counter buffer read after the frame.
-//! 4. `epipole` (prefiltered/epipole.wgsl): the disc around a visible light, ray-marched, as
+//! 1. `build` (build.wgsl, bounds.wgsl): the min-max tree of every row, one workgroup per row:
+//!    level 0 the host's rasterized rectified map
+//!    ([`crate::techniques::Technique::raster_request`]) or the bounds of the standard
+//!    shadow-map texels each rectified texel covers.
+//! 2. `traverse` (traverse.wgsl): per pixel, the walk (Chen et al. 2011 §3.2), the exact
+//!    integral of its lit spans and the lookups of its mixed texels; the walks' counts go to a
+//!    counter buffer read after the frame.
+//! 3. `epipole` (prefiltered/epipole.wgsl): the disc around a visible light, ray-marched, as
 //!    `prefiltered` does.
 
 pub mod cpu;
@@ -31,13 +36,19 @@ use crate::march::mean_extinction;
 use crate::stats::TechniqueStats;
 use crate::techniques::pass;
 use crate::techniques::prefiltered::{
-    self, EPIPOLE_WGSL, Mode, PrefilteredParams, RECTIFY_WGSL, Rectification, RectifiedRaster, epipole_box,
+    self, EPIPOLE_WGSL, Mode, PrefilteredParams, RESAMPLE_WGSL, Rectification, RectifiedRaster, epipole_box,
     epipole_pixel, epipole_samples, pass_source,
 };
 use std::collections::BTreeMap;
 
 /// Pass `build`.
 pub const BUILD_WGSL: &str = include_str!("build.wgsl");
+/// Level 0 of the tree from the standard shadow map (`texel_bounds`), used by `build`.
+pub const BOUNDS_WGSL: &str = include_str!("bounds.wgsl");
+
+fn build_wgsl() -> String {
+    format!("{RESAMPLE_WGSL}\n{BOUNDS_WGSL}\n{BUILD_WGSL}")
+}
 /// The walk and its integration (`shade`), shared by `traverse` and epipolar's min-max march.
 pub const WALK_WGSL: &str = include_str!("walk.wgsl");
 /// Pass `traverse` (the walk and the `epipole` entry of prefiltered/epipole.wgsl appended).
@@ -51,7 +62,7 @@ fn traverse_wgsl() -> String {
 pub fn shaders() -> [(&'static str, String, &'static str); 3] {
     let p = prefiltered::BasisPrecision::Unorm8;
     [
-        ("minmax/build", pass_source(BUILD_WGSL, p), "build"),
+        ("minmax/build", pass_source(&build_wgsl(), p), "build"),
         ("minmax/traverse", pass_source(&traverse_wgsl(), p), "traverse"),
         ("minmax/epipole", pass_source(&traverse_wgsl(), p), "epipole"),
     ]
@@ -82,7 +93,8 @@ pub fn params(
 
 /// `TechniqueStats::extra` of a frame: the rectification, the tree's size and memory, and —
 /// once the walks are counted (`totals`) — nodes visited per ray (mean, max), lit and shadowed
-/// nodes per ray, and the rays that reached the node budget.
+/// nodes per ray, mixed texels looked up in the standard map per ray, and the rays that
+/// reached the node budget.
 pub(crate) fn stats_extra(
     s: &MinmaxSettings,
     rect: &Rectification,
@@ -108,14 +120,13 @@ pub(crate) fn stats_extra(
         m.insert("lit_nodes_per_ray".into(), per_ray(t.lit));
         m.insert("shadowed_nodes_per_ray".into(), per_ray(t.shadowed));
         m.insert("rays_over_budget".into(), t.over_budget as f64);
+        m.insert("mixed_texels_per_ray".into(), per_ray(t.mixed));
     }
     m
 }
 
-/// The rectified map and its tree, reallocated when the map size changes.
-struct Maps {
-    depth: wgpu::Texture,
-    depth_view: wgpu::TextureView,
+/// The tree buffer, reallocated when the map size changes.
+struct TreeBuffer {
     tree: wgpu::Buffer,
     key: [u32; 2],
 }
@@ -128,28 +139,24 @@ pub struct TreeFrame {
     pub host: bool,
 }
 
-/// The min-max structure of a one-light frame on the GPU: passes `rectify` (skipped where the
-/// host rasterized the projective map) and `build`, into a tree buffer and the uniform block the
-/// walk reads. `minmax` walks it per pixel; `epipolar` with `march = "minmax"` per ray-march
-/// sample (Yusov 2013). Its frame uniforms and lights are the owner's ([`pass::FrameBuffers`],
-/// written by the owner before [`TreeBuilder::encode`]).
+/// The min-max structure of a one-light frame on the GPU: pass `build`, into a tree buffer and
+/// the uniform block the walk reads. `minmax` walks it per pixel; `epipolar` with
+/// `march = "minmax"` per ray-march sample (Yusov 2013). Its frame uniforms and lights are the
+/// owner's ([`pass::FrameBuffers`], written by the owner before [`TreeBuilder::encode`]).
 pub struct TreeBuilder {
-    rectify_pipeline: wgpu::ComputePipeline,
     build_pipeline: wgpu::ComputePipeline,
-    rectify_layout: wgpu::BindGroupLayout,
     build_layout: wgpu::BindGroupLayout,
     params_buffer: wgpu::Buffer,
-    /// The rectify pass's per-row reference rays (unused by the walk, bound for the layout).
-    rows_buffer: wgpu::Buffer,
-    maps: Option<Maps>,
-    binds: pass::BindCache<[wgpu::BindGroup; 2]>,
+    /// Bound in the host raster's place where the map is resampled (never read there).
+    no_raster: wgpu::TextureView,
+    tree: Option<TreeBuffer>,
+    binds: pass::BindCache<wgpu::BindGroup>,
 }
 
 impl TreeBuilder {
-    /// Builds the two pipelines.
+    /// Builds the pipeline.
     pub fn new(device: &wgpu::Device) -> Self {
         use wgpu::TextureViewDimension as D;
-        let rectify_layout = prefiltered::rectify_layout(device);
         let build_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("minmax build"),
             entries: &[
@@ -157,29 +164,23 @@ impl TreeBuilder {
                 pass::uniform_entry(1),
                 pass::texture_entry(2, D::D2),
                 pass::storage_buffer_entry(3, false, None),
+                pass::texture_entry(4, D::D2Array),
+                pass::lights_entry(),
             ],
         });
-        let p = prefiltered::BasisPrecision::Unorm8;
-        let pipe = |label: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
-            pass::compute_pipeline(device, label, &pass_source(src, p), entry, layout)
-        };
+        let src = pass_source(&build_wgsl(), prefiltered::BasisPrecision::Unorm8);
+        let no_raster = crate::gpu::storage_texture(device, "minmax no raster", wgpu::TextureFormat::R32Float, 1, 1)
+            .create_view(&Default::default());
         Self {
-            rectify_pipeline: pipe("prefiltered/rectify.wgsl", RECTIFY_WGSL, "rectify", &rectify_layout),
-            build_pipeline: pipe("minmax/build.wgsl", BUILD_WGSL, "build", &build_layout),
-            rectify_layout,
+            build_pipeline: pass::compute_pipeline(device, "minmax/build.wgsl", &src, "build", &build_layout),
             build_layout,
             params_buffer: pass::uniform_buffer(
                 device,
                 "minmax params",
                 std::mem::size_of::<PrefilteredParams>() as u64,
             ),
-            rows_buffer: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("minmax rows"),
-                size: 16,
-                usage: wgpu::BufferUsages::STORAGE,
-                mapped_at_creation: false,
-            }),
-            maps: None,
+            no_raster,
+            tree: None,
             binds: Default::default(),
         }
     }
@@ -191,17 +192,17 @@ impl TreeBuilder {
 
     /// The tree of the last frame (`2·columns` (min, max) pairs per row); None before the first.
     pub fn tree(&self) -> Option<&wgpu::Buffer> {
-        self.maps.as_ref().map(|m| &m.tree)
+        self.tree.as_ref().map(|m| &m.tree)
     }
 
-    /// Bytes held: the rectified depth, the tree and the two small buffers.
+    /// Bytes held: the tree and the uniforms.
     pub fn gpu_memory_bytes(&self) -> u64 {
-        let maps = self.maps.as_ref().map_or(0, |m| m.key[0] as u64 * m.key[1] as u64 * 4 + m.tree.size());
-        maps + self.params_buffer.size() + self.rows_buffer.size()
+        self.tree.as_ref().map_or(0, |m| m.tree.size()) + self.params_buffer.size()
     }
 
-    /// Records `rectify` (unless `host_raster` and the frame's rectified raster serves) and
-    /// `build` for `frame` under `s`; `buffers` hold the frame's uniforms and lights.
+    /// Records `build` for `frame` under `s` (from the frame's rectified raster where
+    /// `host_raster` and the rectification is projective, else from its standard shadow map);
+    /// `buffers` hold the frame's uniforms and lights.
     pub fn encode(
         &mut self,
         gpu: &GpuContext,
@@ -213,10 +214,19 @@ impl TreeBuilder {
     ) -> Result<TreeFrame, Error> {
         let desc = frame.desc;
         let [w, h] = s.map_size;
-        gpu.check_texture_size("minmax rectified map (map_size)", w, h)?;
         let rect = Rectification::new(desc, &s.rectify_options());
         let host = frame.rectified_shadow_map().filter(|_| host_raster && rect.mode == Mode::Projective);
-        if self.maps.as_ref().is_none_or(|m| m.key != [w, h]) {
+        if let Some(view) = host {
+            let size = view.texture().size();
+            if [size.width, size.height] != [w, h] {
+                return Err(Error::invalid(
+                    "minmax host raster",
+                    format!("{}x{}", size.width, size.height),
+                    format!("must be map_size {w}x{h}"),
+                ));
+            }
+        }
+        if self.tree.as_ref().is_none_or(|m| m.key != [w, h]) {
             let limit = gpu.device.limits().max_storage_buffer_binding_size;
             if s.tree_bytes() > limit {
                 return Err(Error::Limit {
@@ -225,79 +235,51 @@ impl TreeBuilder {
                     limit,
                 });
             }
-            self.maps = None;
-            self.maps = Some(gpu.scoped("allocating the minmax maps", || {
-                let depth = crate::gpu::storage_texture(
-                    &gpu.device,
-                    "minmax rectified depth",
-                    wgpu::TextureFormat::R32Float,
-                    w,
-                    h,
-                );
-                let tree = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            self.tree = None;
+            self.tree = Some(gpu.scoped("allocating the minmax tree", || TreeBuffer {
+                tree: gpu.device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("minmax tree"),
                     size: s.tree_bytes(),
                     usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                     mapped_at_creation: false,
-                });
-                Maps { depth_view: depth.create_view(&Default::default()), depth, tree, key: [w, h] }
+                }),
+                key: [w, h],
             })?);
         }
         let epipole = epipole_pixel(desc, s.epipole_radius);
         let p = params(s, &rect, desc, epipole, host.is_some());
         rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&p));
-        let maps = self.maps.as_ref().expect("allocated above");
-        let view = wgpu::BindingResource::TextureView;
-        let mut key = pass::frame_key(frame, &maps.depth_view);
-        key.extend([pass::Bound::Buffer(maps.tree.clone()), pass::Bound::Choice(host.is_some() as u32)]);
+        let tree = &self.tree.as_ref().expect("allocated above").tree;
+        let raster = host.unwrap_or(&self.no_raster);
+        let mut key = pass::frame_key(frame, raster);
+        key.push(pass::Bound::Buffer(tree.clone()));
         if !self.binds.is_current(&key) {
-            let binds = gpu.scoped("binding the minmax inputs", || {
-                let bind = |label, layout, entries: &[wgpu::BindGroupEntry]| {
-                    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries })
-                };
+            let bind = gpu.scoped("binding the minmax inputs", || {
                 let e = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-                let rectify = bind(
-                    "minmax rectify",
-                    &self.rectify_layout,
-                    &[
+                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("minmax build"),
+                    layout: &self.build_layout,
+                    entries: &[
                         e(0, buffers.frame.as_entire_binding()),
                         e(1, self.params_buffer.as_entire_binding()),
-                        e(2, view(frame.shadow_maps)),
-                        e(3, self.rows_buffer.as_entire_binding()),
-                        e(4, view(&maps.depth_view)),
+                        e(2, wgpu::BindingResource::TextureView(raster)),
+                        e(3, tree.as_entire_binding()),
+                        e(4, wgpu::BindingResource::TextureView(frame.shadow_maps)),
                         pass::lights_binding(&buffers.lights),
                     ],
-                );
-                let build = bind(
-                    "minmax build",
-                    &self.build_layout,
-                    &[
-                        e(0, buffers.frame.as_entire_binding()),
-                        e(1, self.params_buffer.as_entire_binding()),
-                        e(2, view(host.unwrap_or(&maps.depth_view))),
-                        e(3, maps.tree.as_entire_binding()),
-                    ],
-                );
-                [rectify, build]
+                })
             })?;
-            self.binds.store(key, binds);
+            self.binds.store(key, bind);
         }
-        let [rectify_bind, build_bind] = self.binds.value();
-        if host.is_none() {
-            let groups = [w.div_ceil(8), h.div_ceil(8), 1];
-            rec.dispatch("rectify", "minmax rectify", &self.rectify_pipeline, rectify_bind, groups)?;
-        }
-        rec.dispatch("build", "minmax build", &self.build_pipeline, build_bind, [h, 1, 1])?;
+        rec.dispatch("build", "minmax build", &self.build_pipeline, self.binds.value(), [h, 1, 1])?;
         Ok(TreeFrame { rect, host: host.is_some() })
     }
 
-    /// Reads back the last frame's rectified depth (`width × height`) and tree (`2·width`
-    /// (min, max) pairs per row), laid out as [`cpu::Passes`], for tests and debug views.
-    pub fn read_maps(&self, gpu: &GpuContext) -> Result<(Vec<f32>, Vec<[f32; 2]>), Error> {
-        let m = self.maps.as_ref().ok_or_else(|| Error::invalid("minmax maps", "none", "render a frame first"))?;
-        let depth = gpu.read_texture_f32(&m.depth, 0)?;
-        let tree = bytemuck::cast_slice(&crate::scattering::read_buffer(gpu, &m.tree)?).to_vec();
-        Ok((depth, tree))
+    /// Reads back the last frame's tree (`2·width` (min, max) pairs per row), laid out as
+    /// [`cpu::Passes::tree`], for tests and debug views.
+    pub fn read_tree(&self, gpu: &GpuContext) -> Result<Vec<[f32; 2]>, Error> {
+        let m = self.tree.as_ref().ok_or_else(|| Error::invalid("minmax tree", "none", "render a frame first"))?;
+        Ok(bytemuck::cast_slice(&crate::scattering::read_buffer(gpu, &m.tree)?).to_vec())
     }
 
     /// The bind groups built so far.
@@ -379,21 +361,20 @@ impl MinMax {
         self.last.as_ref()
     }
 
-    /// Bytes of GPU memory this technique holds: the rectified depth, the tree, the counters and
-    /// the uniforms.
+    /// Bytes of GPU memory this technique holds: the tree, the counters and the uniforms.
     pub fn gpu_memory_bytes(&self) -> u64 {
         self.tree.gpu_memory_bytes() + self.buffers.size() + self.counters.size() + 16
     }
 
-    /// Reads back the last frame's rectified depth and tree ([`TreeBuilder::read_maps`]).
-    pub fn read_maps(&self, gpu: &GpuContext) -> Result<(Vec<f32>, Vec<[f32; 2]>), Error> {
-        self.tree.read_maps(gpu)
+    /// Reads back the last frame's tree ([`TreeBuilder::read_tree`]).
+    pub fn read_tree(&self, gpu: &GpuContext) -> Result<Vec<[f32; 2]>, Error> {
+        self.tree.read_tree(gpu)
     }
 
-    /// Records the in-scattering of `frame` into `output` through `rec`. Passes: `rectify`
-    /// (skipped when the frame carries the host's rectified raster and this frame's
-    /// rectification is projective), `build`, `traverse`, `epipole` (when the light's disc is on
-    /// screen).
+    /// Records the in-scattering of `frame` into `output` through `rec`. Passes: `build` (from
+    /// the host's rectified raster when the frame carries one and this frame's rectification is
+    /// projective, else from the standard shadow map), `traverse`, `epipole` (when the light's
+    /// disc is on screen).
     pub fn encode(
         &mut self,
         gpu: &GpuContext,
@@ -445,7 +426,7 @@ impl MinMax {
         // read back (never with StatsMode::Off).
         let (settings, rect_c) = (s.clone(), rect.clone());
         rec.read_counters(&self.counters, move |data, stats| {
-            let v: &[u32] = bytemuck::cast_slice(&data[..24]);
+            let v: &[u32] = bytemuck::cast_slice(&data[..28]);
             let totals = cpu::WalkTotals {
                 rays: v[0] as u64,
                 nodes: v[1] as u64,
@@ -453,6 +434,7 @@ impl MinMax {
                 lit: v[3] as u64,
                 shadowed: v[4] as u64,
                 over_budget: v[5] as u64,
+                mixed: v[6] as u64,
             };
             stats.extra = stats_extra(&settings, &rect_c, host, Some(&totals));
         });
@@ -473,7 +455,7 @@ impl MinMax {
 impl crate::techniques::Technique for MinmaxSettings {
     const INFO: crate::techniques::TechniqueInfo = crate::techniques::TechniqueInfo {
         name: "minmax",
-        summary: "1D min-max mipmaps per row of a rectified shadow map: each view ray skips all-lit and all-shadowed spans and integrates its lit spans exactly (GPU: rectify, build, traverse; CPU mirror)",
+        summary: "1D min-max mipmaps per row of a rectified shadow map: each view ray skips all-lit and all-shadowed spans, integrates its lit spans exactly and looks its mixed texels up in the standard shadow map (GPU: build, traverse; CPU mirror)",
         paper: "Chen, Baran, Durand & Jarosz 2011, on the rectification of Klehm, Seidel & Eisemann 2014 §4",
         gpu: true,
         cpu: true,

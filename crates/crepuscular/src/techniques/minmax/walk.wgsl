@@ -1,8 +1,13 @@
 // minmax: the walk and its integration (cpu.rs ray_row, column_distance, Spans, Merge, shade):
 // per view ray, its row and depth in the rectified map, the walk of Chen et al. 2011 §3.2 down
-// the row's min-max tree, and the exact in-scattering of its lit spans. Shared by minmax's
-// `traverse` pass and epipolar's min-max march; the pass declares `tree`, `spot_tex`, `frame`
-// and `params`.
+// the row's min-max tree, the exact in-scattering of its lit spans, and the standard-map lookups
+// of its mixed texels. Shared by minmax's `traverse` pass and epipolar's min-max march; the pass
+// declares `tree`, `shadow_map`, `spot_tex`, `frame` and `params`.
+
+// cpu.rs MIXED: a texel whose bounds hold the ray's depth, resolved by `resolve_mixed`.
+const MIXED: f32 = -1.0;
+// No span (a shadowed node, or nothing pending).
+const NO_SPAN: f32 = -2.0;
 
 fn band_value(i: u32) -> f32 {
     return 0.0;
@@ -120,11 +125,186 @@ fn spans_add(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, v:
     }
 }
 
+// cpu.rs MAX_PIECES: the most texel-edge steps of one mixed span.
+const MAX_PIECES: u32 = 64u;
+
+// cpu.rs root: the t at which a + b·t = 0.
+fn root(a: f32, b: f32) -> f32 {
+    if b != 0.0 {
+        return -a / b;
+    }
+    return INF;
+}
+
+struct Breaks {
+    t: array<f32, 9>,
+    n: u32,
+}
+
+fn push_break(br: ptr<function, Breaks>, t: f32, t0: f32, t1: f32) {
+    if t > t0 && t < t1 {
+        (*br).t[(*br).n] = t;
+        (*br).n += 1u;
+    }
+}
+
+// cpu.rs span_breaks.
+fn span_breaks(l: Light, o: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32) -> Breaks {
+    var br: Breaks;
+    br.n = 0u;
+    if l.shadow_layers == 1u {
+        let m = light_view_proj(l, 0u);
+        let c = m * vec4<f32>(o, 1.0);
+        let d = m * vec4<f32>(dir, 0.0);
+        push_break(&br, root(c.w, d.w), t0, t1);
+        push_break(&br, root(c.z, d.z), t0, t1);
+        push_break(&br, root(c.z - c.w, d.z - d.w), t0, t1);
+    } else {
+        let q = o - l.position.xyz;
+        push_break(&br, root(q.x - q.y, dir.x - dir.y), t0, t1);
+        push_break(&br, root(q.x + q.y, dir.x + dir.y), t0, t1);
+        push_break(&br, root(q.x - q.z, dir.x - dir.z), t0, t1);
+        push_break(&br, root(q.x + q.z, dir.x + dir.z), t0, t1);
+        push_break(&br, root(q.y - q.z, dir.y - dir.z), t0, t1);
+        push_break(&br, root(q.y + q.z, dir.y + dir.z), t0, t1);
+    }
+    for (var i = 1u; i < br.n; i++) {
+        var k = i;
+        while k > 0u && br.t[k - 1u] > br.t[k] {
+            let x = br.t[k];
+            br.t[k] = br.t[k - 1u];
+            br.t[k - 1u] = x;
+            k -= 1u;
+        }
+    }
+    return br;
+}
+
+// cpu.rs resolve_mixed's `piece`: the lit part of [a, b], one texel throughout.
+fn resolve_piece(f: Frame, p: Params, sp: ptr<function, Spans>, l: Light, a: f32, b: f32) {
+    let o = f.camera_pos.xyz;
+    let dir = (*sp).dir;
+    let sc = shadow_coord(l, o + dir * (0.5 * (a + b)));
+    if !sc.valid {
+        spans_add(f, p, sp, a, b, 1.0);
+        return;
+    }
+    let limit = shadow_stored(l, shadow_map, vec2<i32>(sc.texel), sc.layer) + l.shadow_bias;
+    let m = light_view_proj(l, sc.layer);
+    let c = m * vec4<f32>(o, 1.0);
+    let d = m * vec4<f32>(dir, 0.0);
+    let qa = c + d * a;
+    let qb = c + d * b;
+    let da = shadow_linear_depth(l, qa.z / qa.w);
+    let db = shadow_linear_depth(l, qb.z / qb.w);
+    let lit_a = da <= limit;
+    let lit_b = db <= limit;
+    if lit_a && lit_b {
+        spans_add(f, p, sp, a, b, 1.0);
+    } else if lit_a || lit_b {
+        let t = clamp(a + (b - a) * (limit - da) / (db - da), a, b);
+        if lit_a {
+            spans_add(f, p, sp, a, t, 1.0);
+        } else {
+            spans_add(f, p, sp, t, b, 1.0);
+        }
+    }
+}
+
+// cpu.rs resolve_mixed: the exact visibility of a mixed texel's span [t0, t1] against the
+// standard shadow map, piece by piece between texel edges.
+fn resolve_mixed(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32) {
+    if !(t1 > t0) {
+        return;
+    }
+    let l = lights.items[0];
+    let o = f.camera_pos.xyz;
+    let dir = (*sp).dir;
+    let size = f32(l.shadow_size);
+    let br = span_breaks(l, o, dir, t0, t1);
+    var steps = 0u;
+    var a = t0;
+    for (var k = 0u; k <= br.n; k++) {
+        var b = t1;
+        if k < br.n {
+            b = br.t[k];
+        }
+        if !(b > a) {
+            continue;
+        }
+        let tm = 0.5 * (a + b);
+        var layer = 0u;
+        if l.shadow_layers == 6u {
+            layer = cube_face(o + dir * tm - l.position.xyz);
+        }
+        let m = light_view_proj(l, layer);
+        let c = m * vec4<f32>(o, 1.0);
+        let d = m * vec4<f32>(dir, 0.0);
+        if (c + d * tm).w <= 0.0 {
+            spans_add(f, p, sp, a, b, 1.0);
+            a = b;
+            continue;
+        }
+        let qa = c + d * a;
+        let qb = c + d * b;
+        let pa = vec2<f32>(size * (qa.x / qa.w * 0.5 + 0.5), size * (0.5 - qa.y / qa.w * 0.5));
+        let pb = vec2<f32>(size * (qb.x / qb.w * 0.5 + 0.5), size * (0.5 - qb.y / qb.w * 0.5));
+        // Only the edges 0..=n matter: outside the map every point is lit.
+        var kx = min(ceil(pa.x) - 1.0, size);
+        var sx = -1.0;
+        if pb.x > pa.x {
+            kx = max(floor(pa.x) + 1.0, 0.0);
+            sx = 1.0;
+        }
+        var ky = min(ceil(pa.y) - 1.0, size);
+        var sy = -1.0;
+        if pb.y > pa.y {
+            ky = max(floor(pa.y) + 1.0, 0.0);
+            sy = 1.0;
+        }
+        var t = a;
+        loop {
+            var tx = INF;
+            if !((sx > 0.0 && (kx >= pb.x || kx > size)) || (sx < 0.0 && (kx <= pb.x || kx < 0.0))) {
+                let kk = 2.0 * kx / size - 1.0;
+                tx = root(c.x - kk * c.w, d.x - kk * d.w);
+            }
+            var ty = INF;
+            if !((sy > 0.0 && (ky >= pb.y || ky > size)) || (sy < 0.0 && (ky <= pb.y || ky < 0.0))) {
+                let kk = 1.0 - 2.0 * ky / size;
+                ty = root(c.y - kk * c.w, d.y - kk * d.w);
+            }
+            var e = min(min(tx, ty), b);
+            if !(e > t) {
+                e = t;
+            }
+            steps += 1u;
+            if steps >= MAX_PIECES {
+                e = b;
+            }
+            if e > t {
+                resolve_piece(f, p, sp, l, t, e);
+                t = e;
+            }
+            if t >= b {
+                break;
+            }
+            if tx <= ty {
+                kx += sx;
+            } else {
+                ky += sy;
+            }
+        }
+        a = b;
+    }
+}
+
 struct Walk {
     nodes: u32,
     lit: u32,
     shadowed: u32,
     over_budget: u32,
+    mixed: u32,
 }
 
 struct Shaded {
@@ -135,7 +315,7 @@ struct Shaded {
 // cpu.rs shade's `integrate`: a finished span (c0, c1, v) of columns, as distances along the ray
 // (the last one ends at the surface, s), into `sp`.
 fn flush(f: Frame, p: Params, sp: ptr<function, Spans>, span: vec3<f32>, theta: f32, c_b: f32, s: f32) {
-    if span.z < 0.0 {
+    if span.z == NO_SPAN {
         return;
     }
     let t0 = min(column_distance(p, (*sp).dir, theta, span.x), s);
@@ -143,7 +323,11 @@ fn flush(f: Frame, p: Params, sp: ptr<function, Spans>, span: vec3<f32>, theta: 
     if span.y < c_b {
         t1 = min(column_distance(p, (*sp).dir, theta, span.y), s);
     }
-    spans_add(f, p, sp, t0, t1, span.z);
+    if span.z == MIXED {
+        resolve_mixed(f, p, sp, t0, t1);
+    } else {
+        spans_add(f, p, sp, t0, t1, span.z);
+    }
 }
 
 // cpu.rs shade and walk, with cpu.rs Merge as the pending span (c0, c1, v).
@@ -161,7 +345,7 @@ fn shade(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> Shaded {
     let levels = p.ints4.z;
     let max_nodes = p.ints4.w;
     let base = ray_row(p, rp.row) * 2u * width;
-    var pending = vec3<f32>(0.0, 0.0, -1.0);
+    var pending = vec3<f32>(0.0, 0.0, NO_SPAN);
     var level = 0u;
     var i = 0u;
     while level < levels && i % 2u == 0u {
@@ -181,21 +365,24 @@ fn shade(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> Shaded {
         let node = tree[base + level_offset(width, level) + i];
         let c0 = f32(start);
         let c1 = min(f32((i + 1u) << level), c_b);
-        var v = -1.0;
+        var v = NO_SPAN;
         if z <= node.x {
             w.lit += 1u;
             v = 1.0;
         } else if z > node.y {
             w.shadowed += 1u;
-        } else if coarse || level == 0u {
+        } else if coarse {
             v = 0.5;
+        } else if level == 0u {
+            w.mixed += 1u;
+            v = MIXED;
         } else {
             level -= 1u;
             i *= 2u;
             continue;
         }
-        if v >= 0.0 {
-            if pending.z == v && pending.y == c0 {
+        if v != NO_SPAN {
+            if pending.z == v && pending.y == c0 && v != MIXED {
                 pending.y = c1;
             } else {
                 flush(f, p, &sp, pending, theta, c_b, s);

@@ -40,6 +40,14 @@ use std::collections::BTreeMap;
 pub const GEOMETRY_WGSL: &str = include_str!("geometry.wgsl");
 /// Pass `rectify`.
 pub const RECTIFY_WGSL: &str = include_str!("rectify.wgsl");
+/// The light line of a rectified texel and the rectified depth of a point on it, shared by pass
+/// `rectify` and `minmax`'s pass `build`.
+pub const RESAMPLE_WGSL: &str = include_str!("resample.wgsl");
+
+/// Pass `rectify`'s source: [`RESAMPLE_WGSL`] and [`RECTIFY_WGSL`].
+fn rectify_wgsl() -> String {
+    format!("{RESAMPLE_WGSL}\n{RECTIFY_WGSL}")
+}
 /// Pass `prefilter` (its storage format is the `BASIS_FORMAT` placeholder).
 pub const PREFILTER_WGSL: &str = include_str!("prefilter.wgsl");
 /// Pass `evaluate` (without its `epipole` entry, [`EPIPOLE_WGSL`]).
@@ -55,7 +63,7 @@ fn evaluate_wgsl() -> String {
 /// The pass shaders: (name, source with the geometry prepended and the 8-bit format, entry).
 pub fn shaders() -> [(&'static str, String, &'static str); 4] {
     [
-        ("prefiltered/rectify", pass_source(RECTIFY_WGSL, BasisPrecision::Unorm8), "rectify"),
+        ("prefiltered/rectify", pass_source(&rectify_wgsl(), BasisPrecision::Unorm8), "rectify"),
         ("prefiltered/prefilter", pass_source(PREFILTER_WGSL, BasisPrecision::Unorm8), "prefilter"),
         ("prefiltered/evaluate", pass_source(&evaluate_wgsl(), BasisPrecision::Unorm8), "evaluate"),
         ("prefiltered/epipole", pass_source(&evaluate_wgsl(), BasisPrecision::Unorm8), "epipole"),
@@ -189,7 +197,7 @@ fn storage_entry(
 
 /// The layout of pass `rectify` (also `minmax`'s): frame and pass uniforms, the shadow maps,
 /// the per-row reference rays, the rectified depth (storage), the lights.
-pub(crate) fn rectify_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+fn rectify_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     use wgpu::TextureViewDimension as D;
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("prefiltered rectify"),
@@ -258,7 +266,7 @@ impl Prefiltered {
             let pipe = |label: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
                 pass::compute_pipeline(device, label, &pass_source(src, settings.precision), entry, layout)
             };
-            let rectify_pipeline = pipe("prefiltered/rectify.wgsl", RECTIFY_WGSL, "rectify", &rectify_layout);
+            let rectify_pipeline = pipe("prefiltered/rectify.wgsl", &rectify_wgsl(), "rectify", &rectify_layout);
             let prefilter_pipeline = pipe("prefiltered/prefilter.wgsl", PREFILTER_WGSL, "prefilter", &prefilter_layout);
             let evaluate_src = pass::with_output(&evaluate_wgsl(), output);
             let evaluate_pipeline = pipe("prefiltered/evaluate.wgsl", &evaluate_src, "evaluate", &evaluate_layout);

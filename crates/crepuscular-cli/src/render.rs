@@ -592,6 +592,7 @@ fn minmax_debug_view(scene: &Scene, gpu: Option<&GpuContext>, settings: &minmax:
         }
     };
     let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &h.shadow_maps, surface: None };
+    let settings = &settings.for_frame(&desc);
     let epipole = prefiltered::epipole_pixel(&desc, settings.epipole_radius);
     let nodes = minmax::cpu::traverse(&frame, settings, &rect, &tree, epipole).2;
     let most = nodes.iter().copied().filter(|&n| n != u32::MAX).max().unwrap_or(1).max(1);

@@ -779,6 +779,7 @@ pub fn passes(
 ) -> Result<(Passes, Vec<PassTime>), Error> {
     settings.validate()?;
     let desc = frame.desc;
+    let settings = &settings.for_frame(desc);
     let mut times = vec![];
     let mut timed = |name: &str, t: std::time::Instant| {
         times.push(PassTime { name: name.into(), ms: t.elapsed().as_secs_f64() * 1e3 })
@@ -813,6 +814,7 @@ pub fn render_with(
     host_depth: Option<&[f32]>,
 ) -> Result<(Image, TechniqueStats), Error> {
     frame.desc.single_light()?;
+    let settings = &settings.for_frame(frame.desc);
     let (p, times) = passes(frame, settings, host_depth)?;
     let epipole = epipole_pixel(frame.desc, settings.epipole_radius);
     let host = host_depth.is_some() && p.rect.mode == Mode::Projective;

@@ -384,8 +384,8 @@ impl MinMax {
     ) -> Result<TechniqueStats, Error> {
         self.settings.validate()?;
         frame.desc.single_light()?;
-        let s = self.settings.clone();
         let desc = frame.desc;
+        let s = self.settings.for_frame(desc);
         self.buffers.write(rec, desc);
         let TreeFrame { rect, host } = self.tree.encode(gpu, rec, frame, &s, &self.buffers, true)?;
         self.binds.tree_builds = self.tree.builds();

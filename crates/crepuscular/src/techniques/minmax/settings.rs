@@ -36,7 +36,7 @@ pub struct MinmaxSettings {
     /// unrefined spans; `rays_over_budget` in the stats counts such rays. A bound on the cost
     /// with the tree's full height (`levels` at its default): with fewer levels the rest of the
     /// row is still walked node by node at the top level (columns / 2^levels nodes at most).
-    /// Default 512 (never reached on the built-in scenes at the default map; see
+    /// Default 1024 (never reached on the built-in scenes at the default map; the conservative level 0 made forest's walks up to 516 nodes long; see
     /// docs/RESULTS.md).
     pub max_nodes: u32,
     /// The rectification, as `prefiltered`'s (§4 of Klehm et al. 2014): `"auto"` (default),
@@ -46,14 +46,15 @@ pub struct MinmaxSettings {
     pub max_projective_angle: f32,
     /// As `prefiltered.max_projective_depth_ratio` (> 1). Default 100.
     pub max_projective_depth_ratio: f32,
-    /// Radius in pixels of the disc around a visible light's epipole that is ray-marched
-    /// instead, as `prefiltered` does (Klehm et al. 2014 §5: there view and light rays are
-    /// nearly parallel and a row holds little of the ray). minmax does not need it: a ray
-    /// there crosses few texels, and those its depth leaves mixed are resolved exactly against
-    /// the standard map, where the disc's march has a step error (on the shadowed closed form,
-    /// docs/MODEL.md §4, the disc's pixels were the worst: 2.3 % of the peak with it, 0.5 %
-    /// without). Cost: π·r²·`epipole_steps` samples when the light is on screen. 0 (the
-    /// default) turns it off.
+    /// Spot and point lights: radius in pixels of the disc around a visible light's epipole
+    /// that is ray-marched instead, as `prefiltered` does (Klehm et al. 2014 §5). Near a local
+    /// light its 1/d² falloff changes faster than `light_steps` segments follow; the disc's
+    /// march samples it per step (cage: 46.4 dB without, 56.5 dB with, docs/quality.toml). A
+    /// directional light never gets the disc ([`MinmaxSettings::for_frame`]): its lit spans are
+    /// closed-form and its mixed texels exact, where the disc's march has a step error (on the
+    /// shadowed closed form, docs/MODEL.md §4, the disc's pixels were the worst, 2.3 % of the
+    /// peak; 0.5 % without; colonnade 63.6 → 67.3 dB). Cost: π·r²·`epipole_steps` samples when
+    /// the light is on screen. 0 turns it off. Default 8.
     pub epipole_radius: u32,
     /// Ray-marching steps per pixel in the epipole disc, 1..=4096. Default 64.
     pub epipole_steps: u32,
@@ -75,11 +76,11 @@ impl Default for MinmaxSettings {
         Self {
             map_size: [1024, 1024],
             levels: MAX_LEVELS,
-            max_nodes: 512,
+            max_nodes: 1024,
             rectification: RectificationChoice::Auto,
             max_projective_angle: 150.0,
             max_projective_depth_ratio: 100.0,
-            epipole_radius: 0,
+            epipole_radius: 8,
             epipole_steps: 64,
             light_steps: 32,
             spot_steps: SpotSteps::ExactCone,
@@ -129,6 +130,13 @@ impl MinmaxSettings {
             ));
         }
         validate_spot_denominator("minmax.spot_denominator", self.spot_denominator)
+    }
+
+    /// The settings a frame runs with: these, with no epipole disc for a directional light
+    /// (see `epipole_radius`).
+    pub fn for_frame(&self, desc: &crate::frame::FrameDesc) -> MinmaxSettings {
+        let directional = desc.lights.first().is_some_and(|l| matches!(l.light, crate::Light::Directional { .. }));
+        MinmaxSettings { epipole_radius: if directional { 0 } else { self.epipole_radius }, ..self.clone() }
     }
 
     /// The levels the tree has for these settings: `levels`, at most log2(columns).

@@ -222,13 +222,21 @@ fn reversed_z_shadow_maps_give_the_standard_in_scattering() {
                     100.0 * over
                 );
                 // The binary shadow tests give identical pixels (measured: 0 difference for
-                // every technique but prefiltered). Prefiltered filters the stored depths
+                // every technique but prefiltered and minmax). Prefiltered filters the stored depths
                 // themselves, so it sees the standard map's rounding (most likely: a perspective
                 // map's depths near its far plane round to the clear value 1 and read as "no
                 // occluder", where the reversed map keeps them — not verified texel by texel). Measured on stained-glass
                 // (the spot): p99 1.4e-2 and 1.37 % of pixels off by > 1 % on llvmpipe, 2.8e-3
                 // and 0.10 % on the CPU; elsewhere ≤ 7.3e-4 and 0 %. Bounds: 2–3× that.
-                let (p99_bound, over_bound) = if name == "prefiltered" { (3e-2, 3e-2) } else { (1e-6, 1e-6) };
+                // minmax solves its span ends in closed form from the stored depths (its level-0
+                // bounds and each mixed texel's lit interval), so the two conventions' rounding
+                // moves them slightly: measured p99 ≤ 8.3e-6 and no pixel off by > 1 % (CPU
+                // and llvmpipe, 2026-12-02; cage on llvmpipe the worst). Bound: 6× that.
+                let (p99_bound, over_bound) = match name {
+                    "prefiltered" => (3e-2, 3e-2),
+                    "minmax" => (5e-5, 1e-6),
+                    _ => (1e-6, 1e-6),
+                };
                 assert!(p99 <= p99_bound, "{scene_name} {name} {backend}: 99th percentile {p99}");
                 assert!(over <= over_bound, "{scene_name} {name} {backend}: {over} of the pixels off by > 1 %");
             }

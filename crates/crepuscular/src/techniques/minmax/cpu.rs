@@ -474,7 +474,7 @@ fn root(a: f32, b: f32) -> f32 {
 /// light where the dominant axis changes (|x| = |y|, |x| = |z|, |y| = |z|). Between two of them
 /// the texel column and row the ray falls in are monotonic in t. Mirrors `span_breaks` in
 /// walk.wgsl.
-fn span_breaks(shadow: &ShadowMap, light_pos: Vec3, o: Vec3, dir: Vec3, t0: f32, t1: f32) -> ([f32; 9], usize) {
+pub fn span_breaks(shadow: &ShadowMap, light_pos: Vec3, o: Vec3, dir: Vec3, t0: f32, t1: f32) -> ([f32; 9], usize) {
     let pr = &shadow.projection;
     let mut out = [0.0f32; 9];
     let mut n = 0;

@@ -32,7 +32,7 @@ fn setup() -> (crepuscular::frame::FrameDesc, host_cpu::CpuHost, crepuscular_sce
     let mut scene = load_scene("colonnade").expect("built-in scene");
     (scene.render.width, scene.render.height) = SIZE;
     scene.render.shadow.size = 256;
-    let desc = frame_desc(&scene);
+    let desc = frame_desc(&scene).expect("the built-in scene is valid");
     let host = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     (desc, host, scene)
 }

@@ -261,7 +261,7 @@ impl<'g> PathRenderer<'g> {
             }
         }
         self.scene.camera = self.path.pose(&self.camera, &self.lights[0].light, t).0;
-        let desc = frame_desc(&self.scene);
+        let desc = frame_desc(&self.scene)?;
         let (depth, surface, shadow_map, textures) = match (self.gpu, &self.host) {
             (Some(g), Some(h)) => {
                 let tex = h.render(g, &desc)?;

@@ -730,7 +730,7 @@ pub fn run(
             let mut scene = load_scene(scene_name)?;
             scene.render.width = w;
             scene.render.height = h;
-            let desc = frame_desc(&scene);
+            let desc = frame_desc(&scene)?;
             if let Some(g) = gpu {
                 g.check_texture_size("image size", w, h)?;
             }

@@ -408,13 +408,47 @@ fn cmd_diff(a: DiffArgs) -> Result<()> {
     Ok(())
 }
 
-fn progress_bar(total: u64) -> ProgressBar {
-    let bar = ProgressBar::new(total);
-    bar.set_style(
-        ProgressStyle::with_template("[{elapsed_precise}] [{bar:30}] {pos}/{len} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar
+/// Progress of a long command: a bar on a terminal, and — where stderr is not a terminal (a
+/// log file, CI) and indicatif draws nothing — one line per step with the elapsed time, so a
+/// redirected run still shows where it is.
+struct Steps {
+    bar: ProgressBar,
+    lines: bool,
+    start: std::time::Instant,
+}
+
+impl Steps {
+    fn new(total: u64) -> Self {
+        use std::io::IsTerminal;
+        let bar = ProgressBar::new(total);
+        bar.set_style(
+            ProgressStyle::with_template("[{elapsed_precise}] [{bar:30}] {pos}/{len} {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        Self { bar, lines: !std::io::stderr().is_terminal(), start: std::time::Instant::now() }
+    }
+
+    /// Moves to step `done` (or one on, with `None`) and names it.
+    fn step(&self, done: Option<u64>, m: &str) {
+        match done {
+            Some(d) => self.bar.set_position(d),
+            None => self.bar.inc(1),
+        }
+        self.bar.set_message(m.to_string());
+        if self.lines {
+            let len = self.bar.length().unwrap_or(0);
+            eprintln!("[{:7.1} s] {}/{len} {m}", self.start.elapsed().as_secs_f64(), self.bar.position());
+        }
+    }
+
+    /// Detail within a step (reference rows): on the bar only.
+    fn detail(&self, m: String) {
+        self.bar.set_message(m);
+    }
+
+    fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
 }
 
 fn cmd_compare(a: CompareArgs) -> Result<()> {
@@ -429,12 +463,9 @@ fn cmd_compare(a: CompareArgs) -> Result<()> {
     let gpu = render::open_gpu(a.backend, &notice)?;
     let on = gpu.as_ref().map(|g| g.describe()).unwrap_or_else(|| "CPU".into());
     eprintln!("compare `{}`: reference + {} on {on}", a.scene, techniques.join(", "));
-    let bar = progress_bar(techniques.len() as u64 + 2);
-    let step = |m: &str| {
-        bar.inc(1);
-        bar.set_message(m.to_string());
-    };
-    let rows = |done: u64, total: u64| bar.set_message(format!("reference: row {done}/{total}"));
+    let bar = Steps::new(techniques.len() as u64 + 2);
+    let step = |m: &str| bar.step(None, m);
+    let rows = |done: u64, total: u64| bar.detail(format!("reference: row {done}/{total}"));
     let args = compare::CompareArgs {
         scene: a.scene.clone(),
         techniques,
@@ -445,7 +476,7 @@ fn cmd_compare(a: CompareArgs) -> Result<()> {
     };
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let written = compare::run(&args, gpu.as_ref(), &command, &step, &rows)?;
-    bar.finish_and_clear();
+    bar.finish();
     for p in written {
         eprintln!("wrote {}", p.display());
     }
@@ -503,16 +534,13 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
         plan.name,
         plan.scenes.len() * plan.sizes.len() * plan.variants.len()
     );
-    let bar = progress_bar(total);
-    let step = |m: &str| {
-        bar.inc(1);
-        bar.set_message(m.to_string());
-    };
-    let rows = |done: u64, total: u64| bar.set_message(format!("reference rows {done}/{total}"));
+    let bar = Steps::new(total);
+    let step = |m: &str| bar.step(None, m);
+    let rows = |done: u64, total: u64| bar.detail(format!("reference rows {done}/{total}"));
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let (mut report, _) = bench::run(&plan, gpu.as_ref(), &command, &step, &rows, false)?;
     bench::measure_flicker(&mut report, gpu.as_ref(), flicker_frames, &step, &rows)?;
-    bar.finish_and_clear();
+    bar.finish();
     for p in bench::write(&report, &a.output)? {
         eprintln!("wrote {}", p.display());
     }
@@ -560,14 +588,11 @@ fn cmd_animate(a: AnimateArgs) -> Result<()> {
         a.size.0,
         a.size.1
     );
-    let bar = progress_bar(a.frames as u64);
-    let step = |done: u32, _total: u32, m: &str| {
-        bar.set_position(done as u64);
-        bar.set_message(m.to_string());
-    };
-    let rows = |done: u64, total: u64| bar.set_message(format!("reference rows {done}/{total}"));
+    let bar = Steps::new(a.frames as u64);
+    let step = |done: u32, _total: u32, m: &str| bar.step(Some(done as u64), m);
+    let rows = |done: u64, total: u64| bar.detail(format!("reference rows {done}/{total}"));
     let report = animate::run(&opts, gpu.as_ref(), &step, &rows)?;
-    bar.finish_and_clear();
+    bar.finish();
     let mut ms = report.technique_ms.clone();
     ms.sort_by(f64::total_cmp);
     eprintln!(

@@ -240,9 +240,10 @@ pub struct RenderOptions<'a> {
     pub progress: &'a (dyn Fn(u64, u64) + Sync),
 }
 
-/// The frame description of a scene at its render size ([`Scene::frame_desc`]).
-pub fn frame_desc(scene: &Scene) -> FrameDesc {
-    scene.frame_desc()
+/// The frame description of a scene at its render size ([`Scene::frame_desc`]); its error
+/// names the scene.
+pub fn frame_desc(scene: &Scene) -> Result<FrameDesc> {
+    scene.frame_desc().with_context(|| format!("scene `{}`", scene.name))
 }
 
 /// The adapter a frame runs on: the GPU's name, backend and driver, or the CPU backend.
@@ -307,7 +308,7 @@ pub fn composite_target(gpu: &GpuContext, width: u32, height: u32) -> wgpu::Text
 
 /// Renders a scene with a technique.
 pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> Result<RenderOutput> {
-    let desc = frame_desc(scene);
+    let desc = frame_desc(scene)?;
     let (inscatter, surface, depth, final_radiance, host_passes, technique, adapter) = match gpu {
         Some(gpu) => {
             let host = GpuHost::for_scene(gpu, &scene)?;
@@ -481,7 +482,7 @@ pub fn debug_view(
     let TechniqueSettings::Epipolar(settings) = technique else {
         bail!("--debug {}: not a debug view of `{}`", view.name(), technique.name());
     };
-    let desc = debug_desc(scene);
+    let desc = debug_desc(scene)?;
     let debug = match gpu {
         Some(gpu) => {
             let host = GpuHost::for_scene(gpu, &scene)?;
@@ -513,10 +514,10 @@ pub fn debug_view(
 
 /// The frame a per-light technique's debug view shows: the scene's first light that reaches
 /// the view alone (epipolar lines and rectified maps are one light's).
-fn debug_desc(scene: &Scene) -> FrameDesc {
-    let desc = frame_desc(scene);
+fn debug_desc(scene: &Scene) -> Result<FrameDesc> {
+    let desc = frame_desc(scene)?;
     let k = desc.scattering_lights().first().copied().unwrap_or(0);
-    desc.with_light(k)
+    Ok(desc.with_light(k))
 }
 
 /// `prefiltered`'s debug views: the frame rendered on the backend (with the host's rectified
@@ -528,7 +529,7 @@ fn prefiltered_debug_view(
     view: DebugView,
 ) -> Result<Image> {
     use prefiltered::debug;
-    let desc = debug_desc(scene);
+    let desc = debug_desc(scene)?;
     let (passes, depth) = match gpu {
         Some(gpu) => {
             let host = GpuHost::for_scene(gpu, &scene)?;
@@ -569,7 +570,7 @@ fn prefiltered_debug_view(
 /// where the rectification is projective), its tree read back, every pixel's walk counted on the
 /// CPU over it.
 fn minmax_debug_view(scene: &Scene, gpu: Option<&GpuContext>, settings: &minmax::MinmaxSettings) -> Result<Image> {
-    let desc = debug_desc(scene);
+    let desc = debug_desc(scene)?;
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let rect = prefiltered::Rectification::new(&desc, &settings.rectify_options());
     let (depth, tree) = match gpu {

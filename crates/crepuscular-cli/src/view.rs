@@ -619,7 +619,7 @@ impl Viewer {
             self.runner_build_ms = built.elapsed().as_secs_f64() * 1e3;
         }
         let scene = self.current_scene();
-        let desc = render::frame_desc(&scene);
+        let desc = render::frame_desc(&scene)?;
         let (w, h) = (desc.width, desc.height);
         if self.targets.as_ref().is_none_or(|t| t.width != w || t.height != h) {
             self.gpu.check_texture_size("render size", w, h)?;

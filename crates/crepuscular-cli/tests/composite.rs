@@ -32,7 +32,7 @@ fn gpu_composite_matches_its_cpu_mirror() {
         scene.render.width = 96;
         scene.render.height = 54;
         scene.render.shadow.size = 256;
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let (w, h) = (desc.width, desc.height);
         let host = GpuHost::for_scene(&gpu, &scene).unwrap();
         let tex = host.render(&gpu, &desc).unwrap();
@@ -138,7 +138,7 @@ fn composite_refuses_targets_that_do_not_fit() {
     scene.render.width = 64;
     scene.render.height = 36;
     scene.render.shadow.size = 128;
-    let desc = frame_desc(&scene);
+    let desc = frame_desc(&scene).unwrap();
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let tex = host.render(&gpu, &desc).unwrap();
     let views = tex.views();

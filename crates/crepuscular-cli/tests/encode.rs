@@ -67,7 +67,7 @@ fn encode_records_into_the_callers_encoder_and_never_submits() {
     let sentinel = 7.25f32;
     for scene_name in ["colonnade", "cage", "stained-glass"] {
         let scene = small(scene_name);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let (w, h) = (desc.width, desc.height);
         let host = GpuHost::for_scene(&gpu, &scene).unwrap();
         let tex = host.render(&gpu, &desc).unwrap();
@@ -130,7 +130,7 @@ fn deferred_counters_arrive_after_the_frame_and_match_the_wall_clock_ones() {
         return;
     };
     let scene = small("colonnade");
-    let desc = frame_desc(&scene);
+    let desc = frame_desc(&scene).unwrap();
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let tex = host.render(&gpu, &desc).unwrap();
     let views = tex.views();
@@ -165,7 +165,7 @@ fn deferred_counters_arrive_after_the_frame_and_match_the_wall_clock_ones() {
 fn inputs_that_do_not_match_the_frame_are_errors_naming_them() {
     let Some(gpu) = test_gpu("inputs_that_do_not_match_the_frame_are_errors_naming_them") else { return };
     let scene = small("colonnade");
-    let desc = frame_desc(&scene);
+    let desc = frame_desc(&scene).unwrap();
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let tex = host.render(&gpu, &desc).unwrap();
     let views = tex.views();
@@ -195,7 +195,7 @@ fn inputs_that_do_not_match_the_frame_are_errors_naming_them() {
     let out = gpu.create_output_texture(desc.width, desc.height);
     // A depth buffer of another size.
     let other = small("colonnade");
-    let mut other_desc = frame_desc(&other);
+    let mut other_desc = frame_desc(&other).unwrap();
     other_desc.width = 40;
     other_desc.height = 30;
     let other_tex = host.render(&gpu, &other_desc).unwrap();
@@ -216,7 +216,7 @@ fn inputs_that_do_not_match_the_frame_are_errors_naming_them() {
 fn bind_groups_are_built_on_resize_and_new_inputs_not_per_frame() {
     let Some(gpu) = test_gpu("bind_groups_are_built_on_resize_and_new_inputs_not_per_frame") else { return };
     let scene = small("colonnade");
-    let desc = frame_desc(&scene);
+    let desc = frame_desc(&scene).unwrap();
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let tex = host.render(&gpu, &desc).unwrap();
     let views = tex.views();
@@ -240,7 +240,7 @@ fn bind_groups_are_built_on_resize_and_new_inputs_not_per_frame() {
         let mut half = small("colonnade");
         half.render.width = 40;
         half.render.height = 22;
-        let half_desc = frame_desc(&half);
+        let half_desc = frame_desc(&half).unwrap();
         let half_tex = host.render(&gpu, &half_desc).unwrap();
         let half_views = half_tex.views();
         let half_out = gpu.create_output_texture(40, 22);
@@ -275,7 +275,7 @@ fn rgba16float_output_is_the_rgba32float_frame_rounded_to_half_floats() {
     let Some(gpu) = test_gpu("rgba16float_output_is_the_rgba32float_frame_rounded_to_half_floats") else { return };
     for scene_name in ["colonnade", "cage"] {
         let scene = small(scene_name);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let (w, h) = (desc.width, desc.height);
         let host = GpuHost::for_scene(&gpu, &scene).unwrap();
         let tex = host.render(&gpu, &desc).unwrap();
@@ -327,7 +327,7 @@ fn a_frame_loop_that_never_asks_for_stats_keeps_at_most_three_frames_in_flight()
         return;
     };
     let scene = small("colonnade");
-    let desc = frame_desc(&scene);
+    let desc = frame_desc(&scene).unwrap();
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let tex = host.render(&gpu, &desc).unwrap();
     let views = tex.views();

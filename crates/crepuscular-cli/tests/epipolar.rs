@@ -163,7 +163,7 @@ fn view_desc(light: Light, w: u32, h: u32) -> FrameDesc {
     let bounds = Bounds { min: Vec3::splat(-40.0), max: Vec3::new(40.0, 40.0, 1.0) };
     let shadow = ShadowProjection::fit(&light, &camera, w as f32 / h as f32, bounds, 64);
     FrameDesc {
-        camera: crepuscular::FrameCamera::look_at(&camera, w as f32 / h as f32),
+        camera: crepuscular::FrameCamera::look_at(&camera, w as f32 / h as f32).unwrap(),
         lights: vec![crepuscular::FrameLight::new(light, shadow)],
         medium: Medium::default(),
         width: w,
@@ -704,7 +704,7 @@ fn epipolar_gpu_matches_its_cpu_mirror_pass_by_pass() {
     let mut ep = epipolar_gpu(&gpu, EpipolarSettings::default());
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 512);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
@@ -752,7 +752,7 @@ fn spot_step_policies_change_the_marched_samples_and_each_matches_the_mirror() {
     // stained-glass: a spot light through a window; with "fixed" the N steps span the whole
     // ray, with "exact-cone" only its chord inside the cone, so the marched values differ.
     let scene = small("stained-glass", 512);
-    let desc = frame_desc(&scene);
+    let desc = frame_desc(&scene).unwrap();
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
     let run = |spot_steps| {
@@ -1009,7 +1009,7 @@ fn epipolar_vs_reference_on_every_builtin_scene_cpu() {
     // The one-light scenes (the several-light ones are tests/lights.rs's).
     for name in builtin::one_light_names() {
         let scene = small(name, 1024);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (rf, _) = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
@@ -1026,7 +1026,7 @@ fn epipolar_vs_reference_on_every_builtin_scene_gpu() {
     // The one-light scenes (the several-light ones are tests/lights.rs's).
     for name in builtin::one_light_names() {
         let scene = small(name, 1024);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         // The GPU host renderer's own depth and shadow map; the reference runs on the CPU over
         // that very shadow map.
         let tex = GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc).unwrap();
@@ -1139,7 +1139,7 @@ fn validate_rejects_bad_settings() {
 fn invalid_settings_and_device_limits_are_errors_not_panics() {
     let Some(gpu) = test_gpu("invalid_settings_and_device_limits_are_errors_not_panics") else { return };
     let scene = small("cage", 64);
-    let desc = frame_desc(&scene);
+    let desc = frame_desc(&scene).unwrap();
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
     let up = UploadedFrame::new(&gpu, &frame).unwrap();
@@ -1229,7 +1229,7 @@ fn camera_at_the_light_and_light_behind_the_camera_give_finite_output() {
     let gpu = test_gpu("camera_at_the_light_and_light_behind_the_camera_give_finite_output");
     let mut ep = gpu.as_ref().map(|g| epipolar_gpu(g, EpipolarSettings::default()));
     for (what, degenerate, scene) in cases {
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let (img, stats, d) = cpu::render_with_debug(&frame, &EpipolarSettings::default()).unwrap();
@@ -1258,7 +1258,7 @@ fn camera_at_the_light_and_light_behind_the_camera_give_finite_output() {
     // Tiny images: a single pixel and a single row (a degenerate sample rect).
     for (w, h) in [(1u32, 1u32), (7, 1), (1, 5)] {
         let scene = scene_at("cage", w, h, 64);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let hr = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &hr.depth, shadow_maps: &hr.shadow_maps, surface: None };
         let (img, _) = cpu::render(&frame, &EpipolarSettings::default()).unwrap();
@@ -1356,7 +1356,7 @@ fn sweep_settings() {
         .iter()
         .map(|name| {
             let scene = scene_at(name, w, h, 1024);
-            let desc = frame_desc(&scene);
+            let desc = frame_desc(&scene).unwrap();
             let host = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
             let frame = CpuFrame { desc: &desc, depth: &host.depth, shadow_maps: &host.shadow_maps, surface: None };
             let reference = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap().0;

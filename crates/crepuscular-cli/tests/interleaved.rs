@@ -109,7 +109,7 @@ fn interleaved_gpu_matches_its_cpu_mirror_pass_by_pass() {
     let Some(gpu) = test_gpu("interleaved_gpu_matches_its_cpu_mirror_pass_by_pass") else { return };
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 512);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
@@ -436,7 +436,7 @@ fn block_one_is_brute_force() {
     let gpu = test_gpu("block_one_is_brute_force");
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 512);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = gpu.as_ref().map(|g| UploadedFrame::new(g, &frame).unwrap());
@@ -508,7 +508,7 @@ fn interleaved_vs_reference_on_every_builtin_scene_cpu() {
     // The one-light scenes (the several-light ones are tests/lights.rs's).
     for name in builtin::one_light_names() {
         let scene = small(name, 1024);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (rf, _) = reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
@@ -539,7 +539,7 @@ fn interleaved_vs_reference_on_every_builtin_scene_gpu() {
     // The one-light scenes (the several-light ones are tests/lights.rs's).
     for name in builtin::one_light_names() {
         let scene = small(name, 1024);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         // The GPU host renderer's own depth and shadow map, as `crepuscular render` uses them;
         // the reference runs on the CPU over that very shadow map.
         let tex = GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc).unwrap();
@@ -603,7 +603,7 @@ fn the_phase_table_changes_each_pixel_by_at_most_its_error() {
     // every term is ≥ 0, so every pixel changes by at most ε (plus rounding).
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 512);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let s = InterleavedSettings::default();

@@ -90,7 +90,7 @@ fn street() -> Scene {
 fn every_technique_sums_its_lights_gpu() {
     let Some(gpu) = test_gpu("every_technique_sums_its_lights_gpu") else { return };
     let scene = street();
-    let desc = scene.frame_desc();
+    let desc = scene.frame_desc().unwrap();
     assert_eq!(desc.scattering_lights().len(), 6, "every light of the street reaches the view");
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let tex = host.render(&gpu, &desc).unwrap();
@@ -113,7 +113,7 @@ fn every_technique_sums_its_lights_gpu() {
 #[test]
 fn every_technique_sums_its_lights_cpu() {
     let scene = street();
-    let desc = scene.frame_desc();
+    let desc = scene.frame_desc().unwrap();
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
     for settings in techniques(&scene, false).into_iter().chain(techniques(&scene, true).into_iter().take(3)) {
@@ -156,7 +156,7 @@ fn colonnade_with_idle_lights() -> Scene {
 fn lights_that_cannot_reach_the_view_change_nothing_gpu() {
     let Some(gpu) = test_gpu("lights_that_cannot_reach_the_view_change_nothing_gpu") else { return };
     let scene = colonnade_with_idle_lights();
-    let desc = scene.frame_desc();
+    let desc = scene.frame_desc().unwrap();
     assert_eq!(desc.scattering_lights(), vec![0], "the spot faces away, the point light does not scatter");
     let host = GpuHost::for_scene(&gpu, &scene).unwrap();
     let tex = host.render(&gpu, &desc).unwrap();
@@ -178,7 +178,7 @@ fn lights_that_cannot_reach_the_view_change_nothing_gpu() {
 #[test]
 fn lights_that_cannot_reach_the_view_change_nothing_cpu() {
     let scene = colonnade_with_idle_lights();
-    let desc = scene.frame_desc();
+    let desc = scene.frame_desc().unwrap();
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
     let sun = desc.with_light(0);
@@ -198,7 +198,7 @@ fn a_lights_scattering_scale_scales_exactly_its_share() {
     // Halving a light's scattering halves every product it enters (a power of two): the
     // in-scattering of a one-light frame halves bit for bit, on the GPU and on the CPU.
     let scene = small("stained-glass", 96, 54);
-    let desc = scene.frame_desc();
+    let desc = scene.frame_desc().unwrap();
     let mut half = desc.clone();
     half.lights[0].scattering = 0.5;
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
@@ -230,7 +230,7 @@ fn a_lights_scattering_scale_scales_exactly_its_share() {
 #[test]
 fn bad_light_lists_are_errors_naming_the_light() {
     let scene = small("colonnade", 32, 18);
-    let desc = scene.frame_desc();
+    let desc = scene.frame_desc().unwrap();
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let brute = parse_technique("brute-force", &scene, &[]).unwrap();
     let cpu = |d: &FrameDesc, maps: &[crepuscular::ShadowMap]| {
@@ -306,7 +306,7 @@ fn multi_light_quality(backend: &str, gpu: Option<&GpuContext>) {
             let out = render(&scene, gpu, &opts(settings)).unwrap();
             assert_eq!(out.stats.technique.extra["lights"], scene.lights.len() as f64);
             let lin = compare(&reference.inscatter, &out.inscatter, &tone).unwrap().psnr_db;
-            let t_ref = crepuscular::frame::surface_transmittance(&scene.frame_desc(), &reference.depth);
+            let t_ref = crepuscular::frame::surface_transmittance(&scene.frame_desc().unwrap(), &reference.depth);
             let fin = compare(
                 &composite(&reference.surface, &reference.inscatter, &t_ref),
                 &composite(&reference.surface, &out.inscatter, &t_ref),

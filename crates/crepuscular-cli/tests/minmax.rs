@@ -49,7 +49,7 @@ fn quality(backend: &str, gpu: Option<&GpuContext>) {
         assert!(out.inscatter.all_finite(), "{}", scene.name);
         let tone = ToneMap::new(scene.render.exposure);
         let psnr = compare(&reference.inscatter, &out.inscatter, &tone).unwrap().psnr_db;
-        let t = surface_transmittance(&scene.frame_desc(), &reference.depth);
+        let t = surface_transmittance(&scene.frame_desc().unwrap(), &reference.depth);
         let flip = compare(
             &composite(&reference.surface, &reference.inscatter, &t),
             &composite(&reference.surface, &out.inscatter, &t),

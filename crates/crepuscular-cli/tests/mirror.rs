@@ -29,7 +29,7 @@ fn host_depth_and_shadow_maps_match_between_gpu_and_cpu() {
     let Some(gpu) = test_gpu("host_depth_and_shadow_maps_match_between_gpu_and_cpu") else { return };
     for (name, _) in builtin::builtin_names() {
         let scene = small(name);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let cpu = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let tex = GpuHost::for_scene(&gpu, &scene).unwrap().render(&gpu, &desc).unwrap();
         let depth = gpu.read_texture_f32(&tex.depth, 0).unwrap();
@@ -60,7 +60,7 @@ fn brute_force_gpu_matches_its_cpu_mirror() {
     let Some(gpu) = test_gpu("brute_force_gpu_matches_its_cpu_mirror") else { return };
     for (name, _) in builtin::builtin_names() {
         let scene = small(name);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let spot = |spot_steps| BruteForceSettings { steps: 32, spot_steps, ..Default::default() };

@@ -389,7 +389,7 @@ fn regions_recombine_to_the_single_prefix_sum() {
     // region has a whole number of columns; 240 = 2·120 = 3·80 = 8·30). Only the storage's
     // rounding differs (a region's running mean restarts at its first column).
     for scene in [scene_at("colonnade", 96, 54, 512), side_lit(scene_at("colonnade", 96, 54, 512))] {
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         for (precision, bound) in [(BasisPrecision::Float16, 5e-3), (BasisPrecision::Unorm8, 2e-2)] {
@@ -442,7 +442,7 @@ fn round_trip_failures(rect: &Rectification) -> Vec<(u32, f32, f32, u32, u32)> {
 /// (map width, regions, split_lambda) of `cases`: one line per failing case.
 fn round_trip_sweep(cases: &[(u32, u32, f32)]) -> Vec<String> {
     let scene = side_lit(scene_at("colonnade", 96, 54, 64));
-    let desc = frame_desc(&scene);
+    let desc = frame_desc(&scene).unwrap();
     let mut failures = vec![];
     for choice in [RectificationChoice::Projective, RectificationChoice::Epipolar] {
         for &(w, regions, lambda) in cases {
@@ -626,7 +626,7 @@ fn prefiltered_gpu_matches_its_cpu_mirror_pass_by_pass() {
     let mut pf = prefiltered_gpu(&gpu, &small_settings());
     for (name, _) in builtin::builtin_names() {
         let scene = scene_at(name, 96, 54, 512);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = UploadedFrame::new(&gpu, &frame).unwrap();
@@ -691,7 +691,7 @@ fn one_light_of_each_kind(desc: &crepuscular::frame::FrameDesc) -> Vec<usize> {
 fn prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map() {
     let Some(gpu) = test_gpu("prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map") else { return };
     let scene = side_lit(scene_at("colonnade", 96, 54, 512));
-    let desc = frame_desc(&scene);
+    let desc = frame_desc(&scene).unwrap();
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
     let up = UploadedFrame::new(&gpu, &frame).unwrap();
@@ -762,7 +762,7 @@ fn prefiltered_gpu_matches_its_cpu_mirror_with_a_host_rasterized_map() {
     let view =
         gtex.create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() });
     let front = scene_at("colonnade", 96, 54, 512);
-    let fdesc = frame_desc(&front);
+    let fdesc = frame_desc(&front).unwrap();
     assert!(pf.raster_requests(&fdesc)[0].is_none(), "the sun in view goes epipolar: nothing to rasterize");
     let fh = host_cpu::render(&front.geometry, &front.shading(), &fdesc);
     let fframe = CpuFrame { desc: &fdesc, depth: &fh.depth, shadow_maps: &fh.shadow_maps, surface: None };
@@ -945,7 +945,7 @@ fn run_render(scene: &Scene, gpu: Option<&GpuContext>, technique: TechniqueSetti
 fn quality(scene: &Scene, rf: &RenderOutput, out: &RenderOutput) -> (f64, f64) {
     let tone = ToneMap::new(scene.render.exposure);
     let lin = compare(&rf.inscatter, &out.inscatter, &tone).unwrap();
-    let t = surface_transmittance(&frame_desc(scene), &out.depth);
+    let t = surface_transmittance(&frame_desc(scene).unwrap(), &out.depth);
     let fin = compare(&rf.final_radiance, &composite(&out.surface, &out.inscatter, &t), &tone).unwrap();
     (lin.psnr_db, fin.flip_mean)
 }
@@ -955,7 +955,7 @@ fn quality(scene: &Scene, rf: &RenderOutput, out: &RenderOutput) -> (f64, f64) {
 /// the very same depth and shadow map: (PSNR of the in-scattering, FLIP of the final images,
 /// the technique's stats). The GPU runner is built once and reused across scenes.
 fn quality_frame(scene: &Scene, gpu: Option<(&GpuContext, &mut Scattering)>) -> (f64, f64, TechniqueStats) {
-    let desc = frame_desc(scene);
+    let desc = frame_desc(scene).unwrap();
     // Side-lit variants ask for the projective map (`auto` goes epipolar at their far/near).
     let side = scene.name.contains("side-lit");
     let overrides = if side { vec!["rectification=\"projective\"".to_string()] } else { vec![] };
@@ -1008,7 +1008,7 @@ fn quality_check(backend: &str, mut gpu: Option<(&GpuContext, &mut Scattering)>)
     // The one-light scenes (the several-light ones are tests/lights.rs's).
     for name in builtin::one_light_names() {
         let scene = scene_at(name, 160, 90, 1024);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let (psnr, flip, st) = run(&scene);
         assert_eq!((st.technique.as_str(), st.backend.as_str()), ("prefiltered", backend));
         let epipole = prefiltered::epipole_pixel(&desc, 1);

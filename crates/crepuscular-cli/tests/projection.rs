@@ -97,7 +97,7 @@ fn reversed_z_infinite_projection_gives_the_standard_in_scattering() {
     let gpu = test_gpu("reversed_z_infinite_projection_gives_the_standard_in_scattering");
     for scene_name in ["colonnade", "cage", "stained-glass"] {
         let scene = small(scene_name);
-        let standard = frame_desc(&scene);
+        let standard = frame_desc(&scene).unwrap();
         let rev = reversed(&scene, &standard);
         assert_eq!(rev.camera.far, standard.camera.far);
         assert!((rev.camera.near - standard.camera.near).abs() < 1e-5);
@@ -139,7 +139,7 @@ fn a_projection_jittered_by_one_pixel_shifts_the_image_by_one_pixel() {
     let gpu = test_gpu("a_projection_jittered_by_one_pixel_shifts_the_image_by_one_pixel");
     for scene_name in ["colonnade", "stained-glass"] {
         let scene = small(scene_name);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let shifted = jittered(&desc, 1.0);
         // The per-pixel march (the reference's stratified samples are seeded per pixel, so a
         // shifted pixel draws other samples; the screen-space techniques' patterns are fixed
@@ -201,7 +201,7 @@ fn reversed_z_shadow_maps_give_the_standard_in_scattering() {
     let gpu = test_gpu("reversed_z_shadow_maps_give_the_standard_in_scattering");
     for scene_name in ["colonnade", "cage", "stained-glass"] {
         let scene = small(scene_name);
-        let standard = frame_desc(&scene);
+        let standard = frame_desc(&scene).unwrap();
         let rev = reversed_shadows(&standard);
         for settings in techniques(&scene) {
             let name = settings.name();

@@ -42,7 +42,7 @@ fn brute_force_vs_reference_on_every_builtin_scene_cpu() {
     // The one-light scenes (the several-light ones are tests/lights.rs's).
     for name in builtin::one_light_names() {
         let scene = small(name);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (bf, _) = crepuscular::techniques::brute_force::cpu::march(&frame, &BruteForceSettings::default()).unwrap();

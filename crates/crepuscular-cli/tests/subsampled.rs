@@ -81,7 +81,7 @@ fn subsampled_gpu_matches_its_cpu_mirror_pass_by_pass() {
     let Some(gpu) = crepuscular::gpu::test_gpu("subsampled_gpu_matches_its_cpu_mirror_pass_by_pass") else { return };
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 512);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         for settings in mirror_settings() {
@@ -143,7 +143,7 @@ fn subsampled_gpu_matches_its_cpu_mirror_pass_by_pass() {
 fn the_grid_is_reallocated_only_when_its_size_changes() {
     let Some(gpu) = crepuscular::gpu::test_gpu("the_grid_is_reallocated_only_when_its_size_changes") else { return };
     let scene = small("cage", 256);
-    let desc = frame_desc(&scene);
+    let desc = frame_desc(&scene).unwrap();
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
     let up = crepuscular::gpu::UploadedFrame::new(&gpu, &frame).unwrap();
@@ -363,7 +363,7 @@ fn factor_one_is_brute_force_cpu() {
     // the same march, bit for bit.
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 256);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         for (s, b) in factor_one_settings() {
@@ -381,7 +381,7 @@ fn factor_one_is_brute_force_gpu() {
     let Some(gpu) = crepuscular::gpu::test_gpu("factor_one_is_brute_force_gpu") else { return };
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 256);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = crepuscular::gpu::UploadedFrame::new(&gpu, &frame).unwrap();
@@ -441,7 +441,7 @@ fn subsampled_vs_reference_on_every_builtin_scene_cpu() {
     // The one-light scenes (the several-light ones are tests/lights.rs's).
     for name in builtin::one_light_names() {
         let scene = small(name, 1024);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (img, stats) = subsampled::cpu::render(&frame, &SubsampledSettings::default()).unwrap();
@@ -460,7 +460,7 @@ fn subsampled_vs_reference_on_every_builtin_scene_gpu() {
     // The one-light scenes (the several-light ones are tests/lights.rs's).
     for name in builtin::one_light_names() {
         let scene = small(name, 1024);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         // The reference over the shadow map and depth the GPU host renderer drew.
         let rf = render(
             &scene,
@@ -499,7 +499,7 @@ const EDGE_REMARCH: &[(&str, f64, f64, f64)] =
 fn edge_remarching_improves_silhouettes() {
     for &(name, min_gain, max_flip_ratio, max_remarched) in EDGE_REMARCH {
         let scene = small(name, 1024);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (rf, _) = crepuscular::techniques::reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();
@@ -536,7 +536,7 @@ fn edge_remarching_improves_silhouettes() {
 fn sweep_depth_tolerance() {
     for (name, _) in builtin::builtin_names() {
         let scene = small(name, 1024);
-        let desc = frame_desc(&scene);
+        let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
         let (rf, _) = crepuscular::techniques::reference::render(&frame, &REFERENCE, &|_, _| {}).unwrap();

@@ -32,7 +32,7 @@ fn posed(scene: &Scene, offset: Vec3) -> (FrameDesc, Vec<f32>, host_cpu::CpuHost
     let mut s = scene.clone();
     s.camera.position += offset;
     s.camera.look_at += offset;
-    let desc = frame_desc(&s);
+    let desc = frame_desc(&s).unwrap();
     let host = host_cpu::render(&s.geometry, &s.shading(), &desc);
     (desc, host.depth.clone(), host)
 }
@@ -122,7 +122,7 @@ fn a_reset_or_a_change_of_light_medium_or_size_gives_the_current_frame_exactly()
     let mut small = sc.clone();
     small.render.width = 48;
     small.render.height = 27;
-    let sd = frame_desc(&small);
+    let sd = frame_desc(&small).unwrap();
     let sh = host_cpu::render(&small.geometry, &small.shading(), &sd);
     check(&mut t, &sd, &sh.depth, "size changed");
 }

@@ -29,7 +29,7 @@ fn render_stats(
     host: &GpuHost,
     runner: &mut Scattering,
 ) -> (Vec<u32>, crepuscular::stats::TechniqueStats) {
-    let desc = frame_desc(scene);
+    let desc = frame_desc(scene).unwrap();
     let tex = host.render(gpu, &desc).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
     let views = tex.views();

@@ -128,10 +128,16 @@ impl From<Light> for SceneLight {
 impl Scene {
     /// The frame description of the scene at its render size: its camera, each light with
     /// its shadow projection fitted to the geometry ([`ShadowProjection::fit`], the scene's
-    /// shadow size and bias), layers packed in light order.
-    pub fn frame_desc(&self) -> FrameDesc {
+    /// shadow size and bias), layers packed in light order. Errors: a camera that fails
+    /// [`crepuscular::Camera::validate`] or a zero render size (a scene built in code; scene
+    /// files are checked when loaded).
+    pub fn frame_desc(&self) -> Result<FrameDesc, crepuscular::Error> {
         let r = &self.render;
+        if r.width == 0 || r.height == 0 {
+            return Err(crepuscular::Error::invalid("render size", format!("{}x{}", r.width, r.height), "must be > 0"));
+        }
         let aspect = r.width as f32 / r.height as f32;
+        let camera = crepuscular::FrameCamera::look_at(&self.camera, aspect)?;
         let bounds = self.geometry.bounds();
         let lights = self
             .lights
@@ -145,15 +151,9 @@ impl Scene {
                 }
             })
             .collect();
-        let mut desc = FrameDesc {
-            camera: crepuscular::FrameCamera::look_at(&self.camera, aspect),
-            lights,
-            medium: self.medium.clone(),
-            width: r.width,
-            height: r.height,
-        };
+        let mut desc = FrameDesc { camera, lights, medium: self.medium.clone(), width: r.width, height: r.height };
         desc.assign_layers();
-        desc
+        Ok(desc)
     }
 
     /// How the host renderer shades the scene's surfaces (`render.ambient`,

@@ -48,7 +48,7 @@ scattering = 0.0
     assert!(matches!(s.lights[2].light, Light::Point { position, .. } if position == Vec3::new(1.0, 2.0, 3.0)));
     assert_eq!(s.lights.iter().map(|l| l.scattering).collect::<Vec<_>>(), vec![1.0, 0.5, 0.0]);
     // The frame packs their shadow maps: one layer, one layer, six cube faces.
-    let d = s.frame_desc();
+    let d = s.frame_desc().unwrap();
     assert_eq!(
         d.lights.iter().map(|l| (l.shadow_layer, l.shadow.layers)).collect::<Vec<_>>(),
         vec![(0, 1), (1, 1), (2, 6)]

@@ -80,7 +80,7 @@ fn every_builtin_loads_with_geometry() {
         assert_eq!((s.render.width, s.render.height), (960, 540), "{name}");
         // 2048² maps, except where a scene's lights need more layers than one point light's
         // cube (6): night-street's eight lights take 13 layers, at 1024² (52 MiB, not 208).
-        let layers: u32 = s.frame_desc().lights.iter().map(|l| l.shadow.layers).sum();
+        let layers: u32 = s.frame_desc().unwrap().lights.iter().map(|l| l.shadow.layers).sum();
         let size = if layers > 6 { 1024 } else { 2048 };
         assert_eq!(s.render.shadow.size, size, "{name} ({layers} shadow-map layers)");
         let c = &s.camera;

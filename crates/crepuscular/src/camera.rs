@@ -142,11 +142,15 @@ impl FrameCamera {
         })
     }
 
-    /// The library's look-at camera ([`crate::Camera`]) for an image of `aspect`, with a
-    /// standard [0, 1] depth buffer.
-    pub fn look_at(camera: &crate::Camera, aspect: f32) -> Self {
+    /// The library's look-at camera ([`crate::Camera`]) for an image of `aspect` (width /
+    /// height), with a standard [0, 1] depth buffer. Errors: the camera's own checks
+    /// ([`crate::Camera::validate`]) and an aspect that is not finite and > 0.
+    pub fn look_at(camera: &crate::Camera, aspect: f32) -> Result<Self, Error> {
+        camera.validate()?;
+        if !(aspect.is_finite() && aspect > 0.0) {
+            return Err(Error::invalid("camera aspect (width / height)", aspect, "must be finite and > 0"));
+        }
         Self::new(camera.view(), camera.projection(aspect), DepthConvention::Standard, Some(camera.far))
-            .expect("a validated look-at camera has invertible matrices")
     }
 
     /// World → clip.
@@ -241,11 +245,33 @@ mod tests {
         crate::Camera { position: Vec3::new(1.0, 2.0, 3.0), look_at: Vec3::new(0.0, 1.0, -5.0), ..Default::default() }
     }
 
+    /// A look-at camera that cannot make matrices is an error naming the field, not a panic.
+    #[test]
+    fn bad_look_at_camera_is_an_error() {
+        let cases: [(&str, crate::Camera); 6] = [
+            ("camera.position", crate::Camera { position: Vec3::new(f32::NAN, 0.0, 0.0), ..camera() }),
+            ("camera.look_at", crate::Camera { look_at: camera().position, ..camera() }),
+            ("camera.fov_y_degrees", crate::Camera { fov_y_degrees: 180.0, ..camera() }),
+            ("camera.near", crate::Camera { near: 0.0, ..camera() }),
+            ("camera.far", crate::Camera { far: 0.05, ..camera() }),
+            ("camera.up", crate::Camera { up: Vec3::splat(f32::INFINITY), ..camera() }),
+        ];
+        for (key, cam) in cases {
+            let e = FrameCamera::look_at(&cam, 1.5).expect_err(key).to_string();
+            assert!(e.contains(key), "{key}: {e}");
+        }
+        let e = FrameCamera::look_at(&camera(), f32::NAN).expect_err("aspect").to_string();
+        assert!(e.contains("aspect"), "{e}");
+        // An up vector along the view is replaced, not refused.
+        let straight_down = crate::Camera { look_at: camera().position - Vec3::Y, ..camera() };
+        assert!(FrameCamera::look_at(&straight_down, 1.5).is_ok());
+    }
+
     #[test]
     fn view_depth_inverts_every_convention() {
         let cam = camera();
         let aspect = 1.5;
-        let standard = FrameCamera::look_at(&cam, aspect);
+        let standard = FrameCamera::look_at(&cam, aspect).unwrap();
         let reversed = FrameCamera::new(
             cam.view(),
             Mat4::perspective_infinite_reverse_rh(cam.fov_y_degrees.to_radians(), aspect, cam.near),
@@ -290,7 +316,7 @@ mod tests {
     #[test]
     fn frustum_corners_match_the_look_at_camera() {
         let cam = camera();
-        let fc = FrameCamera::look_at(&cam, 1.5);
+        let fc = FrameCamera::look_at(&cam, 1.5).unwrap();
         let a = cam.frustum_corners(1.5, 1.0, 20.0);
         let b = fc.frustum_corners(1.0, 20.0);
         for (p, q) in a.iter().zip(&b) {

@@ -40,6 +40,36 @@ impl Default for Camera {
 }
 
 impl Camera {
+    /// Checks what the matrices need: finite position, look-at point and up; the look-at point
+    /// away from the eye; `fov_y_degrees` in (0, 180); 0 < `near` < `far`, both finite. The
+    /// error names the field (`camera.near`, …) and its value. (An `up` parallel to the view
+    /// is not an error here: [`Camera::effective_up`] replaces it.)
+    pub fn validate(&self) -> Result<(), crate::Error> {
+        use crate::Error;
+        let vec = |v: Vec3| format!("[{}, {}, {}]", v.x, v.y, v.z);
+        for (key, v) in [("camera.position", self.position), ("camera.look_at", self.look_at), ("camera.up", self.up)] {
+            if !v.is_finite() {
+                return Err(Error::invalid(key, vec(v), "must be finite"));
+            }
+        }
+        if (self.look_at - self.position).length() <= 1e-6 * (1.0 + self.position.length()) {
+            return Err(Error::invalid("camera.look_at", vec(self.look_at), "must differ from camera.position"));
+        }
+        if !(self.fov_y_degrees > 0.0 && self.fov_y_degrees < 180.0) {
+            return Err(Error::invalid("camera.fov_y_degrees", self.fov_y_degrees, "must be in (0, 180) degrees"));
+        }
+        if !(self.near.is_finite() && self.near > 0.0) {
+            return Err(Error::invalid("camera.near", self.near, "must be a finite number > 0"));
+        }
+        if !(self.far.is_finite() && self.far > self.near) {
+            return Err(Error::invalid(
+                "camera.far",
+                self.far,
+                format!("must be finite and > camera.near ({})", self.near),
+            ));
+        }
+        Ok(())
+    }
     /// Unit view direction.
     pub fn forward(&self) -> Vec3 {
         (self.look_at - self.position).normalize()

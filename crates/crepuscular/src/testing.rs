@@ -52,7 +52,7 @@ pub fn wall_frame_lights(lights: Vec<Light>, medium: Medium, w: u32, h: u32) -> 
         .map(|l| ShadowMap { projection: l.shadow.clone(), depth: vec![1.0; l.shadow.layers as usize * 64 * 64] })
         .collect();
     // The wall's depth-buffer value at its view depth.
-    let camera = FrameCamera::look_at(&camera, aspect);
+    let camera = FrameCamera::look_at(&camera, aspect).expect("the fixed test camera is valid");
     let depth = vec![camera.depth_of(WALL_DISTANCE); (w * h) as usize];
     let mut desc = FrameDesc { camera, lights, medium, width: w, height: h };
     desc.assign_layers();
@@ -159,7 +159,7 @@ pub fn half_plane_frame(medium: Medium, w: u32, h: u32, size: u32) -> (FrameDesc
         })
         .expect("half_plane_frame: the edge is inside the map");
     let map = ShadowMap { projection: shadow.clone(), depth };
-    let camera = FrameCamera::look_at(&camera, aspect);
+    let camera = FrameCamera::look_at(&camera, aspect).expect("the fixed test camera is valid");
     let depth = vec![camera.depth_of(WALL_DISTANCE); (w * h) as usize];
     let mut desc = FrameDesc { camera, lights: vec![FrameLight::new(light, shadow)], medium, width: w, height: h };
     desc.assign_layers();

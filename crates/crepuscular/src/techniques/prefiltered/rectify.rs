@@ -783,7 +783,7 @@ mod tests {
         let mut light = crate::FrameLight::new(light, shadow);
         light.shadow_bias = 0.0;
         FrameDesc {
-            camera: crate::FrameCamera::look_at(&camera, 16.0 / 9.0),
+            camera: crate::FrameCamera::look_at(&camera, 16.0 / 9.0).unwrap(),
             lights: vec![light],
             medium: Medium::default(),
             width: 160,

@@ -415,7 +415,9 @@ impl<'a> Spans<'a> {
 }
 
 /// Merges adjacent spans of equal visibility before they are integrated (fewer exponentials,
-/// and an unbroken lit run integrates as one span). Mirrors the pending span in traverse.wgsl.
+/// and an unbroken lit run integrates as one span; a run of mixed texels is resolved in one
+/// [`resolve_mixed`] call, its face planes and clip-space line found once). Mirrors the pending
+/// span in walk.wgsl.
 pub struct Merge {
     pending: Option<(f32, f32, f32)>,
 }
@@ -428,7 +430,7 @@ impl Merge {
     /// Adds span [c0, c1] of visibility v; returns the finished span it closes, if any.
     pub fn push(&mut self, c0: f32, c1: f32, v: f32) -> Option<(f32, f32, f32)> {
         match self.pending {
-            Some((a, b, pv)) if b == c0 && pv == v && v != MIXED => {
+            Some((a, b, pv)) if b == c0 && pv == v => {
                 self.pending = Some((a, c1, v));
                 None
             }
@@ -450,10 +452,10 @@ impl Default for Merge {
     }
 }
 
-/// The most texel-edge steps one mixed texel's span takes in [`resolve_mixed`]: a cost bound.
-/// A span that crosses more standard-texel edges (a rectified texel covering a long stretch of
-/// the standard map along the ray) has the rest of each of its pieces decided by one lookup at
-/// the rest's midpoint.
+/// The most texel-edge steps [`resolve_mixed`] takes per mixed texel of a run (a run of n
+/// texels takes at most n·64): a cost bound. A run that crosses more standard-texel edges (a
+/// rectified texel covering a long stretch of the standard map along the ray) has the rest of
+/// each of its pieces decided by one lookup at the rest's midpoint.
 pub const MAX_PIECES: u32 = 64;
 
 /// The ray point o + t·dir's position in the light's clip space, linear in t: (C, D) with
@@ -518,7 +520,7 @@ pub fn span_breaks(shadow: &ShadowMap, light_pos: Vec3, o: Vec3, dir: Vec3, t0: 
 /// row are monotonic in t between breaks, each edge x = k solved in clip space, linear in t);
 /// in each piece the texel is fixed and the light depth linear in t, so its lit part is one
 /// interval, found in closed form, and added to `spans` exactly. At most [`MAX_PIECES`] edge
-/// steps. Mirrors `resolve_mixed` in walk.wgsl.
+/// steps per texel of the run (`texels`). Mirrors `resolve_mixed` in walk.wgsl.
 #[allow(clippy::too_many_arguments)]
 pub fn resolve_mixed(
     spans: &mut Spans,
@@ -529,6 +531,7 @@ pub fn resolve_mixed(
     dir: Vec3,
     t0: f32,
     t1: f32,
+    texels: u32,
 ) {
     if !(t1 > t0) {
         return;
@@ -536,28 +539,33 @@ pub fn resolve_mixed(
     let pr = &shadow.projection;
     let size = pr.size as f32;
     let (breaks, nb) = span_breaks(shadow, light_pos, origin, dir, t0, t1);
-    // The edge steps taken: at most MAX_PIECES, then the rest of each piece is one.
+    // The edge steps taken: at most MAX_PIECES per texel, then the rest of each piece is one.
+    let max_steps = MAX_PIECES.saturating_mul(texels.max(1));
     let mut steps = 0u32;
-    // One piece [a, b] of fixed texel: its lit part.
-    let piece = |a: f32, b: f32, spans: &mut Spans| {
-        let mid = origin + dir * (0.5 * (a + b));
-        let Some((layer, tx, ty, _)) = shadow.coord(light_pos, mid) else {
-            spans.add(a, b, 1.0);
-            return;
-        };
+    // Lit parts that touch are integrated as one span: fewer exponentials, the same integral.
+    let mut run = LitRun::default();
+    // One piece [a, b] of fixed texel on face `layer` (clip line c + t·d): its lit part. The
+    // texel is the one at the piece's midpoint (ShadowMap::coord, on the clip line).
+    let piece = |a: f32, b: f32, layer: u32, c: Vec4, d: Vec4| -> (f32, f32) {
+        let q = c + d * (0.5 * (a + b));
+        let ndc = q.truncate() / q.w;
+        if q.w <= 0.0 || ndc.z < 0.0 || ndc.z > 1.0 || ndc.x.abs() > 1.0 || ndc.y.abs() > 1.0 {
+            return (a, b);
+        }
+        let tx = ((ndc.x * 0.5 + 0.5) * size).floor().min(size - 1.0) as u32;
+        let ty = ((0.5 - ndc.y * 0.5) * size).floor().min(size - 1.0) as u32;
         let limit = pr.linear(shadow.texel(layer, tx, ty)) + bias;
-        let (c, d) = clip_line(shadow, layer, origin, dir);
         let depth = |t: f32| {
             let q = c + d * t;
             pr.linear(q.z / q.w)
         };
         let (da, db) = (depth(a), depth(b));
         match (da <= limit, db <= limit) {
-            (true, true) => spans.add(a, b, 1.0),
-            (false, false) => {}
+            (true, true) => (a, b),
+            (false, false) => (b, b),
             (lit_a, _) => {
                 let t = (a + (b - a) * (limit - da) / (db - da)).clamp(a, b);
-                if lit_a { spans.add(a, t, 1.0) } else { spans.add(t, b, 1.0) }
+                if lit_a { (a, t) } else { (t, b) }
             }
         }
     };
@@ -572,7 +580,7 @@ pub fn resolve_mixed(
         let layer = if pr.layers == 6 { cube_face(mid - light_pos) } else { 0 };
         let (c, d) = clip_line(shadow, layer, origin, dir);
         if (c + d * (0.5 * (a + b))).w <= 0.0 {
-            spans.add(a, b, 1.0);
+            run.add(spans, a, b);
             a = b;
             continue;
         }
@@ -602,11 +610,12 @@ pub fn resolve_mixed(
                 e = t;
             }
             steps += 1;
-            if steps >= MAX_PIECES {
+            if steps >= max_steps {
                 e = b;
             }
             if e > t {
-                piece(t, e, spans);
+                let (la, lb) = piece(t, e, layer, c, d);
+                run.add(spans, la, lb);
                 t = e;
             }
             if t >= b {
@@ -619,6 +628,35 @@ pub fn resolve_mixed(
             }
         }
         a = b;
+    }
+    run.finish(spans);
+}
+
+/// The pending lit span of [`resolve_mixed`]: a lit part that starts where the pending one ends
+/// extends it; any other is integrated.
+#[derive(Default)]
+struct LitRun {
+    a: f32,
+    b: f32,
+}
+
+impl LitRun {
+    fn add(&mut self, spans: &mut Spans, a: f32, b: f32) {
+        if !(b > a) {
+            return;
+        }
+        if a == self.b && self.b > self.a {
+            self.b = b;
+            return;
+        }
+        self.finish(spans);
+        *self = LitRun { a, b };
+    }
+    fn finish(&mut self, spans: &mut Spans) {
+        if self.b > self.a {
+            spans.add(self.a, self.b, 1.0);
+        }
+        *self = LitRun::default();
     }
 }
 
@@ -645,7 +683,9 @@ pub fn shade(
         let t0 = column_distance(rect, dir, theta, c0).min(s);
         let t1 = if c1 >= c_b { s } else { column_distance(rect, dir, theta, c1).min(s) };
         if v == MIXED {
-            resolve_mixed(spans, shadow, light_pos, fl.shadow_bias, origin, dir, t0, t1);
+            // A run of level-0 texels: whole columns, the last one cut at c_b.
+            let texels = (c1.ceil() - c0.floor()).max(1.0) as u32;
+            resolve_mixed(spans, shadow, light_pos, fl.shadow_bias, origin, dir, t0, t1, texels);
         } else {
             spans.add(t0, t1, v);
         }

@@ -125,7 +125,7 @@ fn spans_add(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, v:
     }
 }
 
-// cpu.rs MAX_PIECES: the most texel-edge steps of one mixed span.
+// cpu.rs MAX_PIECES: the most texel-edge steps per mixed texel of a run.
 const MAX_PIECES: u32 = 64u;
 
 // cpu.rs root: the t at which a + b·t = 0.
@@ -180,19 +180,17 @@ fn span_breaks(l: Light, o: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32) -> Brea
     return br;
 }
 
-// cpu.rs resolve_mixed's `piece`: the lit part of [a, b], one texel throughout.
-fn resolve_piece(f: Frame, p: Params, sp: ptr<function, Spans>, l: Light, a: f32, b: f32) {
-    let o = f.camera_pos.xyz;
-    let dir = (*sp).dir;
-    let sc = shadow_coord(l, o + dir * (0.5 * (a + b)));
-    if !sc.valid {
-        spans_add(f, p, sp, a, b, 1.0);
-        return;
+// cpu.rs resolve_mixed's `piece`: the lit part of [a, b], one texel throughout, on face `layer`
+// (clip line c + t·d); the texel is the one at the piece's midpoint (shadow_coord on the line).
+fn resolve_piece(l: Light, a: f32, b: f32, layer: u32, c: vec4<f32>, d: vec4<f32>) -> vec2<f32> {
+    let q = c + d * (0.5 * (a + b));
+    let ndc = q.xyz / q.w;
+    if q.w <= 0.0 || ndc.z < 0.0 || ndc.z > 1.0 || abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 {
+        return vec2<f32>(a, b);
     }
-    let limit = shadow_stored(l, shadow_map, vec2<i32>(sc.texel), sc.layer) + l.shadow_bias;
-    let m = light_view_proj(l, sc.layer);
-    let c = m * vec4<f32>(o, 1.0);
-    let d = m * vec4<f32>(dir, 0.0);
+    let n = f32(l.shadow_size);
+    let texel = min(floor(vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * n), vec2<f32>(n - 1.0));
+    let limit = shadow_stored(l, shadow_map, vec2<i32>(texel), layer) + l.shadow_bias;
     let qa = c + d * a;
     let qb = c + d * b;
     let da = shadow_linear_depth(l, qa.z / qa.w);
@@ -200,20 +198,37 @@ fn resolve_piece(f: Frame, p: Params, sp: ptr<function, Spans>, l: Light, a: f32
     let lit_a = da <= limit;
     let lit_b = db <= limit;
     if lit_a && lit_b {
-        spans_add(f, p, sp, a, b, 1.0);
+        return vec2<f32>(a, b);
     } else if lit_a || lit_b {
         let t = clamp(a + (b - a) * (limit - da) / (db - da), a, b);
         if lit_a {
-            spans_add(f, p, sp, a, t, 1.0);
-        } else {
-            spans_add(f, p, sp, t, b, 1.0);
+            return vec2<f32>(a, t);
         }
+        return vec2<f32>(t, b);
     }
+    return vec2<f32>(b, b);
+}
+
+// cpu.rs LitRun: the pending lit span (x, y) of resolve_mixed; a lit part (a, b) that starts
+// where it ends extends it, any other is integrated.
+fn lit_run_add(f: Frame, p: Params, sp: ptr<function, Spans>, run: ptr<function, vec2<f32>>, a: f32, b: f32) {
+    if !(b > a) {
+        return;
+    }
+    if a == (*run).y && (*run).y > (*run).x {
+        (*run).y = b;
+        return;
+    }
+    if (*run).y > (*run).x {
+        spans_add(f, p, sp, (*run).x, (*run).y, 1.0);
+    }
+    *run = vec2<f32>(a, b);
 }
 
 // cpu.rs resolve_mixed: the exact visibility of a mixed texel's span [t0, t1] against the
-// standard shadow map, piece by piece between texel edges.
-fn resolve_mixed(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32) {
+// standard shadow map, piece by piece between texel edges; at most MAX_PIECES edge steps per
+// texel of the run (`texels`).
+fn resolve_mixed(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, texels: u32) {
     if !(t1 > t0) {
         return;
     }
@@ -222,7 +237,10 @@ fn resolve_mixed(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32
     let dir = (*sp).dir;
     let size = f32(l.shadow_size);
     let br = span_breaks(l, o, dir, t0, t1);
+    let max_steps = MAX_PIECES * max(texels, 1u);
     var steps = 0u;
+    // Lit parts that touch are integrated as one span: fewer exponentials, the same integral.
+    var run = vec2<f32>(0.0, 0.0);
     var a = t0;
     for (var k = 0u; k <= br.n; k++) {
         var b = t1;
@@ -241,7 +259,7 @@ fn resolve_mixed(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32
         let c = m * vec4<f32>(o, 1.0);
         let d = m * vec4<f32>(dir, 0.0);
         if (c + d * tm).w <= 0.0 {
-            spans_add(f, p, sp, a, b, 1.0);
+            lit_run_add(f, p, sp, &run, a, b);
             a = b;
             continue;
         }
@@ -279,11 +297,12 @@ fn resolve_mixed(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32
                 e = t;
             }
             steps += 1u;
-            if steps >= MAX_PIECES {
+            if steps >= max_steps {
                 e = b;
             }
             if e > t {
-                resolve_piece(f, p, sp, l, t, e);
+                let lit = resolve_piece(l, t, e, layer, c, d);
+                lit_run_add(f, p, sp, &run, lit.x, lit.y);
                 t = e;
             }
             if t >= b {
@@ -296,6 +315,9 @@ fn resolve_mixed(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32
             }
         }
         a = b;
+    }
+    if run.y > run.x {
+        spans_add(f, p, sp, run.x, run.y, 1.0);
     }
 }
 
@@ -324,7 +346,9 @@ fn flush(f: Frame, p: Params, sp: ptr<function, Spans>, span: vec3<f32>, theta: 
         t1 = min(column_distance(p, (*sp).dir, theta, span.y), s);
     }
     if span.z == MIXED {
-        resolve_mixed(f, p, sp, t0, t1);
+        // A run of level-0 texels: whole columns, the last one cut at c_b.
+        let texels = u32(max(ceil(span.y) - floor(span.x), 1.0));
+        resolve_mixed(f, p, sp, t0, t1, texels);
     } else {
         spans_add(f, p, sp, t0, t1, span.z);
     }
@@ -382,7 +406,7 @@ fn shade(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> Shaded {
             continue;
         }
         if v != NO_SPAN {
-            if pending.z == v && pending.y == c0 && v != MIXED {
+            if pending.z == v && pending.y == c0 {
                 pending.y = c1;
             } else {
                 flush(f, p, &sp, pending, theta, c_b, s);

@@ -38,4 +38,4 @@ pub use model::{Camera, Light, Medium, Phase, RgbTexture};
 pub use scattering::Scattering;
 pub use shadow::{Bounds, ShadowMap, ShadowProjection, ShadowSettings};
 pub use techniques::{AnyGpuTechnique, TechniqueSettings};
-pub use temporal::{CpuTemporal, Temporal, TemporalSettings};
+pub use temporal::{CpuTemporal, HistoryFilter, Temporal, TemporalSettings};

@@ -28,10 +28,27 @@ pub const TEMPORAL_WGSL: &str = include_str!("temporal.wgsl");
 /// The frame count a pixel's history saturates at (`MAX_FRAMES` in temporal.wgsl).
 pub const MAX_FRAMES: f32 = 1024.0;
 
+/// How the reprojected history is read between texels ([`TemporalSettings::history_filter`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum HistoryFilter {
+    /// The 2×2 texels around the reprojected point, bilinear weights (each texel kept only
+    /// where the previous frame saw the same surface). Soft: a sub-pixel motion blurs the
+    /// history a little every frame.
+    #[default]
+    Bilinear,
+    /// The 4×4 texels around it with Catmull-Rom weights (a cubic that interpolates the
+    /// texels and keeps their slopes), where all 16 show the same surface; elsewhere bilinear.
+    /// Keeps sharp patterns (a gobo's, a thin shaft's) sharp under motion; its overshoot is
+    /// clamped at 0 and then by the neighbourhood clip. Cost: 16 history and distance reads
+    /// per pixel instead of 4.
+    CatmullRom,
+}
+
 /// The temporal stage's settings. Cost of the stage: one full-screen compute pass reading, per
-/// pixel, 4 history texels and their 4 stored distances, and (where the history is clipped or
-/// rejected) 9 current texels and their depths; 44 bytes of history per pixel (two RGBA32F
-/// images, two R32F distances, one R32F weight).
+/// pixel, 4 history texels and their 4 stored distances (16 with the Catmull-Rom read), and
+/// (where the history is clipped or rejected) 9 current texels and their depths; 44 bytes of
+/// history per pixel (two RGBA32F images, two R32F distances, one R32F weight).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TemporalSettings {
@@ -62,11 +79,25 @@ pub struct TemporalSettings {
     /// between two frames. Slower motion of the lights (and any change of their colour or
     /// intensity) is left to the neighbourhood clip. Default 5°.
     pub light_jump_degrees: f32,
+    /// How the history is read at the reprojected point, between texels: `"bilinear"` or
+    /// `"catmull-rom"` ([`HistoryFilter`]). Default `"bilinear"`, measured (docs/RESULTS.md,
+    /// "Temporal accumulation"): with the clip on, Catmull-Rom changed no scene's PSNR by more
+    /// than 0.1 dB nor its FLIP by more than 0.0002 after 8 frames (the clip, not the read,
+    /// bounds the history); without the clip it halves the reprojection error of fine surface
+    /// detail. Cost: 16 reads of history and distance instead of 4.
+    pub history_filter: HistoryFilter,
 }
 
 impl Default for TemporalSettings {
     fn default() -> Self {
-        Self { history_weight: 0.9, clip: true, clip_sigma: 0.5, depth_tolerance: 0.05, light_jump_degrees: 5.0 }
+        Self {
+            history_weight: 0.9,
+            clip: true,
+            clip_sigma: 0.5,
+            depth_tolerance: 0.05,
+            light_jump_degrees: 5.0,
+            history_filter: HistoryFilter::Bilinear,
+        }
     }
 }
 
@@ -173,8 +204,10 @@ pub struct TemporalUniforms {
     pub valid: u32,
     /// 1 to clip ([`TemporalSettings::clip`]).
     pub clip: u32,
+    /// 1 for the Catmull-Rom history read ([`TemporalSettings::history_filter`]).
+    pub catmull_rom: u32,
     /// Padding.
-    pub _pad: [u32; 3],
+    pub _pad: [u32; 2],
 }
 
 fn uniforms(s: &TemporalSettings, prev: Option<&Previous>) -> TemporalUniforms {
@@ -186,7 +219,8 @@ fn uniforms(s: &TemporalSettings, prev: Option<&Previous>) -> TemporalUniforms {
         depth_tolerance: s.depth_tolerance,
         valid: prev.is_some() as u32,
         clip: s.clip as u32,
-        _pad: [0; 3],
+        catmull_rom: (s.history_filter == HistoryFilter::CatmullRom) as u32,
+        _pad: [0; 2],
     }
 }
 
@@ -208,6 +242,17 @@ pub fn view_distances(desc: &FrameDesc, depth: &[f32]) -> Vec<f32> {
 /// `same_surface` in temporal.wgsl.
 pub fn same_surface(stored: f32, reference: f32, tolerance: f32) -> bool {
     if reference < 0.0 { stored < 0.0 } else { stored >= 0.0 && (stored - reference).abs() <= tolerance * reference }
+}
+
+/// Catmull-Rom weights of the texels at −1, 0, 1, 2 for a point at fraction `f` ∈ [0, 1) past
+/// texel 0 (they sum to 1). Mirrors `catmull_rom_weights` in temporal.wgsl.
+pub fn catmull_rom_weights(f: f32) -> [f32; 4] {
+    [
+        f * (-0.5 + f * (1.0 - 0.5 * f)),
+        1.0 + f * f * (-2.5 + 1.5 * f),
+        f * (0.5 + f * (2.0 - 1.5 * f)),
+        f * f * (-0.5 + 0.5 * f),
+    ]
 }
 
 /// One pixel's resolve: (output rgb, history rgba, weight). `distances`: this frame's
@@ -265,6 +310,27 @@ pub fn resolve_pixel(
                     h = acc.truncate() / total;
                     n = acc.w / total;
                     w = u.history_weight.min(n / (n + 1.0));
+                    if u.catmull_rom == 1 {
+                        // Catmull-Rom over the 4×4 texels around q, where all show the same
+                        // surface (a cubic's negative lobes cannot be renormalised over a
+                        // partial set); its overshoot clamped at 0.
+                        let (wx, wy) = (catmull_rom_weights(f.x), catmull_rom_weights(f.y));
+                        let mut cr = Vec3::ZERO;
+                        let mut all = true;
+                        for k in 0..16 {
+                            let (ox, oy) = (k & 3, k >> 2);
+                            let t = at(ix + ox - 1, iy + oy - 1);
+                            all &= same_surface(
+                                history_distances[t],
+                                if sky { -1.0 } else { expected },
+                                u.depth_tolerance,
+                            );
+                            cr += wx[ox as usize] * wy[oy as usize] * rgb(history.pixels[t]);
+                        }
+                        if all {
+                            h = cr.max(Vec3::ZERO);
+                        }
+                    }
                 }
             }
         }
@@ -577,6 +643,30 @@ impl Temporal {
             history: [texture("temporal history a", Rgba32Float), texture("temporal history b", Rgba32Float)],
             distance: [texture("temporal distance a", R32Float), texture("temporal distance b", R32Float)],
             weights: texture("temporal weights", R32Float),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::catmull_rom_weights;
+
+    /// Catmull-Rom weights interpolate (f = 0 is texel 0 alone), sum to 1 and reproduce a
+    /// linear and a quadratic function exactly: Σ wᵢ·xᵢ = f, Σ wᵢ·xᵢ² = f² at x = −1, 0, 1, 2
+    /// (the cubic is exact on polynomials of degree ≤ 2).
+    #[test]
+    fn catmull_rom_weights_reproduce_polynomials_up_to_degree_two() {
+        assert_eq!(catmull_rom_weights(0.0), [0.0, 1.0, 0.0, 0.0]);
+        for k in 0..=16 {
+            let f = k as f32 / 16.0;
+            let w = catmull_rom_weights(f);
+            let xs = [-1.0f32, 0.0, 1.0, 2.0];
+            let sum: f32 = w.iter().sum();
+            let lin: f32 = w.iter().zip(xs).map(|(w, x)| w * x).sum();
+            let quad: f32 = w.iter().zip(xs).map(|(w, x)| w * x * x).sum();
+            assert!((sum - 1.0).abs() < 1e-6, "f {f}: weights sum to {sum}");
+            assert!((lin - f).abs() < 1e-6, "f {f}: linear {lin}");
+            assert!((quad - f * f).abs() < 1e-6, "f {f}: quadratic {quad}");
         }
     }
 }

@@ -1,7 +1,8 @@
 // Temporal accumulation after any technique (docs/MODEL.md §7; temporal.rs, whose `resolve_pixel`
 // is this pass's CPU mirror, line for line). Per pixel: the current in-scattering c; the
 // surface point (or, where nothing was drawn, the view direction) reprojected into the previous
-// frame through its view-projection; the history there read bilinearly from the texels where
+// frame through its view-projection; the history there read (bilinear, or Catmull-Rom where all
+// 16 texels agree) from the texels where
 // the previous frame saw the same surface (its stored view distance within the tolerance of the
 // point's distance to the previous eye; sky for sky), renormalised, and rejected where none
 // did or the point is outside the previous image; the history clipped to
@@ -21,9 +22,20 @@ struct Temporal {
     valid: u32,
     // 1 to clip the history to the neighbourhood.
     clip: u32,
-    _pad0: u32,
+    // 1 for the Catmull-Rom history read (temporal.rs HistoryFilter::CatmullRom).
+    catmull_rom: u32,
     _pad1: u32,
     _pad2: u32,
+}
+
+// temporal.rs catmull_rom_weights: the weights of the texels at -1, 0, 1, 2 at fraction f.
+fn catmull_rom_weights(f: f32) -> vec4<f32> {
+    return vec4<f32>(
+        f * (-0.5 + f * (1.0 - 0.5 * f)),
+        1.0 + f * f * (-2.5 + 1.5 * f),
+        f * (0.5 + f * (2.0 - 1.5 * f)),
+        f * f * (-0.5 + 0.5 * f),
+    );
 }
 
 // temporal.rs MAX_FRAMES: the frame count the history saturates at.
@@ -111,6 +123,24 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
                     h = acc.rgb / total;
                     n = acc.a / total;
                     w = min(params.history_weight, n / (n + 1.0));
+                    if params.catmull_rom == 1u {
+                        // Catmull-Rom over the 4×4 texels around q, where all show the same
+                        // surface (a cubic's negative lobes cannot be renormalised over a
+                        // partial set); its overshoot clamped at 0.
+                        let wx = catmull_rom_weights(f.x);
+                        let wy = catmull_rom_weights(f.y);
+                        var cr = vec3<f32>(0.0);
+                        var all = true;
+                        for (var k = 0; k < 16; k++) {
+                            let o = vec2<i32>(k & 3, k >> 2u);
+                            let t = clamp(i + o - vec2<i32>(1), vec2<i32>(0), size - 1);
+                            all = all && same_surface(textureLoad(distance_tex, t, 0).r, select(expected, -1.0, sky));
+                            cr += wx[o.x] * wy[o.y] * textureLoad(history_tex, t, 0).rgb;
+                        }
+                        if all {
+                            h = max(cr, vec3<f32>(0.0));
+                        }
+                    }
                 }
             }
         }

@@ -2,7 +2,7 @@
 // shadow map (cpu.rs texel_bounds, UNBOUNDED, MAX_FOOTPRINT). The pass declares `shadow_map`.
 
 const UNBOUNDED: vec2<f32> = vec2<f32>(-1.0, 2.0);
-const MAX_FOOTPRINT: u32 = 64u;
+const MAX_FOOTPRINT: u32 = 4096u;
 
 // One of a texel's nine sample lines: its column coordinate, point, direction, and the clip
 // position of the point the light's map projects.

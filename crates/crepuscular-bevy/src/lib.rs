@@ -208,21 +208,34 @@ fn main_texture_copy_dst(mut cameras: Query<&mut bevy::camera::CameraMainTexture
     }
 }
 
-/// Reads each marked light's gobo image into a [`CrepuscularGobo`] when it is loaded or the
-/// handle changes; an image that cannot be read is logged once, naming the light and format.
+/// Reads each marked light's gobo image into a [`CrepuscularGobo`] when it is loaded, when the
+/// handle changes, or when the image is edited in place (`Assets::get_mut`, a hot reload: its
+/// `AssetEvent::Modified`); an image that cannot be read is logged once per version, naming the
+/// light and format.
 fn read_gobos(
     mut commands: Commands,
     lights: Query<(Entity, &CrepuscularLight, Option<&CrepuscularGobo>)>,
     images: Res<Assets<Image>>,
+    mut events: MessageReader<AssetEvent<Image>>,
     mut failed: Local<HashMap<Entity, AssetId<Image>>>,
 ) {
+    let modified: Vec<AssetId<Image>> = events
+        .read()
+        .filter_map(|e| match e {
+            AssetEvent::Modified { id } => Some(*id),
+            _ => None,
+        })
+        .collect();
     for (entity, light, gobo) in &lights {
         match (&light.texture, gobo) {
             (None, Some(_)) => {
                 commands.entity(entity).remove::<CrepuscularGobo>();
             }
-            (Some(handle), g) if g.is_none_or(|g| g.image != handle.id()) => {
+            (Some(handle), g) if g.is_none_or(|g| g.image != handle.id()) || modified.contains(&handle.id()) => {
                 let Some(image) = images.get(handle) else { continue };
+                if modified.contains(&handle.id()) {
+                    failed.remove(&entity);
+                }
                 if failed.get(&entity) == Some(&handle.id()) {
                     continue;
                 }

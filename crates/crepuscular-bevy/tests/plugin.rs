@@ -204,6 +204,27 @@ fn matrices_put_bevys_depth_and_shadow_maps_on_the_scene() {
         assert!(fraction >= 0.99, "light {k}: shadow texels unprojected off the scene: {fraction}");
         assert!(faces >= 0.99, "light {k}: texels on another cube face's axis: {faces}");
     }
+
+    // The gobo edited in place (the same handle, `Assets::get_mut`): the next frames read it
+    // again. Pane (0, 0) turned pure sRGB blue.
+    let mut app = app;
+    let handle = app
+        .world_mut()
+        .query::<&crepuscular_bevy::CrepuscularLight>()
+        .iter(app.world())
+        .find_map(|l| l.texture.clone())
+        .expect("the demo's spot has a gobo");
+    {
+        let mut images = app.world_mut().resource_mut::<Assets<Image>>();
+        let mut image = images.get_mut(&handle).expect("the gobo image");
+        let data = image.data.as_mut().expect("the gobo's texels live on the CPU");
+        data[..4].copy_from_slice(&[0, 0, 255, 255]);
+    }
+    demo::settle(&mut app, 2).expect("Bevy renders on");
+    let edited = take_capture(&mut app);
+    let gobo = edited.desc.lights.iter().find_map(|l| l.spot_texture()).expect("the spot's gobo");
+    eprintln!("gobo texel (0, 0) after the edit: {:?}", &gobo.texels[0][..3]);
+    assert_eq!(&gobo.texels[0][..3], &[0.0, 0.0, 1.0], "the edited gobo was not read again");
 }
 
 #[test]

@@ -1,0 +1,556 @@
+//! `crepuscular bench`: the matrix scene × size × technique × setting, timed per pass over
+//! repeated frames after warm-up frames, with ray-marched samples, GPU memory and quality vs
+//! `reference`; written as `bench.json`, `bench.md` and SVG plots. Named presets reproduce the
+//! papers' own experiments.
+//!
+//! Timing: every pass of every frame is measured by the library's `Scattering` (GPU timestamp
+//! queries read back after the frame on hardware adapters, `StatsMode::Deferred`; a
+//! synchronised wall clock on software adapters, `StatsMode::WallClock`, and on the CPU).
+//! Warm-up frames (pipeline compilation, first-use allocation) are excluded; the report gives
+//! the median and the min–max spread over the timed frames. Timings are only comparable within
+//! one run on one device: the device is recorded in every output.
+//!
+//! Split along its seams: the plan and its run here; [`presets`] the papers' experiments;
+//! [`report`] bench.md's tables; [`plot`] the plots and the files written.
+
+use crate::animate::{AnimatedTechnique, Flicker, FlickerMeter, MotionPath, PathRenderer, frame_time};
+use crate::metrics::Quality;
+use crate::render::{self, AdapterStats, adapter_stats, frame_desc, load_scene, parse_technique};
+use anyhow::{Context, Result, bail};
+use crepuscular::TechniqueSettings;
+use crepuscular::frame::surface_transmittance;
+use crepuscular::gpu::GpuContext;
+use crepuscular::stats::TechniqueStats;
+use crepuscular::techniques::reference::{self, ReferenceSettings};
+use crepuscular::tonemap::{ToneMap, composite};
+use crepuscular::{CpuFrame, Image};
+use crepuscular_scene::{GpuHost, host, host_cpu};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+pub mod plot;
+pub mod presets;
+pub mod report;
+
+pub use plot::write;
+use presets::*;
+pub use presets::{KLEHM_TABLE1, KLEHM_TABLE2, PRESETS, preset};
+pub use report::markdown;
+
+/// One technique configuration of the matrix.
+#[derive(Clone, Debug, Serialize)]
+pub struct Variant {
+    /// Technique name.
+    pub technique: String,
+    /// `key=value` settings on top of the scene's `[render.<technique>]` table.
+    pub overrides: Vec<String>,
+    /// The curve this variant belongs to in plots (technique plus the fixed settings).
+    pub series: String,
+    /// The swept setting and its value (the x of a curve), if any.
+    pub sweep: Option<(String, f64)>,
+}
+
+impl Variant {
+    /// A variant named `series`, sweeping `key` (if any) at `value`.
+    pub fn new(technique: &str, overrides: &[&str], series: &str, sweep: Option<(&str, f64)>) -> Self {
+        Variant {
+            technique: technique.into(),
+            overrides: overrides.iter().map(|s| s.to_string()).collect(),
+            series: series.into(),
+            sweep: sweep.map(|(k, v)| (k.to_string(), v)),
+        }
+    }
+
+    /// Series plus the swept value: one row of the tables.
+    pub fn label(&self) -> String {
+        if self.overrides.is_empty() {
+            self.series.clone()
+        } else {
+            format!("{} {}", self.technique, self.overrides.join(" "))
+        }
+    }
+}
+
+/// What a bench run does.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchPlan {
+    /// Preset name, or "custom".
+    pub name: String,
+    /// What it reproduces and how to read it.
+    pub description: String,
+    /// Scenes (built-in names or scene files).
+    pub scenes: Vec<String>,
+    /// Image sizes.
+    pub sizes: Vec<(u32, u32)>,
+    /// Technique configurations.
+    pub variants: Vec<Variant>,
+    /// Timed frames per configuration.
+    pub repeat: u32,
+    /// Untimed frames before them.
+    pub warmup: u32,
+    /// Steps of the quality reference (0: no quality measurement).
+    pub reference_steps: u32,
+}
+
+/// The steps swept by default for each ray-marching technique.
+pub const DEFAULT_STEP_SWEEP: [u32; 4] = [16, 32, 64, 128];
+
+/// The default plan: every built-in scene, each given technique swept over its main setting.
+pub fn default_plan(scenes: Vec<String>, techniques: &[String]) -> Result<BenchPlan> {
+    let mut variants = Vec::new();
+    for t in techniques {
+        match t.as_str() {
+            "brute-force" | "interleaved" | "subsampled" | "epipolar" => {
+                for n in DEFAULT_STEP_SWEEP {
+                    let o = format!("steps={n}");
+                    variants.push(Variant::new(t, &[&o], t, Some(("steps", n as f64))));
+                }
+            }
+            "reference" => bail!("`reference` is the quality yardstick of every bench row; it is not benchmarked"),
+            other => {
+                if crepuscular::techniques::find(other).is_none() {
+                    bail!("unknown technique `{other}`");
+                }
+                variants.push(Variant::new(other, &[], other, None));
+            }
+        }
+    }
+    Ok(BenchPlan {
+        name: "custom".into(),
+        description: "each technique over its main setting (steps) on the given scenes".into(),
+        scenes,
+        sizes: vec![(320, 180)],
+        variants,
+        repeat: 5,
+        warmup: 2,
+        reference_steps: 256,
+    })
+}
+
+/// Median, min and max of one pass over the timed frames.
+#[derive(Clone, Debug, Serialize)]
+pub struct PassSummary {
+    /// Pass name.
+    pub name: String,
+    /// Median, milliseconds.
+    pub median_ms: f64,
+    /// Fastest frame, milliseconds.
+    pub min_ms: f64,
+    /// Slowest frame, milliseconds.
+    pub max_ms: f64,
+}
+
+/// One row of the matrix.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchRecord {
+    /// Scene name.
+    pub scene: String,
+    /// Width, height.
+    pub size: [u32; 2],
+    /// Technique.
+    pub technique: String,
+    /// Curve in the plots.
+    pub series: String,
+    /// Row label.
+    pub label: String,
+    /// Swept setting and value.
+    pub sweep: Option<(String, f64)>,
+    /// Full settings.
+    pub settings: TechniqueSettings,
+    /// Per pass over the timed frames.
+    pub passes: Vec<PassSummary>,
+    /// The whole technique per frame: median, min, max (ms).
+    pub total_ms: [f64; 3],
+    /// Ray-marched samples per frame.
+    pub raymarched_samples: u64,
+    /// GPU memory the technique holds.
+    pub gpu_memory_bytes: u64,
+    /// PSNR of the linear in-scattering vs reference (dB).
+    pub psnr_db: Option<f64>,
+    /// FLIP mean of the tone-mapped final image vs reference.
+    pub flip_mean: Option<f64>,
+    /// The technique's own extra numbers (last frame).
+    pub extra: BTreeMap<String, f64>,
+    /// Temporal stability vs reference along the scene's `animate` path (see
+    /// [`BenchReport::flicker_frames`]); `None` where not measured.
+    pub flicker: Option<Flicker>,
+}
+
+/// The frame without scattering: the host renderer's passes (shadow map, depth and surface).
+#[derive(Clone, Debug, Serialize)]
+pub struct HostRecord {
+    /// Scene.
+    pub scene: String,
+    /// Width, height.
+    pub size: [u32; 2],
+    /// Per pass.
+    pub passes: Vec<PassSummary>,
+    /// Median, min, max of the whole host frame (ms).
+    pub total_ms: [f64; 3],
+}
+
+/// Everything a bench run measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchReport {
+    /// The plan.
+    pub plan: BenchPlan,
+    /// The device; a result without its device is not a result.
+    pub adapter: AdapterStats,
+    /// "gpu" or "cpu".
+    pub backend: String,
+    /// How passes were timed ("timestamp" or "wall-clock").
+    pub timing: String,
+    /// UTC date of the run (YYYY-MM-DD).
+    pub date: String,
+    /// The command line.
+    pub command: String,
+    /// The host frame per scene and size.
+    pub host: Vec<HostRecord>,
+    /// The matrix.
+    pub records: Vec<BenchRecord>,
+    /// Frames of the flicker measurement (0: not measured): frames 1/24 of the scene's
+    /// `animate` loop apart, at [`BenchReport::flicker_size`], for the rows of the smallest size.
+    pub flicker_frames: u32,
+    /// Size the flicker was measured at.
+    pub flicker_size: Option<[u32; 2]>,
+}
+
+fn median_min_max(v: &[f64]) -> [f64; 3] {
+    if v.is_empty() {
+        return [0.0; 3];
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    let med = if n % 2 == 1 { s[n / 2] } else { 0.5 * (s[n / 2 - 1] + s[n / 2]) };
+    [med, s[0], s[n - 1]]
+}
+
+/// Summaries of per-frame pass lists (same pass names each frame).
+fn summarise(frames: &[Vec<crepuscular::stats::PassTime>]) -> (Vec<PassSummary>, [f64; 3]) {
+    let mut names: Vec<String> = Vec::new();
+    for f in frames {
+        for p in f {
+            if !names.contains(&p.name) {
+                names.push(p.name.clone());
+            }
+        }
+    }
+    let passes = names
+        .iter()
+        .map(|n| {
+            let v: Vec<f64> = frames.iter().map(|f| f.iter().filter(|p| &p.name == n).map(|p| p.ms).sum()).collect();
+            let [median_ms, min_ms, max_ms] = median_min_max(&v);
+            PassSummary { name: n.clone(), median_ms, min_ms, max_ms }
+        })
+        .collect();
+    let totals: Vec<f64> = frames.iter().map(|f| f.iter().map(|p| p.ms).sum()).collect();
+    (passes, median_min_max(&totals))
+}
+
+/// Today's UTC date from the system clock (days-from-civil inverse, Hinnant's algorithm).
+pub fn utc_date() -> String {
+    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+    let z = (secs / 86400) as i64 + 719468;
+    let era = z.div_euclid(146097);
+    let doe = z - era * 146097;
+    let yoe = (doe - doe / 1460 + doe / 36524 - doe / 146096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!("{y:04}-{m:02}-{d:02}")
+}
+
+/// Images of one row, kept when asked (for `compare`'s contact sheet).
+pub struct Kept {
+    /// Scene.
+    pub scene: String,
+    /// Width, height.
+    pub size: [u32; 2],
+    /// Row label ("reference" for the reference).
+    pub label: String,
+    /// Linear in-scattering.
+    pub inscatter: Image,
+    /// Final radiance.
+    pub final_radiance: Image,
+    /// Wall-clock time of the row's last frame (ms).
+    pub ms: f64,
+}
+
+/// Runs a plan. `progress` receives one line per step. With `keep_images`, the reference's
+/// and every row's last images are returned too.
+pub fn run(
+    plan: &BenchPlan,
+    gpu: Option<&GpuContext>,
+    command: &str,
+    progress: &dyn Fn(&str),
+    reference_progress: &(dyn Fn(u64, u64) + Sync),
+    keep_images: bool,
+) -> Result<(BenchReport, Vec<Kept>)> {
+    let mut kept = Vec::new();
+    if plan.repeat == 0 {
+        bail!("--repeat must be at least 1");
+    }
+    let mut host_records = Vec::new();
+    let mut records = Vec::new();
+    let mut timing = String::from("wall-clock");
+    for scene_name in &plan.scenes {
+        for &(w, h) in &plan.sizes {
+            let mut scene = load_scene(scene_name)?;
+            scene.render.width = w;
+            scene.render.height = h;
+            let desc = frame_desc(&scene)?;
+            if let Some(g) = gpu {
+                g.check_texture_size("image size", w, h)?;
+            }
+            progress(&format!("{} {w}×{h}: host frame ×{}", scene.name, plan.warmup + plan.repeat));
+            // The host frame (no scattering), timed like a technique; its outputs feed every row.
+            let mut host_frames = Vec::new();
+            let gpu_host = match gpu {
+                Some(g) => Some(GpuHost::for_scene(g, &scene)?),
+                None => None,
+            };
+            let (depth, surface, shadow_map, gpu_tex) = match (gpu, &gpu_host) {
+                (Some(g), Some(gh)) => {
+                    let mut last = None;
+                    for i in 0..plan.warmup + plan.repeat {
+                        let t = gh.render(g, &desc)?;
+                        if i >= plan.warmup {
+                            host_frames.push(t.passes.clone());
+                        }
+                        last = Some(t);
+                    }
+                    let t = last.context("no host frame")?;
+                    let depth = g.read_texture_f32(&t.depth, 0)?;
+                    let surface = g.read_image(&t.surface)?;
+                    let sm = host::read_shadow_maps(g, &t, &desc)?;
+                    (depth, surface, sm, Some(t))
+                }
+                _ => {
+                    let mut last = None;
+                    for i in 0..plan.warmup + plan.repeat {
+                        let hc = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
+                        if i >= plan.warmup {
+                            host_frames.push(hc.passes.clone());
+                        }
+                        last = Some(hc);
+                    }
+                    let hc = last.context("no host frame")?;
+                    (hc.depth, hc.surface, hc.shadow_maps, None)
+                }
+            };
+            let (passes, total_ms) = summarise(&host_frames);
+            host_records.push(HostRecord { scene: scene.name.clone(), size: [w, h], passes, total_ms });
+            let cpu_frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &shadow_map, surface: Some(&surface) };
+            let transmittance = surface_transmittance(&desc, &depth);
+            let tone = ToneMap::new(scene.render.exposure);
+            let quality = if plan.reference_steps > 0 {
+                progress(&format!("{} {w}×{h}: reference, {} steps per pixel (CPU)", scene.name, plan.reference_steps));
+                let rs = ReferenceSettings { steps: plan.reference_steps, seed: 1 };
+                let (r, rstats) = reference::render(&cpu_frame, &rs, reference_progress)?;
+                let fin = composite(&surface, &r, &transmittance);
+                if keep_images {
+                    kept.push(Kept {
+                        scene: scene.name.clone(),
+                        size: [w, h],
+                        label: "reference".into(),
+                        inscatter: r.clone(),
+                        final_radiance: fin.clone(),
+                        ms: rstats.total_ms(),
+                    });
+                }
+                Some(Quality { inscatter: r, final_radiance: fin, transmittance: transmittance.clone(), tone })
+            } else {
+                None
+            };
+            for v in &plan.variants {
+                let choice = parse_technique(&v.technique, &scene, &v.overrides)?;
+                progress(&format!("{} {w}×{h}: {} ×{}", scene.name, v.label(), plan.warmup + plan.repeat));
+                let mut frames = Vec::new();
+                let mut last: Option<(Image, TechniqueStats)> = None;
+                match (gpu, &gpu_tex) {
+                    (Some(g), Some(t)) => {
+                        let Some(mut runner) = render::scattering(g, &choice)? else {
+                            bail!("`{}` has no GPU implementation; bench it with --backend cpu", v.technique)
+                        };
+                        let out = g.create_output_texture(w, h);
+                        let out_view = out.create_view(&Default::default());
+                        let views = t.views();
+                        let frame = views.frame(&desc);
+                        let mut stats = None;
+                        for i in 0..plan.warmup + plan.repeat {
+                            let s = render::render_gpu(&mut runner, gpu_host.as_ref(), &frame, &out_view)?;
+                            if i >= plan.warmup {
+                                timing = s.timing.clone();
+                                frames.push(s.passes.clone());
+                            }
+                            stats = Some(s);
+                        }
+                        last = Some((g.read_image(&out)?, stats.context("no frame")?));
+                    }
+                    _ => {
+                        for i in 0..plan.warmup + plan.repeat {
+                            let (img, s) = render::render_cpu(&choice, &cpu_frame, Some(&scene.geometry), &|_, _| {})?;
+                            if i >= plan.warmup {
+                                frames.push(s.passes.clone());
+                            }
+                            last = Some((img, s));
+                        }
+                    }
+                }
+                let (img, stats) = last.context("no frame")?;
+                if !img.all_finite() {
+                    bail!("{} on {}: non-finite output (a bug)", v.label(), scene.name);
+                }
+                let (psnr, flip) = match &quality {
+                    Some(q) => {
+                        let (p, f) = q.measure(&img, &surface)?;
+                        (Some(p), Some(f))
+                    }
+                    None => (None, None),
+                };
+                let (passes, total_ms) = summarise(&frames);
+                if keep_images {
+                    kept.push(Kept {
+                        scene: scene.name.clone(),
+                        size: [w, h],
+                        label: v.label(),
+                        final_radiance: composite(&surface, &img, &transmittance),
+                        inscatter: img.clone(),
+                        ms: total_ms[0],
+                    });
+                }
+                records.push(BenchRecord {
+                    scene: scene.name.clone(),
+                    size: [w, h],
+                    technique: v.technique.clone(),
+                    series: v.series.clone(),
+                    label: v.label(),
+                    sweep: v.sweep.clone(),
+                    settings: choice,
+                    passes,
+                    total_ms,
+                    raymarched_samples: stats.raymarched_samples,
+                    gpu_memory_bytes: stats.gpu_memory_bytes,
+                    psnr_db: psnr,
+                    flip_mean: flip,
+                    extra: stats.extra,
+                    flicker: None,
+                });
+            }
+        }
+    }
+    let adapter = adapter_stats(gpu);
+    if gpu.is_some_and(|g| !g.software) && timing == "wall-clock" {
+        log::warn!("hardware adapter timed by wall clock");
+    }
+    let report = BenchReport {
+        plan: plan.clone(),
+        backend: if gpu.is_some() { "gpu".into() } else { "cpu".into() },
+        adapter,
+        timing,
+        date: utc_date(),
+        command: command.into(),
+        host: host_records,
+        records,
+        flicker_frames: 0,
+        flicker_size: None,
+    };
+    Ok((report, kept))
+}
+
+/// Frames of the flicker measurement when `--flicker-frames` is not given: 3 frame pairs.
+pub const DEFAULT_FLICKER_FRAMES: u32 = 4;
+/// Widest image the flicker is measured at; a larger smallest bench size is scaled down to it.
+pub const FLICKER_MAX_WIDTH: u32 = 320;
+
+/// The size flicker is measured at: the plan's smallest size (by pixels), scaled down to at most
+/// [`FLICKER_MAX_WIDTH`] wide (aspect kept); also the size whose rows get the flicker column.
+pub fn flicker_sizes(plan: &BenchPlan) -> Option<((u32, u32), (u32, u32))> {
+    let &(w, h) = plan.sizes.iter().min_by_key(|(w, h)| *w as u64 * *h as u64)?;
+    let m = if w > FLICKER_MAX_WIDTH {
+        (FLICKER_MAX_WIDTH, ((h as u64 * FLICKER_MAX_WIDTH as u64 + w as u64 / 2) / w as u64).max(1) as u32)
+    } else {
+        (w, h)
+    };
+    Some(((w, h), m))
+}
+
+/// Measures flicker (see [`crate::animate::Flicker`]) of every row of the plan's smallest size:
+/// per scene, `frames` host frames along the scene's `animate` path, 1/24 of its loop apart
+/// (t = 0 is the benched frame), each rendered by `reference` (the plan's reference steps, seed
+/// 1) and by every row's configuration, with `frame_index` advanced per frame. Costs `frames`
+/// host frames and references per scene plus `frames` frames per row. `frames` = 0 does
+/// nothing; 1 is an error, as is a plan without a reference.
+pub fn measure_flicker(
+    report: &mut BenchReport,
+    gpu: Option<&GpuContext>,
+    frames: u32,
+    progress: &dyn Fn(&str),
+    reference_progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<()> {
+    if frames == 0 {
+        return Ok(());
+    }
+    check_flicker_frames(frames, report.plan.reference_steps)?;
+    let Some((rows_size, size)) = flicker_sizes(&report.plan) else { return Ok(()) };
+    for scene_arg in &report.plan.scenes {
+        let mut scene = load_scene(scene_arg)?;
+        (scene.render.width, scene.render.height) = size;
+        let mut rows = Vec::new();
+        for (i, x) in report.records.iter().enumerate() {
+            if x.scene == scene.name && x.size == [rows_size.0, rows_size.1] {
+                let v =
+                    report.plan.variants.iter().find(|v| v.label() == x.label).context("bench row without variant")?;
+                rows.push((i, AnimatedTechnique::new(&v.technique, &scene, &v.overrides)?, FlickerMeter::new()));
+            }
+        }
+        if rows.is_empty() {
+            continue;
+        }
+        let r = [format!("steps={}", report.plan.reference_steps), "seed=1".to_string()];
+        let mut reference = AnimatedTechnique::new("reference", &scene, &r)?;
+        let path = MotionPath::for_scene(scene_arg, &scene);
+        let name = scene.name.clone();
+        let mut renderer = PathRenderer::new(scene, path, gpu)?;
+        for f in 0..frames {
+            progress(&format!(
+                "{name} {}×{}: flicker frame {}/{frames} (reference + {} rows)",
+                size.0,
+                size.1,
+                f + 1,
+                rows.len()
+            ));
+            let mut frame = renderer.frame(frame_time(f, frames, false))?;
+            let (ri, _) = reference.render(gpu, &mut frame, 0, reference_progress)?;
+            for (_, t, meter) in &mut rows {
+                let (img, _) = t.render(gpu, &mut frame, f, &|_, _| {})?;
+                meter.push(&img, &ri)?;
+            }
+        }
+        for (i, _, meter) in rows {
+            report.records[i].flicker = Some(meter.finish()?);
+        }
+    }
+    report.flicker_frames = frames;
+    report.flicker_size = Some([size.0, size.1]);
+    Ok(())
+}
+
+/// Checks `--flicker-frames` against the plan before any work.
+pub fn check_flicker_frames(frames: u32, reference_steps: u32) -> Result<()> {
+    if frames == 1 || frames > 1000 {
+        bail!("--flicker-frames {frames}: must be 0 (no flicker) or in 2..=1000");
+    }
+    if frames > 0 && reference_steps == 0 {
+        bail!("--flicker-frames {frames}: flicker is measured against the reference; it needs --reference-steps > 0");
+    }
+    Ok(())
+}
+
+pub(super) fn load_name_matches(arg: &str, scene_name: &str) -> bool {
+    arg == scene_name || Path::new(arg).file_stem().is_some_and(|s| s == scene_name)
+}

@@ -291,6 +291,23 @@ impl CrepuscularCapture {
     }
 }
 
+/// The effect's statistics per camera, for tools and overlays: insert a `CrepuscularStats`
+/// resource into the app and read [`CrepuscularStats::get`] with the camera's entity. While it
+/// exists every camera's technique runs with `StatsMode::Deferred`: its GPU timestamps (on an
+/// adapter with timestamp queries; none on a software one, where `timing` says `unmeasured`)
+/// and counters (samples, nodes per ray, …) are recorded into Bevy's encoder and read back a
+/// frame or more later, never stalling the frame; without it the effect records none
+/// (`StatsMode::Off`). What arrives is the newest frame whose readbacks have finished.
+#[derive(Resource, Clone, Default)]
+pub struct CrepuscularStats(Arc<Mutex<HashMap<Entity, crepuscular::stats::TechniqueStats>>>);
+
+impl CrepuscularStats {
+    /// The newest statistics of camera `camera` (its main-world entity), once they arrived.
+    pub fn get(&self, camera: Entity) -> Option<crepuscular::stats::TechniqueStats> {
+        self.0.lock().ok()?.get(&camera).cloned()
+    }
+}
+
 /// One frame as the plugin handed it to the library.
 pub struct CapturedFrame {
     /// The frame description (camera, lights with their projections and layers, medium, size).
@@ -318,12 +335,13 @@ impl Plugin for CrepuscularPlugin {
         };
         render_app
             .init_resource::<ViewStates>()
-            .add_systems(bevy::render::ExtractSchedule, extract_capture)
+            .add_systems(bevy::render::ExtractSchedule, (extract_capture, extract_stats))
             .add_systems(
                 Render,
                 (
                     depth_texture_binding.in_set(RenderSystems::Prepare).before(prepare_core_3d_depth_textures),
                     forget_views.in_set(RenderSystems::Prepare),
+                    publish_stats.in_set(RenderSystems::Cleanup),
                 ),
             )
             .add_systems(Core3d, scatter.after(Core3dSystems::MainPass).before(Core3dSystems::EarlyPostProcess));
@@ -334,6 +352,29 @@ fn extract_capture(mut commands: Commands, capture: bevy::render::Extract<Option
     match capture.as_ref() {
         Some(c) => commands.insert_resource((**c).clone()),
         None => commands.remove_resource::<CrepuscularCapture>(),
+    }
+}
+
+fn extract_stats(mut commands: Commands, stats: bevy::render::Extract<Option<Res<CrepuscularStats>>>) {
+    match stats.as_ref() {
+        Some(c) => commands.insert_resource((**c).clone()),
+        None => commands.remove_resource::<CrepuscularStats>(),
+    }
+}
+
+/// After Bevy submitted the frame (`RenderSystems::Cleanup` follows the render graph's
+/// submit): each view's `Scattering::end_frame` starts the readback of what it recorded, and
+/// the newest statistics that arrived go to [`CrepuscularStats`].
+fn publish_stats(states: Res<ViewStates>, stats: Option<Res<CrepuscularStats>>) {
+    let Ok(mut states) = states.0.lock() else { return };
+    for state in states.values_mut() {
+        state.scattering.end_frame();
+        if let (Some(stats), Some(main)) = (&stats, state.main)
+            && let Some(s) = state.scattering.stats()
+            && let Ok(mut map) = stats.0.lock()
+        {
+            map.insert(main, s.clone());
+        }
     }
 }
 
@@ -375,6 +416,8 @@ struct ViewState {
     gobos: Vec<Arc<crepuscular::RgbTexture>>,
     gobo_array: Option<wgpu::TextureView>,
     technique: TechniqueSettings,
+    /// The camera's main-world entity ([`CrepuscularStats`] is keyed by it).
+    main: Option<Entity>,
     /// The last error, logged once until it changes.
     last_error: Option<String>,
 }
@@ -391,6 +434,7 @@ fn scatter(
         Option<&ViewShadowBindings>,
         Option<&Msaa>,
         Option<&RenderLayers>,
+        &bevy::render::sync_world::MainEntity,
     )>,
     directional: Query<(Entity, &ExtractedDirectionalLight, Option<&RenderLayers>, Option<&CrepuscularLight>)>,
     points: Query<(
@@ -403,12 +447,13 @@ fn scatter(
     shadow_views: Query<&ExtractedView>,
     cluster_meta: Option<Res<GlobalClusterableObjectMeta>>,
     capture: Option<Res<CrepuscularCapture>>,
+    stats: Option<Res<CrepuscularStats>>,
     states: Res<ViewStates>,
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
     mut ctx: RenderContext,
 ) {
-    let (entity, extracted, camera, target, depth, settings, shadows, msaa, layers) = view.into_inner();
+    let (entity, extracted, camera, target, depth, settings, shadows, msaa, layers, main) = view.into_inner();
     let device_w = device.wgpu_device();
     let queue_w: &wgpu::Queue = &queue.0;
     let Some(size) = camera.physical_viewport_size else { return };
@@ -441,6 +486,12 @@ fn scatter(
             state.inscatter = None;
         }
         state.technique = settings.technique.clone();
+        state.main = Some(main.id());
+        // Statistics only while a CrepuscularStats resource asks for them.
+        let mode = if stats.is_some() { StatsMode::Deferred } else { StatsMode::Off };
+        if state.scattering.stats_mode() != mode {
+            state.scattering.set_stats_mode(mode).map_err(|e| e.to_string())?;
+        }
         // The lights and where their maps are (docs/BEVY.md "Shadow maps").
         let lights = convert::LightsInView {
             view: entity,
@@ -566,6 +617,7 @@ fn new_state(device: &wgpu::Device, queue: &wgpu::Queue, settings: &Crepuscular)
         gobos: Vec::new(),
         gobo_array: None,
         technique: settings.technique.clone(),
+        main: None,
         last_error: None,
     })
 }

@@ -14,7 +14,7 @@ use std::sync::Mutex;
 use bevy::prelude::*;
 use crepuscular::{GpuContext, GpuFrame, Scattering, StatsMode, TechniqueSettings};
 use crepuscular_bevy::demo::{self, DemoOptions, Effect};
-use crepuscular_bevy::{CapturedFrame, Crepuscular, CrepuscularCapture};
+use crepuscular_bevy::{CapturedFrame, Crepuscular, CrepuscularCapture, CrepuscularStats};
 
 /// One Bevy app at a time: each opens its own device, and two at once only slow each other.
 static SERIAL: Mutex<()> = Mutex::new(());
@@ -59,8 +59,18 @@ fn gpu_of(app: &App) -> GpuContext {
 /// The library's own in-scattering of a captured frame: a fresh `Scattering` on the same
 /// device, reading the captured depth and shadow maps.
 fn library_result(gpu: &GpuContext, c: &CapturedFrame, shadow_maps: &wgpu::Texture) -> crepuscular::Image {
+    library_render(gpu, c, shadow_maps, StatsMode::Off).0
+}
+
+/// [`library_result`] with its statistics, measured in `mode`.
+fn library_render(
+    gpu: &GpuContext,
+    c: &CapturedFrame,
+    shadow_maps: &wgpu::Texture,
+    mode: StatsMode,
+) -> (crepuscular::Image, crepuscular::stats::TechniqueStats) {
     let mut s = Scattering::from_gpu(gpu, c.technique.clone())
-        .and_then(|s| s.with_stats(StatsMode::Off))
+        .and_then(|s| s.with_stats(mode))
         .and_then(|s| s.with_output_format(wgpu::TextureFormat::Rgba32Float))
         .expect("the technique builds");
     let out = gpu.device.create_texture(&wgpu::TextureDescriptor {
@@ -100,8 +110,9 @@ fn library_result(gpu: &GpuContext, c: &CapturedFrame, shadow_maps: &wgpu::Textu
         spot_textures: gobo_array.as_ref(),
         rectified_shadow_maps: &[],
     };
-    s.render(&frame, &out.create_view(&Default::default())).expect("the library renders the captured frame");
-    gpu.read_image(&out).expect("readback")
+    let stats =
+        s.render(&frame, &out.create_view(&Default::default())).expect("the library renders the captured frame");
+    (gpu.read_image(&out).expect("readback"), stats)
 }
 
 fn max_abs_diff(a: &crepuscular::Image, b: &crepuscular::Image) -> (f32, f32) {
@@ -225,6 +236,57 @@ fn matrices_put_bevys_depth_and_shadow_maps_on_the_scene() {
     let gobo = edited.desc.lights.iter().find_map(|l| l.spot_texture()).expect("the spot's gobo");
     eprintln!("gobo texel (0, 0) after the edit: {:?}", &gobo.texels[0][..3]);
     assert_eq!(&gobo.texels[0][..3], &[0.0, 0.0, 1.0], "the edited gobo was not read again");
+}
+
+/// With a `CrepuscularStats` resource the plugin's statistics arrive, a frame or more later,
+/// without stalling Bevy: the technique's name and its GPU counters, equal to the library's own
+/// count on the same captured frame (the scene is still, so every frame is the same).
+#[test]
+fn the_plugins_statistics_arrive_and_match_the_library() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !adapter("the_plugins_statistics_arrive_and_match_the_library") {
+        return;
+    }
+    let effect = Effect::Crepuscular(full_float(TechniqueSettings::named("epipolar").unwrap()));
+    let mut app = demo::headless_app(&options(effect, false));
+    app.insert_resource(CrepuscularCapture::default());
+    app.insert_resource(CrepuscularStats::default());
+    app.finish();
+    app.cleanup();
+    demo::settle(&mut app, 3).expect("the demo settles");
+    let camera = app
+        .world_mut()
+        .query_filtered::<Entity, With<Crepuscular>>()
+        .single(app.world())
+        .expect("one camera with the effect");
+    let stats = app.world().resource::<CrepuscularStats>().clone();
+    let mut got = None;
+    for _ in 0..10 {
+        app.update();
+        got = stats.get(camera);
+        if got.is_some() {
+            break;
+        }
+    }
+    let got = got.expect("the plugin's statistics arrived within 10 frames");
+    let c = take_capture(&mut app);
+    let gpu = gpu_of(&app);
+    let (_, want) = library_render(&gpu, &c, &c.shadow_maps, StatsMode::Deferred);
+    eprintln!(
+        "plugin stats: {} ({}), {} ray-marched samples, passes {:?}; library: {} samples",
+        got.technique,
+        got.timing,
+        got.raymarched_samples,
+        got.passes.iter().map(|p| p.name.as_str()).collect::<Vec<_>>(),
+        want.raymarched_samples
+    );
+    assert_eq!(got.technique, "epipolar");
+    assert!(got.raymarched_samples > 0, "the GPU's counters did not arrive");
+    assert_eq!(got.raymarched_samples, want.raymarched_samples, "the plugin's counts are not the library's");
+    assert_eq!(
+        got.passes.iter().map(|p| &p.name).collect::<Vec<_>>(),
+        want.passes.iter().map(|p| &p.name).collect::<Vec<_>>()
+    );
 }
 
 #[test]

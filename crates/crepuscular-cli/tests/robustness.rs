@@ -371,14 +371,20 @@ fn visible(img: &Image) -> bool {
 
 /// Runs `cases` on one backend, prints per technique its worst case and returns every failure
 /// ([`check`]); `verbose`: a line per case too.
-fn sweep(cases: &[Case], gpu: Option<&crepuscular::gpu::GpuContext>, backend: &str, verbose: bool) -> Vec<String> {
+fn sweep(
+    cases: &[Case],
+    gpu: Option<&crepuscular::gpu::GpuContext>,
+    backend: &str,
+    verbose: bool,
+    reference: ReferenceSettings,
+) -> Vec<String> {
     let techniques = techniques();
     let mut failures = Vec::new();
     let mut worst: Vec<(f64, String)> = vec![(0.0, String::new()); techniques.len()];
     let started = std::time::Instant::now();
     for (k, c) in cases.iter().enumerate() {
         let opts = |technique| RenderOptions { technique, progress: &|_, _| {} };
-        let reference = render(&c.scene, None, &opts(TechniqueSettings::Reference(REFERENCE)))
+        let reference = render(&c.scene, None, &opts(TechniqueSettings::Reference(reference.clone())))
             .unwrap_or_else(|e| panic!("reference on `{}`: {e:#}", c.name));
         assert!(finite(&reference.inscatter), "reference on `{}`: NaN or Inf", c.name);
         let mut line = format!("{backend} {:<40}", c.name);
@@ -412,14 +418,14 @@ fn sweep(cases: &[Case], gpu: Option<&crepuscular::gpu::GpuContext>, backend: &s
 
 #[test]
 fn every_technique_survives_every_hard_view_cpu() {
-    let failures = sweep(&cases(), None, "cpu", true);
+    let failures = sweep(&cases(), None, "cpu", true, REFERENCE);
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
 #[test]
 fn every_technique_survives_every_hard_view_gpu() {
     let Some(gpu) = test_gpu("every_technique_survives_every_hard_view_gpu") else { return };
-    let failures = sweep(&cases(), Some(&gpu), "gpu", true);
+    let failures = sweep(&cases(), Some(&gpu), "gpu", true, REFERENCE);
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
@@ -436,14 +442,32 @@ fn every_technique_over_many_seeded_views() {
         Err(_) => 1000,
     };
     let backends = std::env::var("CREPUSCULAR_SWEEP_BACKENDS").unwrap_or_else(|_| "cpu,gpu".into());
-    let cases = random_cases(n);
+    // To look at a few views closely: CREPUSCULAR_SWEEP_ONLY=731,140 keeps those (printing
+    // each), CREPUSCULAR_SWEEP_REFERENCE_STEPS=4096 refines the reference they are checked on.
+    let only: Option<Vec<usize>> = std::env::var("CREPUSCULAR_SWEEP_ONLY").ok().map(|v| {
+        v.split(',')
+            .map(|k| k.trim().parse().unwrap_or_else(|_| panic!("CREPUSCULAR_SWEEP_ONLY={v}: not indices")))
+            .collect()
+    });
+    let reference = match std::env::var("CREPUSCULAR_SWEEP_REFERENCE_STEPS") {
+        Ok(v) => ReferenceSettings {
+            steps: v.parse().unwrap_or_else(|_| panic!("CREPUSCULAR_SWEEP_REFERENCE_STEPS={v}: not a count")),
+            ..REFERENCE
+        },
+        Err(_) => REFERENCE,
+    };
+    let mut cases = random_cases(n);
+    if let Some(only) = &only {
+        cases = cases.into_iter().enumerate().filter(|(k, _)| only.contains(k)).map(|(_, c)| c).collect();
+    }
+    let verbose = only.is_some();
     let mut failures = Vec::new();
     for backend in backends.split(',') {
         match backend {
-            "cpu" => failures.extend(sweep(&cases, None, "cpu", false)),
+            "cpu" => failures.extend(sweep(&cases, None, "cpu", verbose, reference.clone())),
             "gpu" => {
                 let Some(gpu) = test_gpu("every_technique_over_many_seeded_views") else { return };
-                failures.extend(sweep(&cases, Some(&gpu), "gpu", false));
+                failures.extend(sweep(&cases, Some(&gpu), "gpu", verbose, reference.clone()));
             }
             other => panic!("CREPUSCULAR_SWEEP_BACKENDS: `{other}` is not cpu or gpu"),
         }

@@ -295,9 +295,9 @@ fn temporal_uniforms_match_their_wgsl_layout() {
             ("depth_tolerance", offset_of!(T, depth_tolerance)),
             ("valid", offset_of!(T, valid)),
             ("clip", offset_of!(T, clip)),
-            ("_pad0", offset_of!(T, _pad)),
-            ("_pad1", offset_of!(T, _pad) + 4),
-            ("_pad2", offset_of!(T, _pad) + 8),
+            ("catmull_rom", offset_of!(T, catmull_rom)),
+            ("_pad1", offset_of!(T, _pad)),
+            ("_pad2", offset_of!(T, _pad) + 4),
         ],
         std::mem::size_of::<T>(),
     );

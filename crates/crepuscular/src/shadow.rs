@@ -248,7 +248,13 @@ impl ShadowMap {
     pub fn coord(&self, light_pos: Vec3, p: Vec3) -> Option<(u32, u32, u32, f32)> {
         let pr = &self.projection;
         let layer = if pr.layers == 6 { cube_face(p - light_pos) } else { 0 };
-        let c = pr.view_proj[layer as usize] * Vec4::new(p.x, p.y, p.z, 1.0);
+        self.clip_coord(layer, pr.view_proj[layer as usize] * Vec4::new(p.x, p.y, p.z, 1.0))
+    }
+
+    /// [`ShadowMap::coord`] of a point already in layer `layer`'s clip space (`c`); None
+    /// behind the light or outside the map. Mirrors `shadow_coord_clip` in common.wgsl.
+    pub fn clip_coord(&self, layer: u32, c: Vec4) -> Option<(u32, u32, u32, f32)> {
+        let pr = &self.projection;
         if c.w <= 0.0 {
             return None;
         }

@@ -206,14 +206,19 @@ fn light_view_proj(l: Light, layer: u32) -> mat4x4<f32> {
 
 // shadow.rs ShadowMap::coord.
 fn shadow_coord(l: Light, p: vec3<f32>) -> ShadowCoord {
-    var sc: ShadowCoord;
-    sc.valid = false;
     var layer = 0u;
     if l.shadow_layers == 6u {
         layer = cube_face(p - l.position.xyz);
     }
+    return shadow_coord_clip(l, layer, light_view_proj(l, layer) * vec4<f32>(p, 1.0));
+}
+
+// shadow_coord of a point already in layer `layer`'s clip space (shadow.rs
+// ShadowMap::clip_coord).
+fn shadow_coord_clip(l: Light, layer: u32, c: vec4<f32>) -> ShadowCoord {
+    var sc: ShadowCoord;
+    sc.valid = false;
     sc.layer = layer;
-    let c = light_view_proj(l, layer) * vec4<f32>(p, 1.0);
     if c.w <= 0.0 {
         return sc;
     }

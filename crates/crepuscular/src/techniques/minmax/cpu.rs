@@ -548,15 +548,11 @@ pub fn resolve_mixed(
     // Lit parts that touch are integrated as one span: fewer exponentials, the same integral.
     let mut run = LitRun::default();
     // One piece [a, b] of fixed texel on face `layer` (clip line c + t·d): its lit part. The
-    // texel is the one at the piece's midpoint (ShadowMap::coord, on the clip line).
+    // texel is the one at the piece's midpoint (ShadowMap::clip_coord, on the clip line).
     let piece = |a: f32, b: f32, layer: u32, c: Vec4, d: Vec4| -> (f32, f32) {
-        let q = c + d * (0.5 * (a + b));
-        let ndc = q.truncate() / q.w;
-        if q.w <= 0.0 || ndc.z < 0.0 || ndc.z > 1.0 || ndc.x.abs() > 1.0 || ndc.y.abs() > 1.0 {
+        let Some((_, tx, ty, _)) = shadow.clip_coord(layer, c + d * (0.5 * (a + b))) else {
             return (a, b);
-        }
-        let tx = ((ndc.x * 0.5 + 0.5) * size).floor().min(size - 1.0) as u32;
-        let ty = ((0.5 - ndc.y * 0.5) * size).floor().min(size - 1.0) as u32;
+        };
         let limit = pr.linear(shadow.texel(layer, tx, ty)) + bias;
         let depth = |t: f32| {
             let q = c + d * t;

@@ -181,16 +181,14 @@ fn span_breaks(l: Light, o: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32) -> Brea
 }
 
 // cpu.rs resolve_mixed's `piece`: the lit part of [a, b], one texel throughout, on face `layer`
-// (clip line c + t·d); the texel is the one at the piece's midpoint (shadow_coord on the line).
+// (clip line c + t·d); the texel is the one at the piece's midpoint (shadow_coord_clip on the
+// line).
 fn resolve_piece(l: Light, a: f32, b: f32, layer: u32, c: vec4<f32>, d: vec4<f32>) -> vec2<f32> {
-    let q = c + d * (0.5 * (a + b));
-    let ndc = q.xyz / q.w;
-    if q.w <= 0.0 || ndc.z < 0.0 || ndc.z > 1.0 || abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 {
+    let sc = shadow_coord_clip(l, layer, c + d * (0.5 * (a + b)));
+    if !sc.valid {
         return vec2<f32>(a, b);
     }
-    let n = f32(l.shadow_size);
-    let texel = min(floor(vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * n), vec2<f32>(n - 1.0));
-    let limit = shadow_stored(l, shadow_map, vec2<i32>(texel), layer) + l.shadow_bias;
+    let limit = shadow_stored(l, shadow_map, vec2<i32>(sc.texel), layer) + l.shadow_bias;
     let qa = c + d * a;
     let qb = c + d * b;
     let da = shadow_linear_depth(l, qa.z / qa.w);

@@ -289,7 +289,10 @@ pub fn resolve_pixel(
             if ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 {
                 let q =
                     glam::Vec2::new((ndc.x * 0.5 + 0.5) * w_px as f32 - 0.5, (0.5 - ndc.y * 0.5) * h_px as f32 - 0.5);
-                let expected = (x4.truncate() - Vec3::from_slice(&u.prev_camera_pos[..3])).length();
+                // The distance the previous frame must have stored where it saw this point: the
+                // point's distance to the previous eye, -1 for sky.
+                let expected =
+                    if sky { -1.0 } else { (x4.truncate() - Vec3::from_slice(&u.prev_camera_pos[..3])).length() };
                 let b = q.floor();
                 let f = q - b;
                 let (ix, iy) = (b.x as i32, b.y as i32);
@@ -298,8 +301,7 @@ pub fn resolve_pixel(
                 for k in 0..4 {
                     let (ox, oy) = (k & 1, k >> 1);
                     let t = at(ix + ox, iy + oy);
-                    // `expected` stands for this point's distance, -1 for sky.
-                    let same = same_surface(history_distances[t], if sky { -1.0 } else { expected }, u.depth_tolerance);
+                    let same = same_surface(history_distances[t], expected, u.depth_tolerance);
                     let fw = (if ox == 1 { f.x } else { 1.0 - f.x }) * (if oy == 1 { f.y } else { 1.0 - f.y });
                     if same && fw > 0.0 {
                         acc += fw * Vec4::from_array(history.pixels[t]);
@@ -320,11 +322,7 @@ pub fn resolve_pixel(
                         for k in 0..16 {
                             let (ox, oy) = (k & 3, k >> 2);
                             let t = at(ix + ox - 1, iy + oy - 1);
-                            all &= same_surface(
-                                history_distances[t],
-                                if sky { -1.0 } else { expected },
-                                u.depth_tolerance,
-                            );
+                            all &= same_surface(history_distances[t], expected, u.depth_tolerance);
                             cr += wx[ox as usize] * wy[oy as usize] * rgb(history.pixels[t]);
                         }
                         if all {

@@ -100,7 +100,9 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
             let ndc = clip.xy / clip.w;
             if abs(ndc.x) <= 1.0 && abs(ndc.y) <= 1.0 {
                 let q = vec2<f32>((ndc.x * 0.5 + 0.5) * f32(size.x) - 0.5, (0.5 - ndc.y * 0.5) * f32(size.y) - 0.5);
-                let expected = length(x4.xyz - params.prev_camera_pos.xyz);
+                // The distance the previous frame must have stored where it saw this point: the
+                // point's distance to the previous eye, -1 for sky.
+                let expected = select(length(x4.xyz - params.prev_camera_pos.xyz), -1.0, sky);
                 // Bilinear over the four history texels around q, each kept only where the
                 // previous frame saw the same surface (or sky) there.
                 let b = floor(q);
@@ -111,8 +113,7 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
                 for (var k = 0; k < 4; k++) {
                     let o = vec2<i32>(k & 1, k >> 1u);
                     let t = clamp(i + o, vec2<i32>(0), size - 1);
-                    // `expected` stands for this point's distance, -1 for sky.
-                    let same = same_surface(textureLoad(distance_tex, t, 0).r, select(expected, -1.0, sky));
+                    let same = same_surface(textureLoad(distance_tex, t, 0).r, expected);
                     let fw = select(1.0 - f.x, f.x, o.x == 1) * select(1.0 - f.y, f.y, o.y == 1);
                     if same && fw > 0.0 {
                         acc += fw * textureLoad(history_tex, t, 0);
@@ -134,7 +135,7 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
                         for (var k = 0; k < 16; k++) {
                             let o = vec2<i32>(k & 3, k >> 2u);
                             let t = clamp(i + o - vec2<i32>(1), vec2<i32>(0), size - 1);
-                            all = all && same_surface(textureLoad(distance_tex, t, 0).r, select(expected, -1.0, sky));
+                            all = all && same_surface(textureLoad(distance_tex, t, 0).r, expected);
                             cr += wx[o.x] * wy[o.y] * textureLoad(history_tex, t, 0).rgb;
                         }
                         if all {

@@ -686,30 +686,21 @@ fn build_camera(ctx: &Ctx, c: RawCamera) -> Result<Camera, SceneError> {
     let position = c.position.map(|v| ctx.finite3("camera.position", v)).transpose()?.unwrap_or(d.position);
     let look_at = c.look_at.map(|v| ctx.finite3("camera.look_at", v)).transpose()?.unwrap_or(d.look_at);
     let up = c.up.map(|v| ctx.direction("camera.up", v)).transpose()?.unwrap_or(d.up);
-    let fov = c.fov_y_degrees.unwrap_or(d.fov_y_degrees);
-    let near = c.near.unwrap_or(d.near);
-    let far = c.far.unwrap_or(d.far);
-    if !(fov > 0.0 && fov < 180.0) {
-        return Err(ctx.err("camera.fov_y_degrees", fmt_num(fov), "must be in (0, 180) degrees"));
-    }
-    if !(near.is_finite() && near > 0.0) {
-        return Err(ctx.err("camera.near", fmt_num(near), "must be a finite number > 0"));
-    }
-    if !(far.is_finite() && far > near) {
-        return Err(ctx.err(
-            "camera.far",
-            fmt_num(far),
-            format!("must be finite and > camera.near ({})", fmt_num(near)),
-        ));
-    }
-    let view = look_at - position;
-    if view.length() <= 1e-6 * (1.0 + position.length()) {
-        return Err(ctx.err("camera.look_at", fmt_vec(look_at.to_array()), "must differ from camera.position"));
-    }
-    if view.normalize().cross(up).length() < 1e-4 {
+    let fov = ctx.finite("camera.fov_y_degrees", c.fov_y_degrees.unwrap_or(d.fov_y_degrees))?;
+    let near = ctx.finite("camera.near", c.near.unwrap_or(d.near))?;
+    let far = ctx.finite("camera.far", c.far.unwrap_or(d.far))?;
+    let camera = Camera { position, look_at, up, fov_y_degrees: fov, near, far };
+    // The library's own checks (field of view, 0 < near < far, a look-at point away from the
+    // eye), with the file named.
+    camera.validate().map_err(|e| match e {
+        crepuscular::Error::Invalid { key, value, reason } => ctx.err(key, value, reason),
+        other => ctx.err("camera", "", other.to_string()),
+    })?;
+    // A file's up vector must not lie along the view (the library would replace it silently).
+    if (look_at - position).normalize().cross(up).length() < 1e-4 {
         return Err(ctx.err("camera.up", fmt_vec(up.to_array()), "must not be parallel to the view direction"));
     }
-    Ok(Camera { position, look_at, up, fov_y_degrees: fov, near, far })
+    Ok(camera)
 }
 
 fn build_medium(ctx: &Ctx, m: RawMedium) -> Result<Medium, SceneError> {

@@ -369,8 +369,11 @@ fn publish_stats(states: Res<ViewStates>, stats: Option<Res<CrepuscularStats>>) 
     let Ok(mut states) = states.0.lock() else { return };
     for state in states.values_mut() {
         state.scattering.end_frame();
+        // Only measured frames: right after the resource appears, the newest stats may still
+        // be those of a frame encoded with statistics off (no counters, `timing` "off").
         if let (Some(stats), Some(main)) = (&stats, state.main)
             && let Some(s) = state.scattering.stats()
+            && s.timing != "off"
             && let Ok(mut map) = stats.0.lock()
         {
             map.insert(main, s.clone());

@@ -248,12 +248,9 @@ fn the_plugins_statistics_arrive_and_match_the_library() {
         return;
     }
     let effect = Effect::Crepuscular(full_float(TechniqueSettings::named("epipolar").unwrap()));
-    let mut app = demo::headless_app(&options(effect, false));
-    app.insert_resource(CrepuscularCapture::default());
+    let (mut app, _) = app_with_capture(effect, false);
+    // Asked for while the app runs: the next frames measure.
     app.insert_resource(CrepuscularStats::default());
-    app.finish();
-    app.cleanup();
-    demo::settle(&mut app, 3).expect("the demo settles");
     let camera = app
         .world_mut()
         .query_filtered::<Entity, With<Crepuscular>>()

@@ -78,6 +78,7 @@ include!(concat!(env!("OUT_DIR"), "/setting_docs.rs"));
 /// Known values of string-valued settings, for a combo box.
 const ENUM_VALUES: &[(&str, &[&str])] = &[
     ("spot_steps", &["fixed", "exact-cone", "appendix-b-constant", "appendix-b-smoothstep"]),
+    ("local_steps", &["equiangular", "uniform"]),
     ("weighting", &["gaussian", "shepard", "threshold"]),
     ("precision", &["unorm8", "float16"]),
     ("rectification", &["auto", "projective", "epipolar"]),

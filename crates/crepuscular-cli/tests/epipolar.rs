@@ -7,7 +7,7 @@
 
 use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::{GpuContext, UploadedFrame, test_gpu};
-use crepuscular::march::SpotSteps;
+use crepuscular::march::{LocalSteps, SpotSteps};
 use crepuscular::stats::TechniqueStats;
 use crepuscular::techniques::epipolar::{
     self, EpipolarDebug, EpipolarLine, EpipolarParams, EpipolarSettings, MIN_LINE_LENGTH, SpotPrefilter, Weighting, cpu,
@@ -388,7 +388,14 @@ fn refinement_marks_both_sides_of_every_depth_step_and_nothing_on_a_plane() {
             depth: vec![1.0; desc.lights[0].shadow.layers as usize * 64 * 64],
         };
         for settings in [
-            EpipolarSettings { slices: Some(96), samples: Some(128), initial_samples: 16, ..Default::default() },
+            // Equiangular steps: a point light's re-march disc then breaks the lines (below).
+            EpipolarSettings {
+                slices: Some(96),
+                samples: Some(128),
+                initial_samples: 16,
+                local_steps: LocalSteps::Equiangular,
+                ..Default::default()
+            },
             EpipolarSettings {
                 slices: Some(64),
                 samples: Some(200),
@@ -396,6 +403,7 @@ fn refinement_marks_both_sides_of_every_depth_step_and_nothing_on_a_plane() {
                 length_proportional_initial_samples: false,
                 threshold_growth: 0.0,
                 depth_threshold: 2.0,
+                local_steps: LocalSteps::Equiangular,
                 ..Default::default()
             },
         ] {
@@ -410,25 +418,42 @@ fn refinement_marks_both_sides_of_every_depth_step_and_nothing_on_a_plane() {
             let coords = cpu::coordinates(&frame, &p, &lines);
             let r = cpu::refine(&desc, &p, &lines, &coords);
             let interp = r.interp;
-            let mut initial = 0;
+            // For a point light (its epipole on screen), the edge of the re-marched disc around
+            // the epipole is a break as a depth step is: both texels across it are samples.
+            let at_disc_edge = |k: usize, t: usize| {
+                let near = |t: usize| {
+                    let c = coords[k * n + t];
+                    p.local_light == 1 && cpu::near_epipole(&p, Vec2::new(c[0], c[1]))
+                };
+                (t > 0 && near(t - 1) != near(t)) || (t + 1 < n && near(t) != near(t + 1))
+            };
+            let (mut initial, mut edges) = (0, 0);
             for (k, line) in lines.iter().enumerate().filter(|(_, l)| l.is_valid()) {
                 let idx: Vec<u32> = (0..line.initial).map(|i| cpu::initial_index(&p, i, line.initial)).collect();
                 assert_eq!((idx[0], *idx.last().unwrap()), (0, p.samples - 1), "{name}: line {k}");
+                let breaks: Vec<u32> =
+                    (0..p.samples).filter(|&t| idx.contains(&t) || at_disc_edge(k, t as usize)).collect();
                 for t in 0..p.samples {
                     let v = interp[k * n + t as usize];
                     let (l, r) = (v & 0xffff, v >> 16);
-                    if idx.contains(&t) {
+                    if breaks.contains(&t) {
                         assert_eq!((l, r), (t, t), "{name}: line {k} initial texel {t}");
                     } else {
-                        let a = *idx.iter().filter(|&&i| i < t).max().unwrap();
-                        let b = *idx.iter().filter(|&&i| i > t).min().unwrap();
+                        let a = *breaks.iter().filter(|&&i| i < t).max().unwrap();
+                        let b = *breaks.iter().filter(|&&i| i > t).min().unwrap();
                         assert_eq!((l, r), (a, b), "{name}: line {k} texel {t} on a plane");
                     }
                 }
                 initial += idx.len();
+                edges += breaks.len() - idx.len();
             }
-            assert_eq!(r.sample_texels, initial as u64, "{name}: only initial samples on a plane");
-            assert!(!r.list.is_empty() && r.list.len() <= initial, "{name}: each sample's pixel, once");
+            assert_eq!(name == "point", edges > 0, "{name}: {edges} samples at the disc's edge");
+            assert_eq!(
+                r.sample_texels,
+                (initial + edges) as u64,
+                "{name}: only initial and disc-edge samples on a plane"
+            );
+            assert!(!r.list.is_empty() && r.list.len() <= initial + edges, "{name}: each sample's pixel, once");
 
             // (b) Boxes in front of the wall, one at 10 m and one at 27 m (a step just over the
             // threshold: 10 % against 5 % relative, 3 m against 2 m absolute): every adjacent
@@ -454,7 +479,7 @@ fn refinement_marks_both_sides_of_every_depth_step_and_nothing_on_a_plane() {
                 };
                 for t in 0..n {
                     let at_step = (t > 0 && step(s[t - 1], s[t])) || (t + 1 < n && step(s[t], s[t + 1]));
-                    let initial = idx.contains(&(t as u32));
+                    let initial = idx.contains(&(t as u32)) || at_disc_edge(k, t);
                     assert_eq!(
                         is_sample(t),
                         at_step || initial,

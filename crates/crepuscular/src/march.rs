@@ -1,11 +1,13 @@
 //! Where a ray-marching technique puts its N steps on a view ray: the spot-light step policy
-//! of Wyman & Ramsey 2008, Appendix B, shared by `brute-force`, `interleaved`, `subsampled` and
-//! `epipolar`. Each function has a WGSL twin of the same name in `shaders/common.wgsl`
+//! of Wyman & Ramsey 2008, Appendix B, and equiangular steps about a local light
+//! (docs/MODEL.md §9), shared by `brute-force`, `interleaved`, `subsampled`, `epipolar` and the
+//! local-light quadratures of `prefiltered` and `minmax`. Each function has a WGSL twin of the same name in `shaders/common.wgsl`
 //! (`cone_interval`, `appendix_b_chord`, `march_interval`), with the same f32 arithmetic.
 //!
 //! Every policy returns an interval [t₀, t₁] of the view ray, measured from the eye, inside
 //! [0, s] (s = distance to the visible surface or the far plane): no policy ever marches past
-//! the surface or the far plane. For directional and point lights every policy is `Fixed`.
+//! the surface or the far plane. For directional and point lights every spot policy is `Fixed`;
+//! [`LocalSteps`] then says how a point or spot light's steps are spread over the interval.
 
 use crate::error::Error;
 use crate::frame::FrameLight;
@@ -74,6 +76,70 @@ pub fn validate_spot_denominator(key: &str, v: f32) -> Result<(), Error> {
         return Err(Error::invalid(key, v, "must be in (0, 1]"));
     }
     Ok(())
+}
+
+/// How the N steps of a local (spot or point) light's march are spread over its interval
+/// (`local_steps` in every ray-marching technique's settings; docs/MODEL.md §9).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LocalSteps {
+    /// Equal steps in distance along the ray (eq. 1 of Tóth & Umenhoffer 2009), as for the sun;
+    /// a point light then shares one march with the other lights that share theirs. Where a ray
+    /// passes within a step of the light, its 1/d² peak falls between samples or on one, and
+    /// neighbouring pixels disagree by up to the peak. The default.
+    #[default]
+    Uniform,
+    /// Equal steps in the angle the ray subtends at the light: short steps where the ray passes
+    /// the light, long ones far from it, so each step carries about the same share of the 1/d²
+    /// falloff. Every local light then gets its own march of N steps over its interval (a point
+    /// light no longer shares the sun's), which costs N more samples per point light on rays
+    /// that also see a sun or another point light, and a sine and cosine per step boundary; far
+    /// from the light its steps are coarser than uniform ones (docs/MODEL.md §9 has the
+    /// measured trade-off).
+    Equiangular,
+}
+
+impl LocalSteps {
+    /// The name used in settings.
+    pub fn name(self) -> &'static str {
+        match self {
+            LocalSteps::Uniform => "uniform",
+            LocalSteps::Equiangular => "equiangular",
+        }
+    }
+}
+
+/// Bit of [`StepPolicy::code`] set for [`LocalSteps::Equiangular`] (`MARCH_EQUIANGULAR` in
+/// common.wgsl); the low two bits are the [`SpotSteps`] code.
+pub const EQUIANGULAR_BIT: u32 = 4;
+
+/// Where a ray-marching technique puts its steps: its `spot_steps`, `spot_denominator` and
+/// `local_steps` settings together.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepPolicy {
+    /// The spot-light interval ([`SpotSteps`]).
+    pub spot: SpotSteps,
+    /// App. B's denominator (`spot_denominator`).
+    pub denominator: f32,
+    /// How a local light's steps are spread ([`LocalSteps`]).
+    pub local: LocalSteps,
+}
+
+impl StepPolicy {
+    /// The code the shaders read (`spot_steps` in the techniques' uniforms): the
+    /// [`SpotSteps::code`] in bits 0–1, [`EQUIANGULAR_BIT`] for equiangular steps.
+    pub fn code(self) -> u32 {
+        self.spot.code() | if self.local == LocalSteps::Equiangular { EQUIANGULAR_BIT } else { 0 }
+    }
+
+    /// The policy of a [`StepPolicy::code`] (unknown spot codes read as `fixed`).
+    pub fn from_code(code: u32, denominator: f32) -> Self {
+        StepPolicy {
+            spot: SpotSteps::ALL.get((code & 3) as usize).copied().unwrap_or_default(),
+            denominator,
+            local: if code & EQUIANGULAR_BIT != 0 { LocalSteps::Equiangular } else { LocalSteps::Uniform },
+        }
+    }
 }
 
 /// The spot cone as the shaders see it: apex, unit axis, cos of the outer half-angle.
@@ -196,6 +262,8 @@ pub struct MarchLights {
     pub cones: Vec<Option<SpotCone>>,
     /// Each light's reach ([`light_reach`]).
     pub reaches: Vec<Option<(Vec3, f32)>>,
+    /// Each local light's position (None for a sun): the centre of its equiangular steps.
+    pub centres: Vec<Option<Vec3>>,
 }
 
 impl MarchLights {
@@ -204,15 +272,24 @@ impl MarchLights {
         let indices = desc.scattering_lights();
         let cones = indices.iter().map(|&k| SpotCone::of(&desc.lights[k].light)).collect();
         let reaches = indices.iter().map(|&k| light_reach(&desc.lights[k], &desc.medium)).collect();
-        Self { indices, cones, reaches }
+        let centres = indices.iter().map(|&k| local_position(&desc.lights[k].light)).collect();
+        Self { indices, cones, reaches, centres }
     }
 
     /// True when light `i` (of [`MarchLights::indices`]) is marched over its own interval
     /// with its own N steps: a spot under a cone policy (its chord is its own; marching it
-    /// with the others would spread its samples over their longer interval). Every other light
-    /// shares one march. Mirrors `own_interval` in WGSL.
-    pub fn owns_interval(&self, i: usize, policy: SpotSteps) -> bool {
-        self.cones[i].is_some() && policy != SpotSteps::Fixed
+    /// with the others would spread its samples over their longer interval), and every local
+    /// light under equiangular steps (its steps are placed about its own position). Every
+    /// other light shares one march. Mirrors `own_interval` in WGSL.
+    pub fn owns_interval(&self, i: usize, policy: StepPolicy) -> bool {
+        (self.cones[i].is_some() && policy.spot != SpotSteps::Fixed)
+            || (self.centres[i].is_some() && policy.local == LocalSteps::Equiangular)
+    }
+
+    /// The steps of light `i`'s own march over `iv` ([`MarchLights::owns_interval`]):
+    /// equiangular about the light under [`LocalSteps::Equiangular`], else uniform.
+    pub fn own_steps(&self, i: usize, iv: (f32, f32), n: u32, o: Vec3, d: Vec3, policy: StepPolicy) -> Steps {
+        Steps::of_light(self.centres[i], iv, n, o, d, policy)
     }
 
     /// The shared march of the view ray o + t·d, t in [0, s]: the smallest interval holding
@@ -221,21 +298,14 @@ impl MarchLights {
     /// others are not evaluated at its samples (a local light's reach missed by the ray costs
     /// nothing there). Empty (0, 0) with no lights when none reaches the ray. Mirrors
     /// `shared_march` in WGSL.
-    pub fn shared_march(
-        &self,
-        o: Vec3,
-        d: Vec3,
-        s: f32,
-        policy: SpotSteps,
-        denominator: f32,
-    ) -> ((f32, f32), LightSet) {
+    pub fn shared_march(&self, o: Vec3, d: Vec3, s: f32, policy: StepPolicy) -> ((f32, f32), LightSet) {
         let (mut lo, mut hi) = (f32::MAX, f32::MIN);
         let mut set = LightSet::EMPTY;
         for i in 0..self.indices.len() {
             if self.owns_interval(i, policy) {
                 continue;
             }
-            let iv = march_interval(self.cones[i].as_ref(), self.reaches[i], o, d, s, policy, denominator);
+            let iv = march_interval(self.cones[i].as_ref(), self.reaches[i], o, d, s, policy);
             if iv.1 > iv.0 {
                 lo = lo.min(iv.0);
                 hi = hi.max(iv.1);
@@ -246,8 +316,8 @@ impl MarchLights {
     }
 
     /// Light `i`'s own [`march_interval`].
-    pub fn own_interval(&self, i: usize, o: Vec3, d: Vec3, s: f32, policy: SpotSteps, denominator: f32) -> (f32, f32) {
-        march_interval(self.cones[i].as_ref(), self.reaches[i], o, d, s, policy, denominator)
+    pub fn own_interval(&self, i: usize, o: Vec3, d: Vec3, s: f32, policy: StepPolicy) -> (f32, f32) {
+        march_interval(self.cones[i].as_ref(), self.reaches[i], o, d, s, policy)
     }
 }
 
@@ -304,21 +374,20 @@ pub fn clip_to_sphere(iv: (f32, f32), o: Vec3, d: Vec3, c: Vec3, r: f32) -> (f32
 }
 
 /// The interval [t₀, t₁] of the view ray from the eye `o` along `d` (unit) that a technique
-/// marches with its N steps, under `policy`; `s` is the distance to the surface or far plane.
+/// marches with its N steps, under `policy` (its spot part); `s` is the distance to the surface
+/// or far plane.
 /// For a local light the interval is then cut to the light's reach ([`light_reach`]), whatever
 /// the policy. An empty interval (t₁ ≤ t₀) means the ray gets no light and is not marched.
 /// Mirrors `march_interval` in common.wgsl.
-#[allow(clippy::too_many_arguments)]
 pub fn march_interval(
     cone: Option<&SpotCone>,
     reach: Option<(Vec3, f32)>,
     o: Vec3,
     d: Vec3,
     s: f32,
-    policy: SpotSteps,
-    denominator: f32,
+    policy: StepPolicy,
 ) -> (f32, f32) {
-    let iv = policy_interval(cone, o, d, s, policy, denominator);
+    let iv = policy_interval(cone, o, d, s, policy.spot, policy.denominator);
     match reach {
         Some((c, r)) if iv.1 > iv.0 => clip_to_sphere(iv, o, d, c, r),
         _ => iv,
@@ -350,6 +419,155 @@ fn policy_interval(
     (t0, (t0 + num / den).min(s))
 }
 
+/// A spot or point light's position; None for a sun.
+pub fn local_position(light: &Light) -> Option<Vec3> {
+    match light {
+        Light::Directional { .. } => None,
+        Light::Spot { position, .. } | Light::Point { position, .. } => Some(*position),
+    }
+}
+
+/// The model's floor on a local light's distance (integrand.rs clamps d at 10⁻⁴ m): the
+/// smallest distance from the ray an equiangular march is laid out for.
+const MIN_LIGHT_DISTANCE: f32 = 1e-4;
+
+/// Relative to the light's coordinates, the distance from a ray under which the light counts as
+/// on it (about a hundred f32 ulps): [`Steps::equiangular`] keeps uniform steps there.
+pub const UNRESOLVED_DISTANCE: f32 = 1e-5;
+
+/// The N steps of one march over the interval [a, b] of a view ray: their boundaries
+/// a = t₀ < t₁ < … < t_N = b, equal in length (eq. 1 of Tóth & Umenhoffer 2009) or equal in
+/// the angle the ray subtends at a local light (docs/MODEL.md §9). Mirrors `Steps` in
+/// common.wgsl.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Steps {
+    /// The interval (a, b).
+    pub iv: (f32, f32),
+    /// N.
+    pub n: u32,
+    /// (b − a)/N, the length of a uniform step.
+    pub delta: f32,
+    /// The angular layout, if any.
+    angular: Option<Angular>,
+}
+
+/// One step of a march ([`Steps::step`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Step {
+    /// Its start tᵢ.
+    pub t0: f32,
+    /// Where its sample sits past tᵢ.
+    pub off: f32,
+    /// Its transmittance integral ∫₀^len e^(−σt·u) du.
+    pub seg: Vec3,
+}
+
+/// An equiangular layout (docs/MODEL.md §9): the light's foot on the ray at t = `along`, its
+/// distance `dist` from the ray; a boundary at angle φ (measured at the light from the ray's
+/// direction `sign`·d) lies at t = along + sign·dist·cot φ; φ runs from `phi0` in steps of
+/// `dphi`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Angular {
+    along: f32,
+    dist: f32,
+    sign: f32,
+    phi0: f32,
+    dphi: f32,
+}
+
+impl Steps {
+    /// N equal steps over `iv`.
+    pub fn uniform(iv: (f32, f32), n: u32) -> Self {
+        Steps { iv, n, delta: (iv.1 - iv.0) / n as f32, angular: None }
+    }
+
+    /// N steps over `iv` of the ray o + t·d (d unit), equal in the angle subtended at `centre`
+    /// (docs/MODEL.md §9): with the light at distance D from the ray and its foot at t = Δ,
+    /// t(φ) = Δ + D·cot φ, φ = atan2(D, t − Δ) ∈ (0, π). The angle is measured from whichever
+    /// direction along the ray holds the longer part of the interval, where φ < π/2 and cot φ
+    /// keeps its precision when D ≪ |t − Δ|. D is floored at the model's 10⁻⁴ m. Where the
+    /// light lies on the ray to within [`UNRESOLVED_DISTANCE`] of its coordinates (a light at
+    /// the eye: every ray starts at it and the integral diverges, docs/ROBUSTNESS.md), points
+    /// that close to it cannot be told apart in f32 (p − light is rounding), and the steps stay
+    /// uniform.
+    pub fn equiangular(iv: (f32, f32), n: u32, o: Vec3, d: Vec3, centre: Vec3) -> Self {
+        let mut steps = Steps::uniform(iv, n);
+        if !(iv.1 > iv.0) {
+            return steps;
+        }
+        let v = centre - o;
+        let along = d.dot(v);
+        let dist = (v - d * along).length();
+        if dist <= UNRESOLVED_DISTANCE * (1.0 + centre.abs().max_element()) {
+            return steps;
+        }
+        let dist = dist.max(MIN_LIGHT_DISTANCE);
+        let (xa, xb) = (iv.0 - along, iv.1 - along);
+        let sign = if xb.abs() >= xa.abs() { 1.0 } else { -1.0 };
+        let phi0 = dist.atan2(sign * xa);
+        let phi1 = dist.atan2(sign * xb);
+        steps.angular = Some(Angular { along, dist, sign, phi0, dphi: (phi1 - phi0) / n as f32 });
+        steps
+    }
+
+    /// Boundary t_k, k in 0..=N (t₀ = a and t_N = b exactly).
+    pub fn boundary(&self, k: u32) -> f32 {
+        if k == 0 {
+            return self.iv.0;
+        }
+        if k >= self.n {
+            return self.iv.1;
+        }
+        match self.angular {
+            None => self.iv.0 + k as f32 * self.delta,
+            Some(g) => {
+                let phi = g.phi0 + k as f32 * g.dphi;
+                (g.along + g.sign * g.dist * phi.cos() / phi.sin()).clamp(self.iv.0, self.iv.1)
+            }
+        }
+    }
+
+    /// The layout of a march of a light at `centre` (None: a sun) over `iv` under `policy`:
+    /// equiangular about a local light under [`LocalSteps::Equiangular`], else uniform.
+    /// Mirrors `own_steps` in common.wgsl.
+    pub fn of_light(centre: Option<Vec3>, iv: (f32, f32), n: u32, o: Vec3, d: Vec3, policy: StepPolicy) -> Self {
+        match centre {
+            Some(c) if policy.local == LocalSteps::Equiangular => Steps::equiangular(iv, n, o, d, c),
+            _ => Steps::uniform(iv, n),
+        }
+    }
+
+    /// The step every step of a uniform layout shares (its `t0` unused), found once per march:
+    /// the [`step_offset`] and transmittance integral of a step of length (b − a)/N. Mirrors
+    /// `uniform_step` in common.wgsl.
+    pub fn uniform_step(&self, sigma: Vec3, j: f32) -> Step {
+        let mean = (sigma.x + sigma.y + sigma.z) / 3.0;
+        Step { t0: 0.0, off: step_offset(mean, self.delta, j), seg: segment_transmittance(sigma, self.delta) }
+    }
+
+    /// Step i: its start tᵢ, its sample's offset past tᵢ ([`step_offset`] of its length, at
+    /// fraction `j`) and its transmittance integral; `uni` is [`Steps::uniform_step`]. Mirrors
+    /// `march_step` in common.wgsl.
+    pub fn step(&self, i: u32, sigma: Vec3, j: f32, uni: &Step) -> Step {
+        if self.angular.is_none() {
+            return Step { t0: self.iv.0 + i as f32 * self.delta, ..*uni };
+        }
+        let t0 = self.boundary(i);
+        let len = self.boundary(i + 1) - t0;
+        let mean = (sigma.x + sigma.y + sigma.z) / 3.0;
+        Step { t0, off: step_offset(mean, len, j), seg: segment_transmittance(sigma, len) }
+    }
+
+    /// The step k in 0..N that holds distance `t` (clamped to the interval).
+    pub fn index_of(&self, t: f32) -> u32 {
+        let x = match self.angular {
+            None => (t - self.iv.0) / self.delta,
+            Some(g) => (g.dist.atan2(g.sign * (t - g.along)) - g.phi0) / g.dphi,
+        };
+        if x.is_finite() { (x.max(0.0) as u32).min(self.n - 1) } else { 0 }
+    }
+}
+
 /// Where in a step of length Δ its sample goes, for a fraction j ∈ [0, 1) (½, or the pixel's
 /// jitter): the j-quantile of the transmittance e^(−σ̄·t) over the step, with σ̄ the mean
 /// extinction of the three channels, t = −ln(1 − j·(1 − e^(−σ̄Δ)))/σ̄. In thin media (σ̄Δ → 0)
@@ -371,44 +589,52 @@ pub fn mean_extinction(desc: &FrameDesc) -> f32 {
     (st.x + st.y + st.z) / 3.0
 }
 
-/// Eq. 1 of Tóth & Umenhoffer 2009 over the interval `iv` = (t₀, t₁) of the view ray from the
-/// eye along `dir`, cut into `n` equal steps Δ: the sum over steps i = `first`, `first` +
-/// `stride`, … < n (brute-force: 0, 1; interleaved: the pixel's block offset, M²), each sampled
-/// at t₀ + i·Δ + [`step_offset`]`(σ̄, Δ, j)` and weighted by the transmittance integrated
-/// exactly over the step (an improvement on eq. 1's exp(−τ(s − l))·Δl that is exact for a
-/// constant integrand).
-/// Mirrors `march_steps` in common.wgsl.
+/// Eq. 1 of Tóth & Umenhoffer 2009 over the N `steps` of the view ray from the eye along
+/// `dir`: the sum over steps i = `first`, `first` + `stride`, … < N (brute-force: 0, 1;
+/// interleaved: the pixel's block offset, M²), step i = [tᵢ, tᵢ₊₁] sampled at
+/// tᵢ + [`step_offset`]`(σ̄, tᵢ₊₁ − tᵢ, j)` and weighted by the transmittance integrated exactly
+/// over the step (an improvement on eq. 1's exp(−τ(s − l))·Δl that is exact for a constant
+/// integrand), of the lights `which` selects. Mirrors `march_steps` in common.wgsl.
 #[allow(clippy::too_many_arguments)]
 pub fn march_steps(
     frame: &CpuFrame,
     lights: &MarchLights,
     which: LightSet,
     dir: Vec3,
-    iv: (f32, f32),
-    n: u32,
+    steps: &Steps,
     first: u32,
     stride: u32,
     j: f32,
 ) -> Vec3 {
-    let (a, b) = iv;
+    let desc = frame.desc;
+    let o = desc.camera.position;
+    march_samples(desc, steps, first, stride, j, |t| march_density(frame, lights, which, dir, o + dir * t))
+}
+
+/// The loop of [`march_steps`] for any integrand `density(t)` (σs·p·L_in·V at distance t):
+/// Σᵢ density(tᵢ + offset)·e^(−σt·tᵢ)·∫₀^{tᵢ₊₁−tᵢ} e^(−σt·u) du over i = first, first + stride, …
+/// < N. A uniform layout's step length, offset and step transmittance are found once.
+pub fn march_samples(
+    desc: &FrameDesc,
+    steps: &Steps,
+    first: u32,
+    stride: u32,
+    j: f32,
+    mut density: impl FnMut(f32) -> Vec3,
+) -> Vec3 {
+    let (a, b) = steps.iv;
     if b <= a {
         return Vec3::ZERO;
     }
-    let desc = frame.desc;
-    let o = desc.camera.position;
-    let delta = (b - a) / n as f32;
-    let st = desc.medium.extinction();
-    let seg = segment_transmittance(st, delta);
-    let off = step_offset(mean_extinction(desc), delta, j);
+    let sigma = desc.medium.extinction();
+    let uni = steps.uniform_step(sigma, j);
     let mut sum = Vec3::ZERO;
     let mut i = first;
-    while i < n {
-        let t0 = a + i as f32 * delta;
-        let t = t0 + off;
-        let p = o + dir * t;
+    while i < steps.n {
+        let step = steps.step(i, sigma, j, &uni);
         // One loop over the samples; every selected light at each (docs/MODEL.md §6): the
         // position and the transmittance are shared, the lights' densities summed.
-        sum += march_density(frame, lights, which, dir, p) * (-st * t0).exp() * seg;
+        sum += density(step.t0 + step.off) * (-sigma * step.t0).exp() * step.seg;
         i += stride;
     }
     sum
@@ -416,8 +642,32 @@ pub fn march_steps(
 
 /// Every light's in-scattering on one view ray of length `s` (docs/MODEL.md §6): one march
 /// over the shared interval for the lights that share it, plus one over its own interval for
-/// each light that owns one ([`MarchLights::owns_interval`]); the steps i = first,
-/// first + stride, … < n of each. Mirrors `march_lights` in WGSL.
+/// each light that owns one ([`MarchLights::owns_interval`], with [`MarchLights::own_steps`]);
+/// the steps i = first, first + stride, … < n of each. `march` runs one march (the lights of a
+/// set over a layout); [`march_lights`] passes [`march_steps`]. Mirrors `march_lights` in WGSL.
+#[allow(clippy::too_many_arguments)]
+pub fn march_light_groups(
+    o: Vec3,
+    lights: &MarchLights,
+    dir: Vec3,
+    s: f32,
+    n: u32,
+    policy: StepPolicy,
+    mut march: impl FnMut(LightSet, &Steps) -> Vec3,
+) -> Vec3 {
+    let (shared, set) = lights.shared_march(o, dir, s, policy);
+    let mut sum = march(set, &Steps::uniform(shared, n));
+    for i in 0..lights.indices.len() {
+        if lights.owns_interval(i, policy) {
+            let iv = lights.own_interval(i, o, dir, s, policy);
+            sum += march(LightSet::one(i), &lights.own_steps(i, iv, n, o, dir, policy));
+        }
+    }
+    sum
+}
+
+/// [`march_light_groups`] with [`march_steps`]: every light's in-scattering on the view ray
+/// `dir` of length `s`, steps i = first, first + stride, … < n. Mirrors `march_lights` in WGSL.
 #[allow(clippy::too_many_arguments)]
 pub fn march_lights(
     frame: &CpuFrame,
@@ -428,19 +678,12 @@ pub fn march_lights(
     first: u32,
     stride: u32,
     j: f32,
-    policy: SpotSteps,
-    denominator: f32,
+    policy: StepPolicy,
 ) -> Vec3 {
     let o = frame.desc.camera.position;
-    let (shared, set) = lights.shared_march(o, dir, s, policy, denominator);
-    let mut sum = march_steps(frame, lights, set, dir, shared, n, first, stride, j);
-    for i in 0..lights.indices.len() {
-        if lights.owns_interval(i, policy) {
-            let iv = lights.own_interval(i, o, dir, s, policy, denominator);
-            sum += march_steps(frame, lights, LightSet::one(i), dir, iv, n, first, stride, j);
-        }
-    }
-    sum
+    march_light_groups(o, lights, dir, s, n, policy, |set, steps| {
+        march_steps(frame, lights, set, dir, steps, first, stride, j)
+    })
 }
 
 /// How a technique marches one pixel's own ray with all N steps (brute-force; subsampled's grid
@@ -453,10 +696,8 @@ pub struct PixelMarch {
     pub jitter: bool,
     /// Jitter seed.
     pub frame_index: u32,
-    /// The spot-step policy.
-    pub spot_steps: SpotSteps,
-    /// Its App. B denominator.
-    pub spot_denominator: f32,
+    /// Where the steps go.
+    pub policy: StepPolicy,
 }
 
 /// Eq. 1 of Tóth & Umenhoffer 2009 for pixel (x, y), ray `dir`, surface distance `s`: N steps
@@ -464,7 +705,7 @@ pub struct PixelMarch {
 /// Mirrors `march_pixel` in common.wgsl.
 pub fn march_pixel(frame: &CpuFrame, lights: &MarchLights, m: &PixelMarch, x: u32, y: u32, dir: Vec3, s: f32) -> Vec3 {
     let j = if m.jitter { crate::shaders::pixel_jitter(x, y, m.frame_index) } else { 0.5 };
-    march_lights(frame, lights, dir, s, m.steps, 0, 1, j, m.spot_steps, m.spot_denominator)
+    march_lights(frame, lights, dir, s, m.steps, 0, 1, j, m.policy)
 }
 
 #[cfg(test)]
@@ -552,10 +793,76 @@ mod tests {
         assert_eq!(cone_interval(&c, o, Vec3::X, 10.0).unwrap().1, 10.0);
         // march_interval never exceeds [0, s] under any policy.
         for p in SpotSteps::ALL {
-            let (a, b) = march_interval(Some(&c), None, o, Vec3::new(1.0, -0.2, 0.0).normalize(), 9.0, p, 0.05);
+            let policy = StepPolicy { spot: p, denominator: 0.05, local: LocalSteps::Uniform };
+            let (a, b) = march_interval(Some(&c), None, o, Vec3::new(1.0, -0.2, 0.0).normalize(), 9.0, policy);
             assert!(a >= 0.0 && b <= 9.0, "{p:?}: {a} {b}");
         }
-        assert_eq!(march_interval(None, None, o, Vec3::X, 9.0, SpotSteps::ExactCone, 0.3), (0.0, 9.0));
+        let exact = StepPolicy { spot: SpotSteps::ExactCone, denominator: 0.3, local: LocalSteps::Equiangular };
+        assert_eq!(march_interval(None, None, o, Vec3::X, 9.0, exact), (0.0, 9.0));
+    }
+
+    /// Σ over the steps of (step length)/d(sample)², the march of 1/d² in an empty medium,
+    /// against its closed form (atan(x_b/D) − atan(x_a/D))/D (docs/MODEL.md §9).
+    fn inverse_square_sum(steps: &Steps, o: Vec3, d: Vec3, c: Vec3) -> f32 {
+        let uni = steps.uniform_step(Vec3::ZERO, 0.5);
+        (0..steps.n)
+            .map(|i| {
+                let st = steps.step(i, Vec3::ZERO, 0.5, &uni);
+                st.seg.x / (o + d * (st.t0 + st.off) - c).length_squared()
+            })
+            .sum()
+    }
+
+    #[test]
+    fn equiangular_steps_tile_the_interval_and_resolve_the_inverse_square_peak() {
+        let (o, d) = (Vec3::ZERO, Vec3::X);
+        // A light 5 cm from a 40 m ray, its foot 12 m in; and one beside the ray's start, and
+        // one past its end (the interval wholly on one side: the mirrored layout).
+        for (c, iv) in [
+            (Vec3::new(12.0, 0.05, 0.0), (0.0f32, 40.0f32)),
+            (Vec3::new(0.5, 0.0, 0.3), (0.0, 40.0)),
+            (Vec3::new(55.0, 0.2, 0.0), (3.0, 40.0)),
+        ] {
+            let dist = (c - o).cross(d).length();
+            let along = (c - o).dot(d);
+            let exact = (((iv.1 - along) / dist).atan() - ((iv.0 - along) / dist).atan()) / dist;
+            for n in [8u32, 16, 64] {
+                let eq = Steps::equiangular(iv, n, o, d, c);
+                // Boundaries increase from a to b, and each t lies in the step index_of names.
+                let b: Vec<f32> = (0..=n).map(|k| eq.boundary(k)).collect();
+                assert_eq!((b[0], b[n as usize]), iv);
+                assert!(b.windows(2).all(|w| w[0] <= w[1]), "{c} {n}: {b:?}");
+                for k in 0..n {
+                    let mid = 0.5 * (b[k as usize] + b[k as usize + 1]);
+                    if b[k as usize + 1] - b[k as usize] > 1e-4 * mid.max(1.0) {
+                        assert_eq!(eq.index_of(mid), k, "{c} {n}: step {k} [{}, {}]", b[k as usize], b[k as usize + 1]);
+                    }
+                }
+                let e = inverse_square_sum(&eq, o, d, c);
+                assert!(((e - exact) / exact).abs() < 0.02, "{c}, {n} equiangular steps: {e} vs {exact}");
+            }
+            // Uniform steps miss or overshoot the peak of the first light (measured: 16 steps of
+            // 2.5 m against a 5 cm peak).
+            if c.y == 0.05 {
+                let u = inverse_square_sum(&Steps::uniform(iv, 16), o, d, c);
+                assert!(((u - exact) / exact).abs() > 0.5, "uniform steps: {u} vs {exact}");
+            }
+        }
+        // A light on the ray (within f32 resolution of its coordinates) keeps uniform steps.
+        let on = Steps::equiangular((0.0, 10.0), 8, o, d, Vec3::new(4.0, 0.0, 0.0));
+        assert_eq!(on, Steps::uniform((0.0, 10.0), 8));
+        // An empty interval is an empty march.
+        assert_eq!(Steps::equiangular((3.0, 3.0), 8, o, d, Vec3::Y).iv, (3.0, 3.0));
+    }
+
+    #[test]
+    fn step_policy_codes_round_trip() {
+        for spot in SpotSteps::ALL {
+            for local in [LocalSteps::Uniform, LocalSteps::Equiangular] {
+                let p = StepPolicy { spot, denominator: 0.3, local };
+                assert_eq!(StepPolicy::from_code(p.code(), 0.3), p);
+            }
+        }
     }
 
     #[test]

@@ -409,9 +409,14 @@ fn smooth_denominator(den: f32, k: f32) -> f32 {
     return k + (den - k) * w;
 }
 
+// march.rs StepPolicy::code: bits 0-1 the spot policy (0 fixed, 1 exact-cone,
+// 2 appendix-b-constant, 3 appendix-b-smoothstep), MARCH_EQUIANGULAR for equiangular steps.
+const MARCH_SPOT_MASK: u32 = 3u;
+const MARCH_EQUIANGULAR: u32 = 4u;
+
 // march.rs march_interval: the interval of the view ray a technique marches with its N steps.
-// policy: 0 fixed, 1 exact-cone, 2 appendix-b-constant, 3 appendix-b-smoothstep.
-fn policy_interval(l: Light, o: vec3<f32>, d: vec3<f32>, s: f32, policy: u32, denominator: f32) -> vec2<f32> {
+fn policy_interval(l: Light, o: vec3<f32>, d: vec3<f32>, s: f32, code: u32, denominator: f32) -> vec2<f32> {
+    let policy = code & MARCH_SPOT_MASK;
     if l.kind != LIGHT_SPOT || policy == 0u {
         return vec2<f32>(0.0, s);
     }
@@ -463,10 +468,123 @@ fn march_interval(f: Frame, l: Light, o: vec3<f32>, d: vec3<f32>, s: f32, policy
     return iv;
 }
 
-// march.rs MarchLights::owns_interval: a spot under a cone policy is marched over its own
-// chord with its own N steps; every other light shares one march (docs/MODEL.md §6).
+// march.rs MarchLights::owns_interval: a spot under a cone policy, and every local light under
+// equiangular steps, is marched over its own interval with its own N steps; every other light
+// shares one march (docs/MODEL.md §6).
 fn own_interval(l: Light, policy: u32) -> bool {
-    return l.kind == LIGHT_SPOT && policy != 0u;
+    return (l.kind == LIGHT_SPOT && (policy & MARCH_SPOT_MASK) != 0u)
+        || (l.kind != LIGHT_DIRECTIONAL && (policy & MARCH_EQUIANGULAR) != 0u);
+}
+
+// march.rs MIN_LIGHT_DISTANCE and UNRESOLVED_DISTANCE.
+const MIN_LIGHT_DISTANCE: f32 = 1e-4;
+const UNRESOLVED_DISTANCE: f32 = 1e-5;
+
+// march.rs Steps: the boundaries of a march's n steps over iv, equal in length or (angular = 1)
+// equal in the angle subtended at a local light (docs/MODEL.md §9): t(φ) = along + sign·dist·cot φ,
+// φ from phi0 in steps of dphi.
+struct Steps {
+    iv: vec2<f32>,
+    n: u32,
+    delta: f32,
+    angular: u32,
+    along: f32,
+    dist: f32,
+    sign: f32,
+    phi0: f32,
+    dphi: f32,
+}
+
+// march.rs Steps::uniform.
+fn uniform_steps(iv: vec2<f32>, n: u32) -> Steps {
+    var st: Steps;
+    st.iv = iv;
+    st.n = n;
+    st.delta = (iv.y - iv.x) / f32(n);
+    return st;
+}
+
+// march.rs Steps::equiangular.
+fn equiangular_steps(iv: vec2<f32>, n: u32, o: vec3<f32>, d: vec3<f32>, centre: vec3<f32>) -> Steps {
+    var st = uniform_steps(iv, n);
+    if !(iv.y > iv.x) {
+        return st;
+    }
+    let v = centre - o;
+    st.along = dot(d, v);
+    let dist = length(v - d * st.along);
+    // A light on the ray to within its coordinates' precision: uniform steps (march.rs).
+    let c = abs(centre);
+    if dist <= UNRESOLVED_DISTANCE * (1.0 + max(c.x, max(c.y, c.z))) {
+        return st;
+    }
+    st.dist = max(dist, MIN_LIGHT_DISTANCE);
+    let xa = iv.x - st.along;
+    let xb = iv.y - st.along;
+    st.sign = select(-1.0, 1.0, abs(xb) >= abs(xa));
+    st.phi0 = atan2(st.dist, st.sign * xa);
+    st.dphi = (atan2(st.dist, st.sign * xb) - st.phi0) / f32(n);
+    st.angular = 1u;
+    return st;
+}
+
+// march.rs MarchLights::own_steps: the steps of light l's own march over iv.
+fn own_steps(l: Light, iv: vec2<f32>, n: u32, o: vec3<f32>, d: vec3<f32>, policy: u32) -> Steps {
+    if l.kind != LIGHT_DIRECTIONAL && (policy & MARCH_EQUIANGULAR) != 0u {
+        return equiangular_steps(iv, n, o, d, l.position.xyz);
+    }
+    return uniform_steps(iv, n);
+}
+
+// march.rs Steps::boundary: t_k, k in 0..=n (t_0 and t_n the interval's ends exactly).
+fn step_boundary(st: Steps, k: u32) -> f32 {
+    if k == 0u {
+        return st.iv.x;
+    }
+    if k >= st.n {
+        return st.iv.y;
+    }
+    if st.angular == 0u {
+        return st.iv.x + f32(k) * st.delta;
+    }
+    let phi = st.phi0 + f32(k) * st.dphi;
+    return clamp(st.along + st.sign * st.dist * cos(phi) / sin(phi), st.iv.x, st.iv.y);
+}
+
+// One step of a march (march.rs march_samples): its start t0, where its sample sits past t0,
+// and its transmittance integral ∫₀^len e^(−σt·u) du.
+struct Step {
+    t0: f32,
+    off: f32,
+    seg: vec3<f32>,
+}
+
+// The step every step of a uniform layout shares (its t0 unused): found once per march.
+fn uniform_step(st: Steps, sigma: vec3<f32>, j: f32) -> Step {
+    return Step(0.0, step_offset((sigma.x + sigma.y + sigma.z) / 3.0, st.delta, j), segment_transmittance(sigma, st.delta));
+}
+
+// Step i of `st`; `uni` is uniform_step(st, sigma, j).
+fn march_step(st: Steps, i: u32, sigma: vec3<f32>, j: f32, uni: Step) -> Step {
+    if st.angular == 0u {
+        return Step(st.iv.x + f32(i) * st.delta, uni.off, uni.seg);
+    }
+    let t0 = step_boundary(st, i);
+    let len = step_boundary(st, i + 1u) - t0;
+    return Step(t0, step_offset((sigma.x + sigma.y + sigma.z) / 3.0, len, j), segment_transmittance(sigma, len));
+}
+
+// march.rs Steps::index_of: the step that holds t.
+fn step_index(st: Steps, t: f32) -> u32 {
+    var x = (t - st.iv.x) / st.delta;
+    if st.angular == 1u {
+        x = (atan2(st.dist, st.sign * (t - st.along)) - st.phi0) / st.dphi;
+    }
+    // NaN or ±Inf (an empty layout) reads as step 0, as in march.rs.
+    if !(abs(x) <= 3.4e38) {
+        return 0u;
+    }
+    return min(u32(max(x, 0.0)), st.n - 1u);
 }
 
 // march.rs MarchLights::shared_march: the smallest interval holding the march_interval of
@@ -595,43 +713,39 @@ fn march_density(
     return sum;
 }
 
-// march.rs march_steps: eq. 1 of Tóth & Umenhoffer 2009 over the interval iv = [t0, t1] of the
-// view ray from the eye along dir, cut into n equal steps Δ; sums the steps i = first,
-// first + stride, … < n (brute-force: 0, 1; interleaved: its block offset, M²), each sampled at
-// (i + j)·Δ and weighted by the transmittance integrated exactly over the step, of the lights
-// of `mask` (march_density; one loop over the samples, every light of the mask at each).
+// march.rs march_steps: eq. 1 of Tóth & Umenhoffer 2009 over the n steps of `st` on the view
+// ray from the eye along dir; sums the steps i = first, first + stride, … < n (brute-force: 0, 1;
+// interleaved: its block offset, M²), step [t_i, t_i+1] sampled at t_i + step_offset(σ̄, its
+// length, j) and weighted by the transmittance integrated exactly over it, of the lights of
+// `mask` (march_density; one loop over the samples, every light of the mask at each).
 fn march_steps(
     f: Frame,
     shadow_map: texture_2d_array<f32>,
     spot_tex: texture_2d_array<f32>,
     dir: vec3<f32>,
-    iv: vec2<f32>,
-    n: u32,
+    st: Steps,
     first: u32,
     stride: u32,
     j: f32,
     mask: u32,
 ) -> vec3<f32> {
-    if iv.y <= iv.x {
+    if st.iv.y <= st.iv.x {
         return vec3<f32>(0.0);
     }
-    let delta = (iv.y - iv.x) / f32(n);
-    let st = extinction(f);
-    let seg = segment_transmittance(st, delta);
-    let off = step_offset((st.x + st.y + st.z) / 3.0, delta, j);
+    let sigma = extinction(f);
+    let uni = uniform_step(st, sigma, j);
     var sum = vec3<f32>(0.0);
-    for (var i = first; i < n; i += stride) {
-        let t0 = iv.x + f32(i) * delta;
-        let t = t0 + off;
-        let p = f.camera_pos.xyz + dir * t;
-        sum += march_density(f, shadow_map, spot_tex, dir, p, mask) * exp(-st * t0) * seg;
+    for (var i = first; i < st.n; i += stride) {
+        let step = march_step(st, i, sigma, j, uni);
+        let p = f.camera_pos.xyz + dir * (step.t0 + step.off);
+        sum += march_density(f, shadow_map, spot_tex, dir, p, mask) * exp(-sigma * step.t0) * step.seg;
     }
     return sum;
 }
 
 // march.rs march_lights: every light's in-scattering on one view ray (docs/MODEL.md §6): one
-// march over the shared interval for the lights that share it, plus one over its own chord
-// for each spot under a cone policy; the steps i = first, first + stride, … < n of each.
+// march over the shared interval for the lights that share it, plus one over its own interval
+// (own_steps) for each light that owns one; the steps i = first, first + stride, … < n of each.
 fn march_lights(
     f: Frame,
     shadow_map: texture_2d_array<f32>,
@@ -647,12 +761,13 @@ fn march_lights(
 ) -> vec3<f32> {
     let o = f.camera_pos.xyz;
     let sm = shared_march(f, o, dir, s, policy, denominator);
-    var sum = march_steps(f, shadow_map, spot_tex, dir, sm.iv, n, first, stride, j, sm.mask);
+    var sum = march_steps(f, shadow_map, spot_tex, dir, uniform_steps(sm.iv, n), first, stride, j, sm.mask);
     for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
         let l = lights.items[k];
         if own_interval(l, policy) {
             let iv = march_interval(f, l, o, dir, s, policy, denominator);
-            sum += march_steps(f, shadow_map, spot_tex, dir, iv, n, first, stride, j, 1u << k);
+            let st = own_steps(l, iv, n, o, dir, policy);
+            sum += march_steps(f, shadow_map, spot_tex, dir, st, first, stride, j, 1u << k);
         }
     }
     return sum;

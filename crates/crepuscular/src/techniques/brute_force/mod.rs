@@ -12,7 +12,7 @@ pub mod cpu;
 use crate::error::Error;
 use crate::frame::GpuFrame;
 use crate::gpu::{GpuContext, Recorder};
-use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
+use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
 use crate::stats::TechniqueStats;
 use crate::techniques::pass;
 use serde::{Deserialize, Serialize};
@@ -42,6 +42,15 @@ pub struct BruteForceSettings {
     /// The App. B denominator: the constant of `appendix-b-constant`, the smoothstep floor of
     /// `appendix-b-smoothstep` (a sine, in (0, 1]). Smaller marches longer chords. Default 0.3.
     pub spot_denominator: f32,
+    /// How a point or spot light's steps are spread over its interval: `"uniform"` (equal
+    /// lengths, as eq. 1; point lights share the sun's march) or `"equiangular"` (equal angles
+    /// seen from the light: short steps where the ray passes it, so a 1/d² peak narrower than a
+    /// step is resolved; every local light then gets its own march). Ignored for a sun.
+    /// Equiangular costs a sine and cosine per step, N more samples per point light on rays that
+    /// also see a sun, and coarser steps far from the light: it fixes the sweep's point lights
+    /// next to the view rays (NMAE 0.58 → 0.01) but loses 1.2 dB (brute-force) to 9 dB
+    /// (minmax) on night-street's spots. Default `"uniform"` (docs/MODEL.md §9).
+    pub local_steps: LocalSteps,
 }
 
 impl Default for BruteForceSettings {
@@ -52,11 +61,17 @@ impl Default for BruteForceSettings {
             frame_index: 0,
             spot_steps: SpotSteps::ExactCone,
             spot_denominator: DEFAULT_SPOT_DENOMINATOR,
+            local_steps: LocalSteps::Uniform,
         }
     }
 }
 
 impl BruteForceSettings {
+    /// Where its steps go: `spot_steps`, `spot_denominator` and `local_steps` together.
+    pub fn step_policy(&self) -> StepPolicy {
+        StepPolicy { spot: self.spot_steps, denominator: self.spot_denominator, local: self.local_steps }
+    }
+
     /// Checks the ranges.
     pub fn validate(&self) -> Result<(), Error> {
         if !(1..=4096).contains(&self.steps) {
@@ -68,13 +83,7 @@ impl BruteForceSettings {
 
 impl From<&BruteForceSettings> for crate::march::PixelMarch {
     fn from(s: &BruteForceSettings) -> Self {
-        Self {
-            steps: s.steps,
-            jitter: s.jitter,
-            frame_index: s.frame_index,
-            spot_steps: s.spot_steps,
-            spot_denominator: s.spot_denominator,
-        }
+        Self { steps: s.steps, jitter: s.jitter, frame_index: s.frame_index, policy: s.step_policy() }
     }
 }
 
@@ -88,7 +97,7 @@ pub struct MarchParams {
     pub jitter: u32,
     /// Jitter seed.
     pub frame_index: u32,
-    /// [`SpotSteps::code`].
+    /// [`crate::march::StepPolicy::code`]: the spot policy and the equiangular bit.
     pub spot_steps: u32,
     /// App. B denominator.
     pub spot_denominator: f32,
@@ -102,7 +111,7 @@ impl From<&BruteForceSettings> for MarchParams {
             steps: s.steps,
             jitter: s.jitter as u32,
             frame_index: s.frame_index,
-            spot_steps: s.spot_steps.code(),
+            spot_steps: s.step_policy().code(),
             spot_denominator: s.spot_denominator,
             _pad: [0; 3],
         }

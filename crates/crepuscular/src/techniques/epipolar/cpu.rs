@@ -8,7 +8,7 @@ use super::{EpipolarDebug, EpipolarLine, EpipolarParams, EpipolarSettings, MIN_L
 use crate::error::Error;
 use crate::frame::{CpuFrame, FrameDesc};
 use crate::image::Image;
-use crate::march::{MarchLights, PixelMarch, SpotCone, SpotSteps, cone_interval, march_pixel};
+use crate::march::{MarchLights, PixelMarch, SpotCone, StepPolicy, cone_interval, march_pixel};
 use crate::model::{Light, RgbTexture};
 use crate::stats::{PassTime, TechniqueStats};
 use glam::{Vec2, Vec3, Vec4};
@@ -369,14 +369,20 @@ pub fn coordinates(frame: &CpuFrame, p: &EpipolarParams, lines: &[EpipolarLine])
 // ---- pass 2: refine ----
 
 /// Mirrors `refine_texel` in refine.wgsl: (left, right) of texel t over the view distances
-/// `s` of its line (left = right = t for a ray-march sample).
-pub fn refine_texel(p: &EpipolarParams, s: &[f32], t: u32, n_init: u32) -> (u32, u32) {
+/// `s` of its line (left = right = t for a ray-march sample). `near[t]`: texel t lies within
+/// `epipole_radius` of the epipole ([`near_epipole`]) and the light is a spot or point light
+/// marched with equiangular steps (`local_light`). The disc's edge then breaks the search as a depth discontinuity does: the texels on either side of it become ray-march samples, so no
+/// texel outside the disc interpolates from one inside it. Inside, a point or spot light seen
+/// directly peaks like 1/r towards the epipole (the ray through it passes the light at distance
+/// 0), and a line's first texel sits on the epipole: interpolating from it would smear that
+/// peak over the whole first initial segment (the disc's pixels are re-marched instead).
+pub fn refine_texel(p: &EpipolarParams, s: &[f32], near: &[bool], t: u32, n_init: u32) -> (u32, u32) {
     let (a, b) = segment(p, t, n_init);
     let mut left = t;
     let mut cur = s[t as usize];
     while left > a {
         let sl = s[left as usize - 1];
-        if discontinuity(p, sl, cur) {
+        if discontinuity(p, sl, cur) || near[left as usize - 1] != near[left as usize] {
             break;
         }
         cur = sl;
@@ -386,7 +392,7 @@ pub fn refine_texel(p: &EpipolarParams, s: &[f32], t: u32, n_init: u32) -> (u32,
     cur = s[t as usize];
     while right < b {
         let sr = s[right as usize + 1];
-        if discontinuity(p, cur, sr) {
+        if discontinuity(p, cur, sr) || near[right as usize] != near[right as usize + 1] {
             break;
         }
         cur = sr;
@@ -419,10 +425,12 @@ pub fn refine(desc: &FrameDesc, p: &EpipolarParams, lines: &[EpipolarLine], coor
                 return (vec![0; n], Vec::new());
             }
             let s: Vec<f32> = row.iter().map(|c| c[2]).collect();
+            let near: Vec<bool> =
+                row.iter().map(|c| p.local_light == 1 && near_epipole(p, Vec2::new(c[0], c[1]))).collect();
             let mut interp = Vec::with_capacity(n);
             let mut pixels = Vec::new();
             for t in 0..n as u32 {
-                let (l, r) = refine_texel(p, &s, t, line.initial);
+                let (l, r) = refine_texel(p, &s, &near, t, line.initial);
                 interp.push(l | (r << 16));
                 if l == t && r == t {
                     let c = row[t as usize];
@@ -463,8 +471,7 @@ pub fn pixel_march(p: &EpipolarParams) -> PixelMarch {
         steps: p.steps,
         jitter: p.jitter == 1,
         frame_index: p.frame_index,
-        spot_steps: SpotSteps::ALL.get(p.spot_steps as usize).copied().unwrap_or_default(),
-        spot_denominator: p.spot_denominator,
+        policy: StepPolicy::from_code(p.spot_steps, p.spot_denominator),
     }
 }
 

@@ -85,7 +85,7 @@ pub use settings::{EpipolarMarch, EpipolarSettings, SpotPrefilter, Weighting};
 use crate::error::Error;
 use crate::frame::{FrameDesc, GpuFrame};
 use crate::gpu::{GpuContext, Recorder, compute_pass};
-use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
+use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
 use crate::model::Light;
 use crate::stats::TechniqueStats;
 use crate::techniques::pass::{self, Bound};
@@ -172,7 +172,7 @@ pub struct EpipolarParams {
     pub jitter: u32,
     /// Jitter seed.
     pub frame_index: u32,
-    /// [`SpotSteps::code`].
+    /// [`crate::march::StepPolicy::code`]: the spot policy and the equiangular bit.
     pub spot_steps: u32,
     /// App. B denominator.
     pub spot_denominator: f32,
@@ -208,8 +208,12 @@ pub struct EpipolarParams {
     pub prefilter_level: u32,
     /// Re-march radius around the epipole, pixels (point and spot lights).
     pub epipole_radius: f32,
+    /// 1 for a spot or point light marched with equiangular steps: its in-scattering, resolved
+    /// there, is singular at the epipole (a ray through it passes the light), and the
+    /// refinement breaks the lines at the re-march disc's edge (cpu.rs `refine_texel`).
+    pub local_light: u32,
     /// Padding.
-    pub _pad: [u32; 3],
+    pub _pad: [u32; 2],
     /// The epipole, homogeneous pixel coordinates (x, y, w) scaled to max-abs 1; w = 0 is a
     /// point at infinity (parallel lines). The fourth component is 0.
     pub epipole: [f32; 4],
@@ -227,7 +231,7 @@ impl EpipolarParams {
             steps: s.steps,
             jitter: s.jitter as u32,
             frame_index: s.frame_index,
-            spot_steps: s.spot_steps.code(),
+            spot_steps: s.step_policy().code(),
             spot_denominator: s.spot_denominator,
             slices,
             samples,
@@ -245,7 +249,9 @@ impl EpipolarParams {
             max_workgroups,
             prefilter_level: s.prefilter_level(desc),
             epipole_radius: s.epipole_radius,
-            _pad: [0; 3],
+            local_light: (s.local_steps == LocalSteps::Equiangular
+                && !matches!(desc.lights[0].light, Light::Directional { .. })) as u32,
+            _pad: [0; 2],
             epipole,
         }
     }

@@ -28,14 +28,20 @@ fn depth_at(t: u32, k: u32) -> f32 {
     return textureLoad(coord_tex, vec2<i32>(i32(t), i32(k)), 0).z;
 }
 
+fn near_at(t: u32, k: u32) -> bool {
+    return params.local_light == 1u && near_epipole(textureLoad(coord_tex, vec2<i32>(i32(t), i32(k)), 0).xy);
+}
+
 // (left, right) of texel t of line k (§5.2 pseudo-code, restricted to t's initial segment).
+// The edge of the re-marched disc around the epipole breaks the search as a depth
+// discontinuity does (cpu.rs refine_texel: no texel outside interpolates from the epipole).
 fn refine_texel(t: u32, k: u32, n_init: u32) -> vec2<u32> {
     let seg = segment(t, n_init);
     var left = t;
     var s = depth_at(t, k);
     while left > seg.x {
         let sl = depth_at(left - 1u, k);
-        if discontinuity(sl, s) {
+        if discontinuity(sl, s) || near_at(left - 1u, k) != near_at(left, k) {
             break;
         }
         s = sl;
@@ -45,7 +51,7 @@ fn refine_texel(t: u32, k: u32, n_init: u32) -> vec2<u32> {
     s = depth_at(t, k);
     while right < seg.y {
         let sr = depth_at(right + 1u, k);
-        if discontinuity(s, sr) {
+        if discontinuity(s, sr) || near_at(right, k) != near_at(right + 1u, k) {
             break;
         }
         s = sr;

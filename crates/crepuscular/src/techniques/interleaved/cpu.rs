@@ -6,7 +6,7 @@ use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
 use crate::integrand::lit_incident;
-use crate::march::{LightSet, MarchLights, march_lights, mean_extinction, step_offset};
+use crate::march::{LightSet, MarchLights, Steps, march_light_groups, march_lights, march_samples};
 use crate::shaders::pixel_jitter;
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
@@ -43,7 +43,7 @@ fn density_lut(frame: &CpuFrame, lut: &PhaseLut, k: usize, dir: Vec3, p: Vec3) -
 }
 
 /// Mirrors `march_steps_lut` in march.wgsl: [`crate::march::march_steps`] (eq. 1 over the
-/// steps i = first, first + stride, … < n) with σs·lut(cos θ) for σs·p(cos θ).
+/// steps i = first, first + stride, … < N of `steps`) with σs·lut(cos θ) for σs·p(cos θ).
 #[allow(clippy::too_many_arguments)]
 pub fn march_steps_lut(
     frame: &CpuFrame,
@@ -51,32 +51,15 @@ pub fn march_steps_lut(
     which: LightSet,
     lut: &PhaseLut,
     dir: Vec3,
-    iv: (f32, f32),
-    n: u32,
+    steps: &Steps,
     first: u32,
     stride: u32,
     j: f32,
 ) -> Vec3 {
-    let (a, b) = iv;
-    if b <= a {
-        return Vec3::ZERO;
-    }
-    let desc = frame.desc;
-    let o = desc.camera.position;
-    let delta = (b - a) / n as f32;
-    let st = desc.medium.extinction();
-    let seg = crate::model::segment_transmittance(st, delta);
-    let off = step_offset(mean_extinction(desc), delta, j);
-    let mut sum = Vec3::ZERO;
-    let mut i = first;
-    while i < n {
-        let t0 = a + i as f32 * delta;
-        let p = o + dir * (t0 + off);
-        let d: Vec3 = which.iter().map(|l| density_lut(frame, lut, lights.indices[l], dir, p)).sum();
-        sum += d * (-st * t0).exp() * seg;
-        i += stride;
-    }
-    sum
+    let o = frame.desc.camera.position;
+    march_samples(frame.desc, steps, first, stride, j, |t| {
+        which.iter().map(|l| density_lut(frame, lut, lights.indices[l], dir, o + dir * t)).sum()
+    })
 }
 
 /// Mirrors `march_lights_lut` in march.wgsl: [`crate::march::march_lights`] with the phase table.
@@ -93,16 +76,9 @@ fn march_lights_lut(
     j: f32,
 ) -> Vec3 {
     let o = frame.desc.camera.position;
-    let (policy, den) = (s.spot_steps, s.spot_denominator);
-    let (shared, set) = lights.shared_march(o, dir, dist, policy, den);
-    let mut sum = march_steps_lut(frame, lights, set, lut, dir, shared, s.steps, first, stride, j);
-    for l in 0..lights.indices.len() {
-        if lights.owns_interval(l, policy) {
-            let iv = lights.own_interval(l, o, dir, dist, policy, den);
-            sum += march_steps_lut(frame, lights, LightSet::one(l), lut, dir, iv, s.steps, first, stride, j);
-        }
-    }
-    sum
+    march_light_groups(o, lights, dir, dist, s.steps, s.step_policy(), |set, steps| {
+        march_steps_lut(frame, lights, set, lut, dir, steps, first, stride, j)
+    })
 }
 
 /// Mirrors `march_ray` in march.wgsl: the terms k, k + M², … of eq. 1 on this pixel's own ray
@@ -124,7 +100,7 @@ pub fn march_ray(
     let k = block_offset(s, x, y);
     match lut {
         Some(lut) => march_lights_lut(frame, lights, s, lut, dir, dist, k, stride, j),
-        None => march_lights(frame, lights, dir, dist, s.steps, k, stride, j, s.spot_steps, s.spot_denominator),
+        None => march_lights(frame, lights, dir, dist, s.steps, k, stride, j, s.step_policy()),
     }
 }
 

@@ -56,20 +56,18 @@ fn density_lut(l: Light, dir: vec3<f32>, p: vec3<f32>) -> vec3<f32> {
 }
 
 // march_steps (common.wgsl) with the phase function read from the table: eq. 1 over the steps
-// i = first, first + stride, … < n of the interval iv, σs·lut(cos θ)·L_in·V per step, of light
-// the lights of `mask` (march_density in common.wgsl).
-fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u32, j: f32, mask: u32) -> vec3<f32> {
-    if iv.y <= iv.x {
+// i = first, first + stride, … < n of `st`, σs·lut(cos θ)·L_in·V per step, of the lights of
+// `mask` (march_density in common.wgsl).
+fn march_steps_lut(dir: vec3<f32>, st: Steps, first: u32, stride: u32, j: f32, mask: u32) -> vec3<f32> {
+    if st.iv.y <= st.iv.x {
         return vec3<f32>(0.0);
     }
-    let delta = (iv.y - iv.x) / f32(n);
-    let st = extinction(frame);
-    let seg = segment_transmittance(st, delta);
-    let off = step_offset((st.x + st.y + st.z) / 3.0, delta, j);
+    let sigma = extinction(frame);
+    let uni = uniform_step(st, sigma, j);
     var sum = vec3<f32>(0.0);
-    for (var i = first; i < n; i += stride) {
-        let t0 = iv.x + f32(i) * delta;
-        let p = frame.camera_pos.xyz + dir * (t0 + off);
+    for (var i = first; i < st.n; i += stride) {
+        let step = march_step(st, i, sigma, j, uni);
+        let p = frame.camera_pos.xyz + dir * (step.t0 + step.off);
         var d = vec3<f32>(0.0);
         var m = mask;
         while m != 0u {
@@ -77,7 +75,7 @@ fn march_steps_lut(dir: vec3<f32>, iv: vec2<f32>, n: u32, first: u32, stride: u3
             m &= m - 1u;
             d += density_lut(lights.items[k], dir, p);
         }
-        sum += d * exp(-st * t0) * seg;
+        sum += d * exp(-sigma * step.t0) * step.seg;
     }
     return sum;
 }
@@ -87,12 +85,12 @@ fn march_lights_lut(dir: vec3<f32>, s: f32, n: u32, first: u32, stride: u32, j: 
     let o = frame.camera_pos.xyz;
     let policy = params.spot_steps;
     let sm = shared_march(frame, o, dir, s, policy, params.spot_denominator);
-    var sum = march_steps_lut(dir, sm.iv, n, first, stride, j, sm.mask);
+    var sum = march_steps_lut(dir, uniform_steps(sm.iv, n), first, stride, j, sm.mask);
     for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
         let l = lights.items[k];
         if own_interval(l, policy) {
             let iv = march_interval(frame, l, o, dir, s, policy, params.spot_denominator);
-            sum += march_steps_lut(dir, iv, n, first, stride, j, 1u << k);
+            sum += march_steps_lut(dir, own_steps(l, iv, n, o, dir, policy), first, stride, j, 1u << k);
         }
     }
     return sum;

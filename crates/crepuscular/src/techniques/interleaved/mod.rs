@@ -44,7 +44,7 @@ pub mod cpu;
 use crate::error::Error;
 use crate::frame::GpuFrame;
 use crate::gpu::{GpuContext, Recorder};
-use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
+use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
 use crate::model::Phase;
 use crate::stats::TechniqueStats;
 use crate::techniques::pass::{self, Bound};
@@ -113,6 +113,15 @@ pub struct InterleavedSettings {
     /// The App. B denominator: the constant of `appendix-b-constant`, the smoothstep floor of
     /// `appendix-b-smoothstep` (a sine, in (0, 1]). Smaller marches longer chords. Default 0.3.
     pub spot_denominator: f32,
+    /// How a point or spot light's steps are spread over its interval: `"uniform"` (equal
+    /// lengths, as eq. 1; point lights share the sun's march) or `"equiangular"` (equal angles
+    /// seen from the light: short steps where the ray passes it, so a 1/d² peak narrower than a
+    /// step is resolved; every local light then gets its own march). Ignored for a sun.
+    /// Equiangular costs a sine and cosine per step, N more samples per point light on rays that
+    /// also see a sun, and coarser steps far from the light: it fixes the sweep's point lights
+    /// next to the view rays (NMAE 0.58 → 0.01) but loses 1.2 dB (brute-force) to 9 dB
+    /// (minmax) on night-street's spots. Default `"uniform"` (docs/MODEL.md §9).
+    pub local_steps: LocalSteps,
 }
 
 impl Default for InterleavedSettings {
@@ -128,11 +137,17 @@ impl Default for InterleavedSettings {
             frame_index: 0,
             spot_steps: SpotSteps::ExactCone,
             spot_denominator: DEFAULT_SPOT_DENOMINATOR,
+            local_steps: LocalSteps::Uniform,
         }
     }
 }
 
 impl InterleavedSettings {
+    /// Where its steps go: `spot_steps`, `spot_denominator` and `local_steps` together.
+    pub fn step_policy(&self) -> StepPolicy {
+        StepPolicy { spot: self.spot_steps, denominator: self.spot_denominator, local: self.local_steps }
+    }
+
     /// Checks the ranges.
     pub fn validate(&self) -> Result<(), Error> {
         if !(1..=16).contains(&self.block) {
@@ -199,7 +214,7 @@ pub struct InterleavedParams {
     pub block: u32,
     /// Total steps N.
     pub steps: u32,
-    /// [`SpotSteps::code`].
+    /// [`crate::march::StepPolicy::code`]: the spot policy and the equiangular bit.
     pub spot_steps: u32,
     /// App. B denominator.
     pub spot_denominator: f32,
@@ -226,7 +241,7 @@ impl From<&InterleavedSettings> for InterleavedParams {
         Self {
             block: s.block,
             steps: s.steps,
-            spot_steps: s.spot_steps.code(),
+            spot_steps: s.step_policy().code(),
             spot_denominator: s.spot_denominator,
             jitter: s.jitter as u32,
             frame_index: s.frame_index,

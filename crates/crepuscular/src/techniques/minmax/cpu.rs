@@ -7,7 +7,7 @@ use crate::error::Error;
 use crate::frame::{CpuFrame, FrameDesc};
 use crate::image::Image;
 use crate::integrand::{light_incident, light_position};
-use crate::march::{light_reach, march_interval, mean_extinction, step_offset};
+use crate::march::{Step, Steps, light_reach, local_position, march_interval};
 use crate::model::segment_transmittance;
 use crate::shadow::{ShadowMap, cube_face};
 use crate::stats::{PassTime, TechniqueStats};
@@ -318,20 +318,20 @@ pub fn column_distance(rect: &Rectification, dir: Vec3, theta: f32, col: f32) ->
 /// and E are constant along the ray; docs/MODEL.md §8). Spot and point: the ray's lit interval
 /// ([`march_interval`]) cut into `light_steps` segments; each segment's light, cone, texture
 /// and phase are evaluated once, at its transmittance-weighted midpoint, and multiply the exact
-/// transmittance integral of each lit piece of it. Mirrors `Spans` in traverse.wgsl.
+/// transmittance integral of each lit piece of it. The segments are `brute-force`'s steps
+/// ([`Steps::of_light`]: equiangular under the default `local_steps`). Mirrors `Spans` in
+/// walk.wgsl.
 pub struct Spans<'a> {
     desc: &'a FrameDesc,
     dir: Vec3,
     st: Vec3,
     /// Directional: σs·p·E. Local: unused.
     constant: Option<Vec3>,
-    /// Local: the lit interval, segment length, sample offset.
-    iv: (f32, f32),
-    delta: f32,
-    offset: f32,
+    /// Local: the segments of the lit interval, and what a uniform one shares.
+    segments: Steps,
+    uni: Step,
     /// The segment whose light is cached, and that light.
     seg: Option<(u32, Vec3)>,
-    steps: u32,
     /// The in-scattering so far.
     pub sum: Vec3,
 }
@@ -346,11 +346,9 @@ impl<'a> Spans<'a> {
             dir,
             st,
             constant: None,
-            iv: (0.0, 0.0),
-            delta: 0.0,
-            offset: 0.0,
+            segments: Steps::uniform((0.0, 0.0), settings.light_steps),
+            uni: Step { t0: 0.0, off: 0.0, seg: Vec3::ZERO },
             seg: None,
-            steps: settings.light_steps,
             sum: Vec3::ZERO,
         };
         if matches!(fl.light, crate::Light::Directional { .. }) {
@@ -359,17 +357,10 @@ impl<'a> Spans<'a> {
             return out;
         }
         let cone = crate::march::SpotCone::of(&fl.light);
-        out.iv = march_interval(
-            cone.as_ref(),
-            light_reach(fl, &desc.medium),
-            desc.camera.position,
-            dir,
-            s,
-            settings.spot_steps,
-            settings.spot_denominator,
-        );
-        out.delta = (out.iv.1 - out.iv.0) / settings.light_steps as f32;
-        out.offset = step_offset(mean_extinction(desc), out.delta, 0.5);
+        let (o, policy) = (desc.camera.position, settings.step_policy());
+        let iv = march_interval(cone.as_ref(), light_reach(fl, &desc.medium), o, dir, s, policy);
+        out.segments = Steps::of_light(local_position(&fl.light), iv, settings.light_steps, o, dir, policy);
+        out.uni = out.segments.uniform_step(st, 0.5);
         out
     }
 
@@ -381,21 +372,21 @@ impl<'a> Spans<'a> {
             }
             return;
         }
-        let (mut a, b) = (t0.max(self.iv.0), t1.min(self.iv.1));
-        if !(b > a) || !(self.delta > 0.0) {
+        let (iv, n) = (self.segments.iv, self.segments.n);
+        let (mut a, b) = (t0.max(iv.0), t1.min(iv.1));
+        if !(b > a) || !(self.segments.delta > 0.0) {
             return;
         }
-        let mut k = (((a - self.iv.0) / self.delta) as u32).min(self.steps - 1);
+        let mut k = self.segments.index_of(a);
         while a < b {
-            let seg_end = if k + 1 >= self.steps { self.iv.1 } else { self.iv.0 + (k + 1) as f32 * self.delta };
-            let end = b.min(seg_end);
+            let end = b.min(self.segments.boundary(k + 1));
             if end > a {
                 let f = self.segment_light(k);
                 self.sum += f * v * (-self.st * a).exp() * segment_transmittance(self.st, end - a);
             }
             a = a.max(end);
             k += 1;
-            if k >= self.steps {
+            if k >= n {
                 break;
             }
         }
@@ -408,8 +399,8 @@ impl<'a> Spans<'a> {
         {
             return f;
         }
-        let t = self.iv.0 + k as f32 * self.delta + self.offset;
-        let p = self.desc.camera.position + self.dir * t;
+        let step = self.segments.step(k, self.st, 0.5, &self.uni);
+        let p = self.desc.camera.position + self.dir * (step.t0 + step.off);
         let (l, wl) = light_incident(&self.desc.lights[0], &self.desc.medium, p);
         let f = self.desc.medium.scattering * self.desc.medium.phase.eval(wl.dot(-self.dir)) * l;
         self.seg = Some((k, f));

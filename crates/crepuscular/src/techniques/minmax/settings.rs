@@ -1,7 +1,7 @@
 //! Settings of `minmax`.
 
 use crate::error::Error;
-use crate::march::{DEFAULT_SPOT_DENOMINATOR, SpotSteps, validate_spot_denominator};
+use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
 use crate::techniques::prefiltered::{PrefilteredSettings, RectificationChoice, rectify::RectifyOptions};
 use serde::{Deserialize, Serialize};
 
@@ -69,6 +69,15 @@ pub struct MinmaxSettings {
     pub spot_steps: SpotSteps,
     /// The App. B denominator of the `appendix-b-*` policies (a sine, in (0, 1]). Default 0.3.
     pub spot_denominator: f32,
+    /// How a point or spot light's steps are spread over its interval: `"uniform"` (equal
+    /// lengths, as eq. 1; point lights share the sun's march) or `"equiangular"` (equal angles
+    /// seen from the light: short steps where the ray passes it, so a 1/d² peak narrower than a
+    /// step is resolved; every local light then gets its own march). Ignored for a sun.
+    /// Equiangular costs a sine and cosine per step, N more samples per point light on rays that
+    /// also see a sun, and coarser steps far from the light: it fixes the sweep's point lights
+    /// next to the view rays (NMAE 0.58 → 0.01) but loses 1.2 dB (brute-force) to 9 dB
+    /// (minmax) on night-street's spots. Default `"uniform"` (docs/MODEL.md §9).
+    pub local_steps: LocalSteps,
 }
 
 impl Default for MinmaxSettings {
@@ -85,11 +94,17 @@ impl Default for MinmaxSettings {
             light_steps: 32,
             spot_steps: SpotSteps::ExactCone,
             spot_denominator: DEFAULT_SPOT_DENOMINATOR,
+            local_steps: LocalSteps::Uniform,
         }
     }
 }
 
 impl MinmaxSettings {
+    /// Where its steps go: `spot_steps`, `spot_denominator` and `local_steps` together.
+    pub fn step_policy(&self) -> StepPolicy {
+        StepPolicy { spot: self.spot_steps, denominator: self.spot_denominator, local: self.local_steps }
+    }
+
     /// Checks the ranges; the error names the setting and value.
     pub fn validate(&self) -> Result<(), Error> {
         let [w, h] = self.map_size;
@@ -159,6 +174,7 @@ impl MinmaxSettings {
             light_steps: self.light_steps,
             spot_steps: self.spot_steps,
             spot_denominator: self.spot_denominator,
+            local_steps: self.local_steps,
             ..PrefilteredSettings::default()
         }
     }

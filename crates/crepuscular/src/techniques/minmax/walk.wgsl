@@ -50,9 +50,8 @@ struct Spans {
     dir: vec3<f32>,
     directional: bool,
     constant: vec3<f32>,
-    iv: vec2<f32>,
-    delta: f32,
-    offset: f32,
+    segments: Steps,
+    uni: Step,
     seg: u32,
     seg_light: vec3<f32>,
     sum: vec3<f32>,
@@ -70,10 +69,10 @@ fn spans_new(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> Spans {
         sp.constant = f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance;
         return sp;
     }
-    sp.iv = march_interval(f, light, f.camera_pos.xyz, dir, s, p.ints3.w, p.epipole.w);
-    sp.delta = (sp.iv.y - sp.iv.x) / f32(p.ints3.z);
-    let st = extinction(f);
-    sp.offset = step_offset((st.x + st.y + st.z) / 3.0, sp.delta, 0.5);
+    let o = f.camera_pos.xyz;
+    let iv = march_interval(f, light, o, dir, s, p.ints3.w, p.epipole.w);
+    sp.segments = own_steps(light, iv, p.ints3.z, o, dir, p.ints3.w);
+    sp.uni = uniform_step(sp.segments, extinction(f), 0.5);
     return sp;
 }
 
@@ -81,8 +80,8 @@ fn segment_light(f: Frame, sp: ptr<function, Spans>, k: u32) -> vec3<f32> {
     if (*sp).seg == k {
         return (*sp).seg_light;
     }
-    let t = (*sp).iv.x + f32(k) * (*sp).delta + (*sp).offset;
-    let inc = light_incident(f, lights.items[0], spot_tex, f.camera_pos.xyz + (*sp).dir * t);
+    let step = march_step((*sp).segments, k, extinction(f), 0.5, (*sp).uni);
+    let inc = light_incident(f, lights.items[0], spot_tex, f.camera_pos.xyz + (*sp).dir * (step.t0 + step.off));
     let l = f.sigma_s.xyz * phase(f, dot(inc.dir, -(*sp).dir)) * inc.radiance;
     (*sp).seg = k;
     (*sp).seg_light = l;
@@ -97,22 +96,19 @@ fn spans_add(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, v:
         }
         return;
     }
-    var a = max(t0, (*sp).iv.x);
-    let b = min(t1, (*sp).iv.y);
-    if !(b > a) || !((*sp).delta > 0.0) {
+    let segs = (*sp).segments;
+    var a = max(t0, segs.iv.x);
+    let b = min(t1, segs.iv.y);
+    if !(b > a) || !(segs.delta > 0.0) {
         return;
     }
-    let steps = p.ints3.z;
-    var k = min(u32((a - (*sp).iv.x) / (*sp).delta), steps - 1u);
+    let steps = segs.n;
+    var k = step_index(segs, a);
     loop {
         if !(a < b) {
             break;
         }
-        var seg_end = (*sp).iv.y;
-        if k + 1u < steps {
-            seg_end = (*sp).iv.x + f32(k + 1u) * (*sp).delta;
-        }
-        let end = min(b, seg_end);
+        let end = min(b, step_boundary(segs, k + 1u));
         if end > a {
             let l = segment_light(f, sp, k);
             (*sp).sum += l * v * exp(-st * a) * segment_transmittance(st, end - a);

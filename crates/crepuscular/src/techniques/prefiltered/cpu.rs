@@ -9,7 +9,9 @@ use crate::error::Error;
 use crate::frame::{CpuFrame, FrameDesc};
 use crate::image::Image;
 use crate::integrand::{light_incident, light_position};
-use crate::march::{PixelMarch, light_reach, march_interval, march_pixel, mean_extinction, step_offset};
+use crate::march::{
+    PixelMarch, Steps, light_reach, local_position, march_interval, march_pixel, march_samples, mean_extinction,
+};
 use crate::model::segment_transmittance;
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
@@ -317,7 +319,8 @@ pub fn prefiltered_visibility(p: &Passes, bases: u32, set: u32, row: f32, col: f
 /// The unoccluded in-scattering along the view ray to distance `s`, the factor the prefiltered
 /// visibility multiplies. Directional: the closed form σs·p·E·(1 − e^(−σt·s))/σt (eq. 2–3).
 /// Spot and point: `light_steps` shadow-free quadrature points over the ray's lit interval,
-/// placed and weighted as `brute-force` places its samples (the "quadrature table" route to the
+/// placed and weighted as `brute-force` places its samples (equiangular under the default
+/// `local_steps`) (the "quadrature table" route to the
 /// unoccluded integral of Sun et al. 2005). Mirrors `unoccluded_inscatter` in evaluate.wgsl.
 pub fn unoccluded_inscatter(desc: &FrameDesc, settings: &PrefilteredSettings, dir: Vec3, s: f32) -> Vec3 {
     let st = desc.medium.extinction();
@@ -326,31 +329,16 @@ pub fn unoccluded_inscatter(desc: &FrameDesc, settings: &PrefilteredSettings, di
     if matches!(desc.lights[0].light, crate::Light::Directional { .. }) {
         return ss * desc.medium.phase.eval(wl.dot(-dir)) * l_in * segment_transmittance(st, s);
     }
-    let cone = crate::march::SpotCone::of(&desc.lights[0].light);
-    let iv = march_interval(
-        cone.as_ref(),
-        light_reach(&desc.lights[0], &desc.medium),
-        desc.camera.position,
-        dir,
-        s,
-        settings.spot_steps,
-        settings.spot_denominator,
-    );
-    if iv.1 <= iv.0 {
-        return Vec3::ZERO;
-    }
-    let n = settings.light_steps;
-    let delta = (iv.1 - iv.0) / n as f32;
-    let seg = segment_transmittance(st, delta);
-    let off = step_offset(mean_extinction(desc), delta, 0.5);
-    let mut sum = Vec3::ZERO;
-    for i in 0..n {
-        let t0 = iv.0 + i as f32 * delta;
-        let p = desc.camera.position + dir * (t0 + off);
-        let (l, wl) = light_incident(&desc.lights[0], &desc.medium, p);
-        sum += ss * desc.medium.phase.eval(wl.dot(-dir)) * l * (-st * t0).exp() * seg;
-    }
-    sum
+    let fl = &desc.lights[0];
+    let cone = crate::march::SpotCone::of(&fl.light);
+    let o = desc.camera.position;
+    let policy = settings.step_policy();
+    let iv = march_interval(cone.as_ref(), light_reach(fl, &desc.medium), o, dir, s, policy);
+    let steps = Steps::of_light(local_position(&fl.light), iv, settings.light_steps, o, dir, policy);
+    march_samples(desc, &steps, 0, 1, 0.5, |t| {
+        let (l, wl) = light_incident(fl, &desc.medium, o + dir * t);
+        ss * desc.medium.phase.eval(wl.dot(-dir)) * l
+    })
 }
 
 /// The prefiltered visibility of a view ray (unit `dir`) ending at `pt`, per colour channel:

@@ -111,19 +111,18 @@ fn unoccluded_inscatter(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> vec3<f32
         let inc = light_incident(f, light, spot_tex, f.camera_pos.xyz);
         return f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance * segment_transmittance(st, s);
     }
-    let iv = march_interval(f, light, f.camera_pos.xyz, dir, s, p.ints3.w, p.epipole.w);
+    let o = f.camera_pos.xyz;
+    let iv = march_interval(f, light, o, dir, s, p.ints3.w, p.epipole.w);
     if iv.y <= iv.x {
         return vec3<f32>(0.0);
     }
-    let n = p.ints3.z;
-    let delta = (iv.y - iv.x) / f32(n);
-    let seg = segment_transmittance(st, delta);
-    let off = step_offset((st.x + st.y + st.z) / 3.0, delta, 0.5);
+    let steps = own_steps(light, iv, p.ints3.z, o, dir, p.ints3.w);
+    let uni = uniform_step(steps, st, 0.5);
     var sum = vec3<f32>(0.0);
-    for (var i = 0u; i < n; i++) {
-        let t0 = iv.x + f32(i) * delta;
-        let inc = light_incident(f, light, spot_tex, f.camera_pos.xyz + dir * (t0 + off));
-        sum += f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance * exp(-st * t0) * seg;
+    for (var i = 0u; i < steps.n; i++) {
+        let step = march_step(steps, i, st, 0.5, uni);
+        let inc = light_incident(f, light, spot_tex, o + dir * (step.t0 + step.off));
+        sum += f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance * exp(-st * step.t0) * step.seg;
     }
     return sum;
 }

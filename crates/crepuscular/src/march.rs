@@ -546,7 +546,9 @@ impl Steps {
     }
 
     /// Step i: its start tᵢ, its sample's offset past tᵢ ([`step_offset`] of its length, at
-    /// fraction `j`) and its transmittance integral; `uni` is [`Steps::uniform_step`]. Mirrors
+    /// fraction `j`) and its weight: the transmittance integral over the step, and for an
+    /// equiangular step that integral's mean times d²/D·Δφ at the sample (the step's length
+    /// under the change of variables t(φ)); `uni` is [`Steps::uniform_step`]. Mirrors
     /// `march_step` in common.wgsl.
     pub fn step(&self, i: u32, sigma: Vec3, j: f32, uni: &Step) -> Step {
         if self.angular.is_none() {
@@ -555,7 +557,13 @@ impl Steps {
         let t0 = self.boundary(i);
         let len = self.boundary(i + 1) - t0;
         let mean = (sigma.x + sigma.y + sigma.z) / 3.0;
-        Step { t0, off: step_offset(mean, len, j), seg: segment_transmittance(sigma, len) }
+        let off = step_offset(mean, len, j);
+        // The step's mean transmittance times its length in φ: dt = d²/D·dφ at the sample
+        // (docs/MODEL.md §9), so a pure 1/d² falloff is integrated exactly whatever the step.
+        let g = self.angular.unwrap();
+        let x = t0 + off - g.along;
+        let stretch = if len > 0.0 { (g.dist * g.dist + x * x) / g.dist * g.dphi.abs() / len } else { 0.0 };
+        Step { t0, off, seg: segment_transmittance(sigma, len) * stretch }
     }
 
     /// The step k in 0..N that holds distance `t` (clamped to the interval).

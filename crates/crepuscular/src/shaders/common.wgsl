@@ -571,7 +571,11 @@ fn march_step(st: Steps, i: u32, sigma: vec3<f32>, j: f32, uni: Step) -> Step {
     }
     let t0 = step_boundary(st, i);
     let len = step_boundary(st, i + 1u) - t0;
-    return Step(t0, step_offset((sigma.x + sigma.y + sigma.z) / 3.0, len, j), segment_transmittance(sigma, len));
+    let off = step_offset((sigma.x + sigma.y + sigma.z) / 3.0, len, j);
+    // The mean transmittance times the step's length in φ, dt = d²/D·dφ at the sample (march.rs).
+    let x = t0 + off - st.along;
+    let stretch = select(0.0, (st.dist * st.dist + x * x) / st.dist * abs(st.dphi) / len, len > 0.0);
+    return Step(t0, off, segment_transmittance(sigma, len) * stretch);
 }
 
 // march.rs Steps::index_of: the step that holds t.

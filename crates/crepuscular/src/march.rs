@@ -99,19 +99,12 @@ pub enum LocalSteps {
     Equiangular,
 }
 
-impl LocalSteps {
-    /// The name used in settings.
-    pub fn name(self) -> &'static str {
-        match self {
-            LocalSteps::Uniform => "uniform",
-            LocalSteps::Equiangular => "equiangular",
-        }
-    }
-}
-
 /// Bit of [`StepPolicy::code`] set for [`LocalSteps::Equiangular`] (`MARCH_EQUIANGULAR` in
-/// common.wgsl); the low two bits are the [`SpotSteps`] code.
+/// common.wgsl).
 pub const EQUIANGULAR_BIT: u32 = 4;
+
+/// The bits of [`StepPolicy::code`] that hold the [`SpotSteps`] code (`MARCH_SPOT_MASK`).
+const SPOT_CODE_MASK: u32 = 3;
 
 /// Where a ray-marching technique puts its steps: its `spot_steps`, `spot_denominator` and
 /// `local_steps` settings together.
@@ -135,7 +128,7 @@ impl StepPolicy {
     /// The policy of a [`StepPolicy::code`] (unknown spot codes read as `fixed`).
     pub fn from_code(code: u32, denominator: f32) -> Self {
         StepPolicy {
-            spot: SpotSteps::ALL.get((code & 3) as usize).copied().unwrap_or_default(),
+            spot: SpotSteps::ALL.get((code & SPOT_CODE_MASK) as usize).copied().unwrap_or_default(),
             denominator,
             local: if code & EQUIANGULAR_BIT != 0 { LocalSteps::Equiangular } else { LocalSteps::Uniform },
         }
@@ -458,7 +451,8 @@ pub struct Step {
     pub t0: f32,
     /// Where its sample sits past tᵢ.
     pub off: f32,
-    /// Its transmittance integral ∫₀^len e^(−σt·u) du.
+    /// Its weight: the transmittance integral ∫₀^len e^(−σt·u) du (for an equiangular step,
+    /// scaled to its length under the change of variables; [`Steps::step`]).
     pub seg: Vec3,
 }
 
@@ -541,8 +535,11 @@ impl Steps {
     /// the [`step_offset`] and transmittance integral of a step of length (b − a)/N. Mirrors
     /// `uniform_step` in common.wgsl.
     pub fn uniform_step(&self, sigma: Vec3, j: f32) -> Step {
-        let mean = (sigma.x + sigma.y + sigma.z) / 3.0;
-        Step { t0: 0.0, off: step_offset(mean, self.delta, j), seg: segment_transmittance(sigma, self.delta) }
+        Step {
+            t0: 0.0,
+            off: step_offset(channel_mean(sigma), self.delta, j),
+            seg: segment_transmittance(sigma, self.delta),
+        }
     }
 
     /// Step i: its start tᵢ, its sample's offset past tᵢ ([`step_offset`] of its length, at
@@ -551,16 +548,14 @@ impl Steps {
     /// under the change of variables t(φ)); `uni` is [`Steps::uniform_step`]. Mirrors
     /// `march_step` in common.wgsl.
     pub fn step(&self, i: u32, sigma: Vec3, j: f32, uni: &Step) -> Step {
-        if self.angular.is_none() {
+        let Some(g) = self.angular else {
             return Step { t0: self.iv.0 + i as f32 * self.delta, ..*uni };
-        }
+        };
         let t0 = self.boundary(i);
         let len = self.boundary(i + 1) - t0;
-        let mean = (sigma.x + sigma.y + sigma.z) / 3.0;
-        let off = step_offset(mean, len, j);
+        let off = step_offset(channel_mean(sigma), len, j);
         // The step's mean transmittance times its length in φ: dt = d²/D·dφ at the sample
         // (docs/MODEL.md §9), so a pure 1/d² falloff is integrated exactly whatever the step.
-        let g = self.angular.unwrap();
         let x = t0 + off - g.along;
         let stretch = if len > 0.0 { (g.dist * g.dist + x * x) / g.dist * g.dphi.abs() / len } else { 0.0 };
         Step { t0, off, seg: segment_transmittance(sigma, len) * stretch }
@@ -593,8 +588,12 @@ pub fn step_offset(sigma_mean: f32, delta: f32, j: f32) -> f32 {
 
 /// The mean extinction σ̄ of the three channels, which [`step_offset`] places samples by.
 pub fn mean_extinction(desc: &FrameDesc) -> f32 {
-    let st = desc.medium.extinction();
-    (st.x + st.y + st.z) / 3.0
+    channel_mean(desc.medium.extinction())
+}
+
+/// The mean of an rgb coefficient's three channels.
+fn channel_mean(v: Vec3) -> f32 {
+    (v.x + v.y + v.z) / 3.0
 }
 
 /// Eq. 1 of Tóth & Umenhoffer 2009 over the N `steps` of the view ray from the eye along
@@ -602,7 +601,8 @@ pub fn mean_extinction(desc: &FrameDesc) -> f32 {
 /// interleaved: the pixel's block offset, M²), step i = [tᵢ, tᵢ₊₁] sampled at
 /// tᵢ + [`step_offset`]`(σ̄, tᵢ₊₁ − tᵢ, j)` and weighted by the transmittance integrated exactly
 /// over the step (an improvement on eq. 1's exp(−τ(s − l))·Δl that is exact for a constant
-/// integrand), of the lights `which` selects. Mirrors `march_steps` in common.wgsl.
+/// integrand; an equiangular step's weight is [`Steps::step`]'s), of the lights `which`
+/// selects. Mirrors `march_steps` in common.wgsl.
 #[allow(clippy::too_many_arguments)]
 pub fn march_steps(
     frame: &CpuFrame,
@@ -620,8 +620,9 @@ pub fn march_steps(
 }
 
 /// The loop of [`march_steps`] for any integrand `density(t)` (σs·p·L_in·V at distance t):
-/// Σᵢ density(tᵢ + offset)·e^(−σt·tᵢ)·∫₀^{tᵢ₊₁−tᵢ} e^(−σt·u) du over i = first, first + stride, …
-/// < N. A uniform layout's step length, offset and step transmittance are found once.
+/// Σᵢ density(tᵢ + offset)·e^(−σt·tᵢ)·wᵢ over i = first, first + stride, … < N, wᵢ the step's
+/// weight ([`Steps::step`]: ∫₀^{tᵢ₊₁−tᵢ} e^(−σt·u) du for a uniform step). A uniform layout's
+/// step length, offset and step transmittance are found once.
 pub fn march_samples(
     desc: &FrameDesc,
     steps: &Steps,

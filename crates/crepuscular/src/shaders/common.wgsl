@@ -552,7 +552,8 @@ fn step_boundary(st: Steps, k: u32) -> f32 {
 }
 
 // One step of a march (march.rs march_samples): its start t0, where its sample sits past t0,
-// and its transmittance integral ∫₀^len e^(−σt·u) du.
+// and its weight: the transmittance integral ∫₀^len e^(−σt·u) du, for an equiangular step scaled
+// to its length under the change of variables (march.rs Steps::step).
 struct Step {
     t0: f32,
     off: f32,

@@ -24,37 +24,46 @@
 @group(0) @binding(7) var<storage, read_write> dispatch: array<u32, 3>;
 @group(0) @binding(8) var<storage, read_write> claims: array<atomic<u32>>;
 
-fn depth_at(t: u32, k: u32) -> f32 {
-    return textureLoad(coord_tex, vec2<i32>(i32(t), i32(k)), 0).z;
+// Texel t of line k: its view distance, and whether the re-march disc's edge counts there
+// (near_epipole, local lights under equiangular steps only).
+struct Texel {
+    s: f32,
+    near: bool,
 }
 
-fn near_at(t: u32, k: u32) -> bool {
-    return params.local_light == 1u && near_epipole(textureLoad(coord_tex, vec2<i32>(i32(t), i32(k)), 0).xy);
+fn texel_at(t: u32, k: u32) -> Texel {
+    let c = textureLoad(coord_tex, vec2<i32>(i32(t), i32(k)), 0);
+    return Texel(c.z, params.local_light == 1u && near_epipole(c.xy));
+}
+
+// A break between adjacent texels a and b: a depth discontinuity, or the edge of the
+// re-marched disc around the epipole (cpu.rs refine_texel: no texel outside interpolates from
+// the epipole).
+fn breaks(a: Texel, b: Texel) -> bool {
+    return discontinuity(a.s, b.s) || a.near != b.near;
 }
 
 // (left, right) of texel t of line k (§5.2 pseudo-code, restricted to t's initial segment).
-// The edge of the re-marched disc around the epipole breaks the search as a depth
-// discontinuity does (cpu.rs refine_texel: no texel outside interpolates from the epipole).
 fn refine_texel(t: u32, k: u32, n_init: u32) -> vec2<u32> {
     let seg = segment(t, n_init);
     var left = t;
-    var s = depth_at(t, k);
+    var cur = texel_at(t, k);
     while left > seg.x {
-        let sl = depth_at(left - 1u, k);
-        if discontinuity(sl, s) || near_at(left - 1u, k) != near_at(left, k) {
+        let l = texel_at(left - 1u, k);
+        if breaks(l, cur) {
             break;
         }
-        s = sl;
+        cur = l;
         left -= 1u;
     }
     var right = t;
-    s = depth_at(t, k);
+    cur = texel_at(t, k);
     while right < seg.y {
-        let sr = depth_at(right + 1u, k);
-        if discontinuity(s, sr) || near_at(right, k) != near_at(right + 1u, k) {
+        let r = texel_at(right + 1u, k);
+        if breaks(cur, r) {
             break;
         }
-        s = sr;
+        cur = r;
         right += 1u;
     }
     if left == t || right == t {

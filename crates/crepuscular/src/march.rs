@@ -451,9 +451,13 @@ pub struct Step {
     pub t0: f32,
     /// Where its sample sits past tᵢ.
     pub off: f32,
-    /// Its weight: the transmittance integral ∫₀^len e^(−σt·u) du (for an equiangular step,
-    /// scaled to its length under the change of variables; [`Steps::step`]).
+    /// Its transmittance integral ∫₀^len e^(−σt·u) du.
     pub seg: Vec3,
+    /// What the integrand at the sample is multiplied by besides: 1 for a uniform step; for an
+    /// equiangular one its length under the change of variables over its length,
+    /// (d²/D·Δφ)/len at the sample (docs/MODEL.md §9), so a pure 1/d² falloff is integrated
+    /// exactly whatever the step.
+    pub scale: f32,
 }
 
 /// An equiangular layout (docs/MODEL.md §9): the light's foot on the ray at t = `along`, its
@@ -539,14 +543,13 @@ impl Steps {
             t0: 0.0,
             off: step_offset(channel_mean(sigma), self.delta, j),
             seg: segment_transmittance(sigma, self.delta),
+            scale: 1.0,
         }
     }
 
     /// Step i: its start tᵢ, its sample's offset past tᵢ ([`step_offset`] of its length, at
-    /// fraction `j`) and its weight: the transmittance integral over the step, and for an
-    /// equiangular step that integral's mean times d²/D·Δφ at the sample (the step's length
-    /// under the change of variables t(φ)); `uni` is [`Steps::uniform_step`]. Mirrors
-    /// `march_step` in common.wgsl.
+    /// fraction `j`), its transmittance integral and its [`Step::scale`]; `uni` is
+    /// [`Steps::uniform_step`]. Mirrors `march_step` in common.wgsl.
     pub fn step(&self, i: u32, sigma: Vec3, j: f32, uni: &Step) -> Step {
         let Some(g) = self.angular else {
             return Step { t0: self.iv.0 + i as f32 * self.delta, ..*uni };
@@ -554,11 +557,10 @@ impl Steps {
         let t0 = self.boundary(i);
         let len = self.boundary(i + 1) - t0;
         let off = step_offset(channel_mean(sigma), len, j);
-        // The step's mean transmittance times its length in φ: dt = d²/D·dφ at the sample
-        // (docs/MODEL.md §9), so a pure 1/d² falloff is integrated exactly whatever the step.
+        // dt = d²/D·dφ at the sample (docs/MODEL.md §9).
         let x = t0 + off - g.along;
-        let stretch = if len > 0.0 { (g.dist * g.dist + x * x) / g.dist * g.dphi.abs() / len } else { 0.0 };
-        Step { t0, off, seg: segment_transmittance(sigma, len) * stretch }
+        let scale = if len > 0.0 { (g.dist * g.dist + x * x) / g.dist * g.dphi.abs() / len } else { 0.0 };
+        Step { t0, off, seg: segment_transmittance(sigma, len), scale }
     }
 
     /// The step k in 0..N that holds distance `t` (clamped to the interval).
@@ -601,8 +603,8 @@ fn channel_mean(v: Vec3) -> f32 {
 /// interleaved: the pixel's block offset, M²), step i = [tᵢ, tᵢ₊₁] sampled at
 /// tᵢ + [`step_offset`]`(σ̄, tᵢ₊₁ − tᵢ, j)` and weighted by the transmittance integrated exactly
 /// over the step (an improvement on eq. 1's exp(−τ(s − l))·Δl that is exact for a constant
-/// integrand; an equiangular step's weight is [`Steps::step`]'s), of the lights `which`
-/// selects. Mirrors `march_steps` in common.wgsl.
+/// integrand; an equiangular step's integrand also carries its [`Step::scale`]), of the lights
+/// `which` selects. Mirrors `march_steps` in common.wgsl.
 #[allow(clippy::too_many_arguments)]
 pub fn march_steps(
     frame: &CpuFrame,
@@ -620,8 +622,8 @@ pub fn march_steps(
 }
 
 /// The loop of [`march_steps`] for any integrand `density(t)` (σs·p·L_in·V at distance t):
-/// Σᵢ density(tᵢ + offset)·e^(−σt·tᵢ)·wᵢ over i = first, first + stride, … < N, wᵢ the step's
-/// weight ([`Steps::step`]: ∫₀^{tᵢ₊₁−tᵢ} e^(−σt·u) du for a uniform step). A uniform layout's
+/// Σᵢ density(tᵢ + offset)·scaleᵢ·e^(−σt·tᵢ)·∫₀^{tᵢ₊₁−tᵢ} e^(−σt·u) du over i = first,
+/// first + stride, … < N ([`Steps::step`]; the scale is 1 for uniform steps). A uniform layout's
 /// step length, offset and step transmittance are found once.
 pub fn march_samples(
     desc: &FrameDesc,
@@ -643,7 +645,7 @@ pub fn march_samples(
         let step = steps.step(i, sigma, j, &uni);
         // One loop over the samples; every selected light at each (docs/MODEL.md §6): the
         // position and the transmittance are shared, the lights' densities summed.
-        sum += density(step.t0 + step.off) * (-sigma * step.t0).exp() * step.seg;
+        sum += density(step.t0 + step.off) * step.scale * (-sigma * step.t0).exp() * step.seg;
         i += stride;
     }
     sum
@@ -817,7 +819,7 @@ mod tests {
         (0..steps.n)
             .map(|i| {
                 let st = steps.step(i, Vec3::ZERO, 0.5, &uni);
-                st.seg.x / (o + d * (st.t0 + st.off) - c).length_squared()
+                st.seg.x * st.scale / (o + d * (st.t0 + st.off) - c).length_squared()
             })
             .sum()
     }

@@ -551,32 +551,33 @@ fn step_boundary(st: Steps, k: u32) -> f32 {
     return clamp(st.along + st.sign * st.dist * cos(phi) / sin(phi), st.iv.x, st.iv.y);
 }
 
-// One step of a march (march.rs march_samples): its start t0, where its sample sits past t0,
-// and its weight: the transmittance integral ∫₀^len e^(−σt·u) du, for an equiangular step scaled
-// to its length under the change of variables (march.rs Steps::step).
+// One step of a march (march.rs Step): its start t0, where its sample sits past t0, its
+// transmittance integral ∫₀^len e^(−σt·u) du, and the scale of the integrand at the sample (1, or
+// for an equiangular step (d²/D·Δφ)/len: its length under the change of variables over its length).
 struct Step {
     t0: f32,
     off: f32,
     seg: vec3<f32>,
+    scale: f32,
 }
 
 // The step every step of a uniform layout shares (its t0 unused): found once per march.
 fn uniform_step(st: Steps, sigma: vec3<f32>, j: f32) -> Step {
-    return Step(0.0, step_offset((sigma.x + sigma.y + sigma.z) / 3.0, st.delta, j), segment_transmittance(sigma, st.delta));
+    return Step(0.0, step_offset((sigma.x + sigma.y + sigma.z) / 3.0, st.delta, j), segment_transmittance(sigma, st.delta), 1.0);
 }
 
 // Step i of `st`; `uni` is uniform_step(st, sigma, j).
 fn march_step(st: Steps, i: u32, sigma: vec3<f32>, j: f32, uni: Step) -> Step {
     if st.angular == 0u {
-        return Step(st.iv.x + f32(i) * st.delta, uni.off, uni.seg);
+        return Step(st.iv.x + f32(i) * st.delta, uni.off, uni.seg, 1.0);
     }
     let t0 = step_boundary(st, i);
     let len = step_boundary(st, i + 1u) - t0;
     let off = step_offset((sigma.x + sigma.y + sigma.z) / 3.0, len, j);
-    // The mean transmittance times the step's length in φ, dt = d²/D·dφ at the sample (march.rs).
+    // dt = d²/D·dφ at the sample (march.rs Step::scale).
     let x = t0 + off - st.along;
-    let stretch = select(0.0, (st.dist * st.dist + x * x) / st.dist * abs(st.dphi) / len, len > 0.0);
-    return Step(t0, off, segment_transmittance(sigma, len) * stretch);
+    let scale = select(0.0, (st.dist * st.dist + x * x) / st.dist * abs(st.dphi) / len, len > 0.0);
+    return Step(t0, off, segment_transmittance(sigma, len), scale);
 }
 
 // march.rs Steps::index_of: the step that holds t.
@@ -743,7 +744,7 @@ fn march_steps(
     for (var i = first; i < st.n; i += stride) {
         let step = march_step(st, i, sigma, j, uni);
         let p = f.camera_pos.xyz + dir * (step.t0 + step.off);
-        sum += march_density(f, shadow_map, spot_tex, dir, p, mask) * exp(-sigma * step.t0) * step.seg;
+        sum += march_density(f, shadow_map, spot_tex, dir, p, mask) * step.scale * exp(-sigma * step.t0) * step.seg;
     }
     return sum;
 }

@@ -75,7 +75,7 @@ fn march_steps_lut(dir: vec3<f32>, st: Steps, first: u32, stride: u32, j: f32, m
             m &= m - 1u;
             d += density_lut(lights.items[k], dir, p);
         }
-        sum += d * exp(-sigma * step.t0) * step.seg;
+        sum += d * step.scale * exp(-sigma * step.t0) * step.seg;
     }
     return sum;
 }

@@ -317,8 +317,8 @@ pub fn column_distance(rect: &Rectification, dir: Vec3, theta: f32, col: f32) ->
 /// Directional light: σs·p·E·e^(−σt·t₀)·(1 − e^(−σt·(t₁ − t₀)))/σt per span, exact (the phase
 /// and E are constant along the ray; docs/MODEL.md §8). Spot and point: the ray's lit interval
 /// ([`march_interval`]) cut into `light_steps` segments; each segment's light, cone, texture
-/// and phase are evaluated once, at its transmittance-weighted midpoint, and multiply the exact
-/// transmittance integral of each lit piece of it. The segments are `brute-force`'s steps
+/// and phase are evaluated once, at its transmittance-weighted midpoint (with the segment's
+/// [`Step::scale`]), and multiply the exact transmittance integral of each lit piece of it. The segments are `brute-force`'s steps
 /// ([`Steps::of_light`]: equiangular under the default `local_steps`). Mirrors `Spans` in
 /// walk.wgsl.
 pub struct Spans<'a> {
@@ -347,7 +347,7 @@ impl<'a> Spans<'a> {
             st,
             constant: None,
             segments: Steps::uniform((0.0, 0.0), settings.light_steps),
-            uni: Step { t0: 0.0, off: 0.0, seg: Vec3::ZERO },
+            uni: Step { t0: 0.0, off: 0.0, seg: Vec3::ZERO, scale: 1.0 },
             seg: None,
             sum: Vec3::ZERO,
         };
@@ -392,7 +392,9 @@ impl<'a> Spans<'a> {
         }
     }
 
-    /// σs·p·L_in of segment `k` at its sample point, cached while the walk stays in it.
+    /// σs·p·L_in of segment `k` at its sample point, times the segment's [`Step::scale`] (1 for
+    /// uniform segments; for equiangular ones the 1/d² falloff averaged over the segment instead
+    /// of taken at the sample, docs/MODEL.md §9), cached while the walk stays in it.
     fn segment_light(&mut self, k: u32) -> Vec3 {
         if let Some((sk, f)) = self.seg
             && sk == k
@@ -402,7 +404,7 @@ impl<'a> Spans<'a> {
         let step = self.segments.step(k, self.st, 0.5, &self.uni);
         let p = self.desc.camera.position + self.dir * (step.t0 + step.off);
         let (l, wl) = light_incident(&self.desc.lights[0], &self.desc.medium, p);
-        let f = self.desc.medium.scattering * self.desc.medium.phase.eval(wl.dot(-self.dir)) * l;
+        let f = self.desc.medium.scattering * self.desc.medium.phase.eval(wl.dot(-self.dir)) * l * step.scale;
         self.seg = Some((k, f));
         f
     }

@@ -82,7 +82,7 @@ fn segment_light(f: Frame, sp: ptr<function, Spans>, k: u32) -> vec3<f32> {
     }
     let step = march_step((*sp).segments, k, extinction(f), 0.5, (*sp).uni);
     let inc = light_incident(f, lights.items[0], spot_tex, f.camera_pos.xyz + (*sp).dir * (step.t0 + step.off));
-    let l = f.sigma_s.xyz * phase(f, dot(inc.dir, -(*sp).dir)) * inc.radiance;
+    let l = f.sigma_s.xyz * phase(f, dot(inc.dir, -(*sp).dir)) * inc.radiance * step.scale;
     (*sp).seg = k;
     (*sp).seg_light = l;
     return l;

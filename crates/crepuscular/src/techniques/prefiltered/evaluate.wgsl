@@ -122,7 +122,7 @@ fn unoccluded_inscatter(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> vec3<f32
     for (var i = 0u; i < steps.n; i++) {
         let step = march_step(steps, i, st, 0.5, uni);
         let inc = light_incident(f, light, spot_tex, o + dir * (step.t0 + step.off));
-        sum += f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance * exp(-st * step.t0) * step.seg;
+        sum += f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance * step.scale * exp(-st * step.t0) * step.seg;
     }
     return sum;
 }

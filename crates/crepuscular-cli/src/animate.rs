@@ -328,7 +328,7 @@ impl AnimatedTechnique {
     }
 
     /// The GPU texture the last frame's in-scattering was rendered into (when it ran on the GPU).
-    fn gpu_output(&self) -> Option<&wgpu::Texture> {
+    pub(crate) fn gpu_output(&self) -> Option<&wgpu::Texture> {
         self.gpu.as_ref().map(|(_, _, out)| out)
     }
 
@@ -698,17 +698,46 @@ pub fn recovery_frames(psnr: &[f64], jump: usize) -> Option<u32> {
     psnr.iter().skip(jump).position(|&p| p >= steady - 1.0).map(|r| r as u32)
 }
 
-/// The temporal stage of one `animate` run.
-enum Stage {
+/// `overrides` with `jitter=true` added where the technique has a `jitter` setting and the
+/// overrides do not set it (what the temporal stage is fed); and whether it was added.
+pub(crate) fn with_jitter(name: &str, scene: &Scene, overrides: &[String]) -> Result<(Vec<String>, bool)> {
+    let first = parse_technique(name, scene, overrides)?;
+    let has_jitter = serde_json::to_value(&first)?.get("jitter").is_some();
+    let set_by_user = overrides.iter().any(|o| o.split_once('=').is_some_and(|(k, _)| k.trim() == "jitter"));
+    let mut o = overrides.to_vec();
+    if has_jitter && !set_by_user {
+        o.push("jitter=true".into());
+    }
+    Ok((o, has_jitter && !set_by_user))
+}
+
+/// The temporal stage after one technique along a path (`animate --temporal`, bench's temporal
+/// column): the library's [`Temporal`] where the technique runs on the GPU, its CPU mirror
+/// elsewhere.
+pub(crate) enum Stage {
     Gpu(Box<Temporal>),
     Cpu(CpuTemporal),
 }
 
 impl Stage {
+    /// The stage for `technique`: on the GPU when there is one and the technique runs there.
+    pub(crate) fn new(settings: TemporalSettings, gpu: Option<&GpuContext>, technique: &str) -> Result<Self> {
+        let on_gpu = crepuscular::techniques::find(technique).is_some_and(|t| t.gpu);
+        Ok(match gpu {
+            Some(g) if on_gpu => Stage::Gpu(Box::new(Temporal::new(&g.device, settings)?)),
+            _ => Stage::Cpu(CpuTemporal::new(settings)?),
+        })
+    }
+
+    /// "gpu" or "cpu".
+    pub(crate) fn backend(&self) -> &'static str {
+        if matches!(self, Stage::Gpu(_)) { "gpu" } else { "cpu" }
+    }
+
     /// Resolves one frame: `img` is the technique's in-scattering on `frame`, which on the GPU
     /// is still in `gpu_output` (read there, with the host's depth, not uploaded again).
     /// Returns the output and the mean history weight.
-    fn resolve(
+    pub(crate) fn resolve(
         &mut self,
         gpu: Option<&GpuContext>,
         frame: &HostFrame,
@@ -782,23 +811,14 @@ pub fn run(
     if let Some(s) = opts.shadow_map_size {
         scene.render.shadow.size = s;
     }
-    let mut overrides = opts.overrides.clone();
-    let mut jitter_added = false;
-    if opts.temporal.is_some() {
-        let first = parse_technique(&opts.technique, &scene, &opts.overrides)?;
-        let has_jitter = serde_json::to_value(&first)?.get("jitter").is_some();
-        let set_by_user = opts.overrides.iter().any(|o| o.split_once('=').is_some_and(|(k, _)| k.trim() == "jitter"));
-        if has_jitter && !set_by_user {
-            overrides.push("jitter=true".into());
-            jitter_added = true;
-        }
-    }
+    let (overrides, jitter_added) = match opts.temporal {
+        Some(_) => with_jitter(&opts.technique, &scene, &opts.overrides)?,
+        None => (opts.overrides.clone(), false),
+    };
     let mut technique = AnimatedTechnique::new(&opts.technique, &scene, &overrides)?;
-    let on_gpu = gpu.is_some() && crepuscular::techniques::find(&opts.technique).is_some_and(|t| t.gpu);
-    let mut stage = match (opts.temporal, gpu) {
-        (Some(s), Some(g)) if on_gpu => Some(Stage::Gpu(Box::new(Temporal::new(&g.device, s)?))),
-        (Some(s), _) => Some(Stage::Cpu(CpuTemporal::new(s)?)),
-        (None, _) => None,
+    let mut stage = match opts.temporal {
+        Some(s) => Some(Stage::new(s, gpu, &opts.technique)?),
+        None => None,
     };
     let mut meter_without = FlickerMeter::new();
     let mut stage_ms = Vec::new();
@@ -890,7 +910,7 @@ pub fn run(
         (Some(settings), Some(st)) => Some(TemporalReport {
             settings,
             jitter_added,
-            backend: if matches!(st, Stage::Gpu(_)) { "gpu" } else { "cpu" }.into(),
+            backend: st.backend().into(),
             stage_ms,
             frames: qualities,
             flicker_without: if opts.flicker { Some(meter_without.finish()?) } else { None },

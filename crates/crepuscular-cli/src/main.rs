@@ -219,6 +219,22 @@ struct BenchArgs {
     /// per scene that many references and host frames, per row that many frames.
     #[arg(long)]
     flicker_frames: Option<u32>,
+    /// Add the temporal column (on in the `temporal` preset): every row of the smallest size (at the flicker's size) along a
+    /// slow camera move (--temporal-frames frames of the scene's `animate` path, 1/96 of its
+    /// loop apart, lights still), as configured and with `jitter=true` followed by the temporal
+    /// stage (docs/MODEL.md §7), each frame against its own reference; PSNR and FLIP of the last
+    /// frame, flicker over all. Cost: per scene that many references and host frames, per row
+    /// twice that many frames.
+    #[arg(long)]
+    temporal: bool,
+    /// A temporal-stage setting for that column, `key=value` (with --temporal), e.g.
+    /// `--temporal-set clip_sigma=1.0`; repeatable.
+    #[arg(long = "temporal-set", value_name = "KEY=VALUE")]
+    temporal_set: Vec<String>,
+    /// Frames of the temporal column, 2..=1000 (default 9: eight frames of history, then the
+    /// measured one).
+    #[arg(long)]
+    temporal_frames: Option<u32>,
     /// Where to compute: auto (GPU if any, else CPU), gpu, cpu.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
@@ -525,11 +541,23 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
         None => bench::DEFAULT_FLICKER_FRAMES,
     };
     bench::check_flicker_frames(flicker_frames, plan.reference_steps)?;
+    let temporal_on = a.temporal || plan.name == bench::TEMPORAL_PRESET;
+    let temporal = match (temporal_on, a.temporal_set.is_empty(), a.temporal_frames) {
+        (true, _, _) => Some(render::parse_temporal(&a.temporal_set)?),
+        (false, false, _) => bail!("--temporal-set needs --temporal"),
+        (false, _, Some(_)) => bail!("--temporal-frames needs --temporal"),
+        (false, true, None) => None,
+    };
+    let temporal_frames = match temporal {
+        Some(_) => a.temporal_frames.unwrap_or(bench::DEFAULT_TEMPORAL_FRAMES),
+        None => 0,
+    };
+    bench::check_temporal_frames(temporal_frames, plan.reference_steps)?;
     let notice = |m: &str| eprintln!("{m}");
     let gpu = render::open_gpu(a.backend, &notice)?;
     let on = gpu.as_ref().map(|g| g.describe()).unwrap_or_else(|| "CPU".into());
     let total = (plan.scenes.len() * plan.sizes.len() * (plan.variants.len() + 2)) as u64
-        + (plan.scenes.len() as u64 * flicker_frames as u64);
+        + (plan.scenes.len() as u64 * (flicker_frames + temporal_frames) as u64);
     eprintln!(
         "bench `{}` on {on}: {} configurations",
         plan.name,
@@ -541,6 +569,9 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let (mut report, _) = bench::run(&plan, gpu.as_ref(), &command, &step, &rows, false)?;
     bench::measure_flicker(&mut report, gpu.as_ref(), flicker_frames, &step, &rows)?;
+    if let Some(t) = temporal {
+        bench::measure_temporal(&mut report, gpu.as_ref(), temporal_frames, t, &step, &rows)?;
+    }
     bar.finish();
     for p in bench::write(&report, &a.output)? {
         eprintln!("wrote {}", p.display());

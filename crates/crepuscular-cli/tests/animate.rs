@@ -282,6 +282,53 @@ fn bench_reports_flicker_for_the_smallest_size() {
 }
 
 #[test]
+fn bench_temporal_column_is_animate_temporal_on_the_same_frames() {
+    // The column renders the same slow move as `animate --temporal --still-lights --frames 96`,
+    // so its last frame's numbers, with and without the stage, are animate's to the bit.
+    let d = tmp("bench-temporal");
+    let out = bin()
+        .args(["bench", "--backend", "cpu", "--scenes", "cage", "--techniques", "brute-force"])
+        .args(["--sizes", "32x18", "--repeat", "1", "--warmup", "0", "--reference-steps", "16"])
+        .args(["--flicker-frames", "0", "--temporal", "--temporal-frames", "3", "--output"])
+        .arg(&d)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(d.join("bench.json")).unwrap()).unwrap();
+    assert_eq!(r["temporal_frames"], 3);
+    let md = std::fs::read_to_string(d.join("bench.md")).unwrap();
+    assert!(md.contains("## Temporal stage") && md.contains("jitter + stage"), "{md}");
+    let rec = r["records"].as_array().unwrap().iter().find(|x| x["label"] == "brute-force steps=32").unwrap().clone();
+    let col = &rec["temporal"];
+    assert_eq!(col["jitter_added"], true, "{col}");
+    assert_eq!(col["flicker"]["frames"], 3, "{col}");
+    let report = d.join("animate.json");
+    let out = bin()
+        .args(["animate", "cage", "--backend", "cpu", "--size", "32x18", "--frames", "96", "--stop-after", "3"])
+        .args(["--still-lights", "--temporal", "--flicker", "--reference-steps", "16", "--set", "steps=32"])
+        .arg("--report")
+        .arg(&report)
+        .arg("--output")
+        .arg(d.join("a.gif"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let a: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let last = &a["temporal"]["frames"][2];
+    assert_eq!(col["psnr_db"], last["psnr_db"], "{col} {last}");
+    assert_eq!(col["flip"], last["flip"], "{col} {last}");
+    assert_eq!(col["flicker"], a["flicker"], "{col}");
+    // "As configured" is brute-force without jitter; animate's "without" is the jittered
+    // technique before the stage, so the two differ: the configured row has its own number.
+    assert!(col["psnr_db_without"].as_f64().unwrap().is_finite(), "{col}");
+    for args in [vec!["--temporal-frames", "3"], vec!["--temporal", "--temporal-frames", "1"]] {
+        let out = bin().args(["bench", "--backend", "cpu", "--scenes", "cage"]).args(args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains("--temporal") && !err.contains("panicked"), "{err}");
+    }
+}
+
+#[test]
 fn bad_animate_input_fails_with_one_line_and_leaves_the_output_alone() {
     let d = tmp("bad");
     let keep = d.join("keep.gif");

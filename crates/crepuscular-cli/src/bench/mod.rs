@@ -13,7 +13,7 @@
 //! Split along its seams: the plan and its run here; [`presets`] the papers' experiments;
 //! [`report`] bench.md's tables; [`plot`] the plots and the files written.
 
-use crate::animate::{AnimatedTechnique, Flicker, FlickerMeter, MotionPath, PathRenderer, frame_time};
+use crate::animate::{AnimatedTechnique, Flicker, FlickerMeter, MotionPath, PathRenderer, Stage, frame_time, with_jitter};
 use crate::metrics::Quality;
 use crate::render::{self, AdapterStats, adapter_stats, frame_desc, load_scene, parse_technique};
 use anyhow::{Context, Result, bail};
@@ -22,6 +22,7 @@ use crepuscular::frame::surface_transmittance;
 use crepuscular::gpu::GpuContext;
 use crepuscular::stats::TechniqueStats;
 use crepuscular::techniques::reference::{self, ReferenceSettings};
+use crepuscular::temporal::TemporalSettings;
 use crepuscular::tonemap::{ToneMap, composite};
 use crepuscular::{CpuFrame, Image};
 use crepuscular_scene::{GpuHost, host, host_cpu};
@@ -35,7 +36,7 @@ pub mod report;
 
 pub use plot::write;
 use presets::*;
-pub use presets::{KLEHM_TABLE1, KLEHM_TABLE2, PRESETS, preset};
+pub use presets::{KLEHM_TABLE1, KLEHM_TABLE2, PRESETS, TEMPORAL_PRESET, preset};
 pub use report::markdown;
 
 /// One technique configuration of the matrix.
@@ -175,6 +176,43 @@ pub struct BenchRecord {
     /// Temporal stability vs reference along the scene's `animate` path (see
     /// [`BenchReport::flicker_frames`]); `None` where not measured.
     pub flicker: Option<Flicker>,
+    /// The row with the temporal stage after a slow camera move (see [`measure_temporal`]);
+    /// `None` where not measured.
+    pub temporal: Option<TemporalColumn>,
+}
+
+/// One row's temporal column: its technique along a slow camera move (the scene's `animate`
+/// path, frames 1/[`TEMPORAL_LOOP`] of the loop apart, lights still), as configured and with
+/// `jitter` on (where it has one) followed by the temporal stage, each frame against its own
+/// reference. PSNR of the linear in-scattering and FLIP of the tone-mapped final image are the
+/// last frame's (the frames before it are its history); flicker is over all the frames.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct TemporalColumn {
+    /// Last frame, the row as configured (no stage): PSNR dB.
+    #[serde(with = "crate::metrics::psnr_serde")]
+    pub psnr_db_without: f64,
+    /// Last frame, the row as configured: FLIP mean.
+    pub flip_without: f64,
+    /// Last frame, jitter + stage: PSNR dB.
+    #[serde(with = "crate::metrics::psnr_serde")]
+    pub psnr_db: f64,
+    /// Last frame, jitter + stage: FLIP mean.
+    pub flip: f64,
+    /// Flicker of the row as configured over the frames.
+    pub flicker_without: Flicker,
+    /// Flicker with jitter + stage.
+    pub flicker: Flicker,
+    /// Whether `jitter=true` was added to the row's settings for the stage.
+    pub jitter_added: bool,
+    /// The stage's wall-clock time per frame (median, ms), around its submit and wait.
+    pub stage_ms: f64,
+}
+
+impl BenchRecord {
+    /// Whether the row's technique has a `jitter` setting (the temporal column turns it on).
+    pub fn settings_have_jitter(&self) -> bool {
+        serde_json::to_value(&self.settings).is_ok_and(|v| v.get("jitter").is_some())
+    }
 }
 
 /// The frame without scattering: the host renderer's passes (shadow map, depth and surface).
@@ -214,6 +252,10 @@ pub struct BenchReport {
     pub flicker_frames: u32,
     /// Size the flicker was measured at.
     pub flicker_size: Option<[u32; 2]>,
+    /// Frames of the temporal column (0: not measured); its size is the flicker's rule's.
+    pub temporal_frames: u32,
+    /// The temporal stage's settings of that column.
+    pub temporal: Option<TemporalSettings>,
 }
 
 fn median_min_max(v: &[f64]) -> [f64; 3] {
@@ -439,6 +481,7 @@ pub fn run(
                     flip_mean: flip,
                     extra: stats.extra,
                     flicker: None,
+                    temporal: None,
                 });
             }
         }
@@ -458,6 +501,8 @@ pub fn run(
         records,
         flicker_frames: 0,
         flicker_size: None,
+        temporal_frames: 0,
+        temporal: None,
     };
     Ok((report, kept))
 }
@@ -537,6 +582,135 @@ pub fn measure_flicker(
     }
     report.flicker_frames = frames;
     report.flicker_size = Some([size.0, size.1]);
+    Ok(())
+}
+
+/// Frames of the temporal column when `--temporal-frames` is not given: the issue's "after 8
+/// frames of a slow camera move" (8 frames of history, then the measured one).
+pub const DEFAULT_TEMPORAL_FRAMES: u32 = 9;
+/// The slow move of the temporal column: frame i is at 1/`TEMPORAL_LOOP` × i of the scene's
+/// `animate` loop (as `animate --frames 96 --stop-after 9 --still-lights`).
+pub const TEMPORAL_LOOP: u32 = 96;
+
+/// Measures the temporal column ([`TemporalColumn`]) of every row of the plan's smallest size
+/// (at [`flicker_sizes`]' size): per scene, `frames` host frames along the scene's `animate`
+/// path with the lights still, 1/[`TEMPORAL_LOOP`] of the loop apart, each rendered by
+/// `reference` (the plan's reference steps, seed 1), by every row as configured and by every
+/// row with jitter and the temporal stage `settings`. Costs per scene `frames` host frames and
+/// references, per row 2 × `frames` frames and `frames` stage passes. `frames` = 0 does nothing.
+pub fn measure_temporal(
+    report: &mut BenchReport,
+    gpu: Option<&GpuContext>,
+    frames: u32,
+    settings: TemporalSettings,
+    progress: &dyn Fn(&str),
+    reference_progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<()> {
+    if frames == 0 {
+        return Ok(());
+    }
+    check_temporal_frames(frames, report.plan.reference_steps)?;
+    settings.validate().map_err(|e| anyhow::anyhow!("--temporal-set: {e}"))?;
+    let Some((rows_size, size)) = flicker_sizes(&report.plan) else { return Ok(()) };
+    struct Row {
+        record: usize,
+        plain: AnimatedTechnique,
+        jittered: AnimatedTechnique,
+        stage: Stage,
+        jitter_added: bool,
+        meters: [FlickerMeter; 2],
+        last: Option<[(f64, f64); 2]>,
+        stage_ms: Vec<f64>,
+    }
+    for scene_arg in &report.plan.scenes {
+        let mut scene = load_scene(scene_arg)?;
+        (scene.render.width, scene.render.height) = size;
+        let mut rows = Vec::new();
+        for (i, x) in report.records.iter().enumerate() {
+            if x.scene == scene.name && x.size == [rows_size.0, rows_size.1] {
+                let v =
+                    report.plan.variants.iter().find(|v| v.label() == x.label).context("bench row without variant")?;
+                let (jo, jitter_added) = with_jitter(&v.technique, &scene, &v.overrides)?;
+                rows.push(Row {
+                    record: i,
+                    plain: AnimatedTechnique::new(&v.technique, &scene, &v.overrides)?,
+                    jittered: AnimatedTechnique::new(&v.technique, &scene, &jo)?,
+                    stage: Stage::new(settings, gpu, &v.technique)?,
+                    jitter_added,
+                    meters: [FlickerMeter::new(), FlickerMeter::new()],
+                    last: None,
+                    stage_ms: Vec::new(),
+                });
+            }
+        }
+        if rows.is_empty() {
+            continue;
+        }
+        let r = [format!("steps={}", report.plan.reference_steps), "seed=1".to_string()];
+        let mut reference = AnimatedTechnique::new("reference", &scene, &r)?;
+        let path = MotionPath::for_scene(scene_arg, &scene).still_lights();
+        let name = scene.name.clone();
+        let tone = ToneMap::new(scene.render.exposure);
+        let mut renderer = PathRenderer::new(scene, path, gpu)?;
+        for f in 0..frames {
+            progress(&format!(
+                "{name} {}×{}: temporal frame {}/{frames} (reference + {} rows with and without the stage)",
+                size.0,
+                size.1,
+                f + 1,
+                rows.len()
+            ));
+            let mut frame = renderer.frame(frame_time(f, TEMPORAL_LOOP, true))?;
+            let (ri, _) = reference.render(gpu, &mut frame, 0, reference_progress)?;
+            let q = Quality {
+                final_radiance: frame.final_radiance(&ri),
+                inscatter: ri,
+                transmittance: frame.transmittance.clone(),
+                tone,
+            };
+            for row in &mut rows {
+                // The row as configured: its frame_index advanced only if it jitters already.
+                let (plain, _) = row.plain.render(gpu, &mut frame, f, &|_, _| {})?;
+                let (raw, _) = row.jittered.render(gpu, &mut frame, f, &|_, _| {})?;
+                let start = std::time::Instant::now();
+                let (out, _) = row.stage.resolve(gpu, &frame, row.jittered.gpu_output(), &raw)?;
+                row.stage_ms.push(start.elapsed().as_secs_f64() * 1e3);
+                row.meters[0].push(&plain, &q.inscatter)?;
+                row.meters[1].push(&out, &q.inscatter)?;
+                if f + 1 == frames {
+                    row.last = Some([q.measure(&plain, &frame.surface)?, q.measure(&out, &frame.surface)?]);
+                }
+            }
+        }
+        for row in rows {
+            let [m0, m1] = row.meters;
+            let [(psnr_db_without, flip_without), (psnr_db, flip)] = row.last.context("no temporal frame")?;
+            report.records[row.record].temporal = Some(TemporalColumn {
+                psnr_db_without,
+                flip_without,
+                psnr_db,
+                flip,
+                flicker_without: m0.finish()?,
+                flicker: m1.finish()?,
+                jitter_added: row.jitter_added,
+                stage_ms: median_min_max(&row.stage_ms)[0],
+            });
+        }
+    }
+    report.temporal_frames = frames;
+    report.temporal = Some(settings);
+    report.flicker_size = Some([size.0, size.1]);
+    Ok(())
+}
+
+/// Checks `--temporal-frames` against the plan before any work.
+pub fn check_temporal_frames(frames: u32, reference_steps: u32) -> Result<()> {
+    if frames == 1 || frames > 1000 {
+        bail!("--temporal-frames {frames}: must be 0 (no temporal column) or in 2..=1000");
+    }
+    if frames > 0 && reference_steps == 0 {
+        bail!("--temporal-frames {frames}: the temporal column is measured against the reference; it needs --reference-steps > 0");
+    }
     Ok(())
 }
 

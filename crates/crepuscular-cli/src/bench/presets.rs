@@ -44,7 +44,14 @@ pub const PRESETS: &[(&str, &str)] = &[
         "klehm-scenes",
         "Klehm, Seidel & Eisemann 2014 §5: scene independence and speed — prefiltered (defaults) on every built-in scene against brute-force at 256 steps, 1920×1080",
     ),
+    (
+        TEMPORAL_PRESET,
+        "the temporal stage at each technique's default cost: every GPU technique at its defaults on every built-in scene, 320×180, with the temporal column (8 frames of a slow camera move, then the measured one)",
+    ),
 ];
+
+/// The preset that turns the temporal column on ([`super::measure_temporal`]).
+pub const TEMPORAL_PRESET: &str = "temporal";
 
 /// The scene of the `lights` preset and the light counts it sweeps.
 pub(super) const LIGHTS_SCENE: &str = "night-street";
@@ -383,6 +390,26 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
                 .into(),
             scenes: LIGHT_COUNTS.iter().map(|n| format!("{LIGHTS_SCENE}:lights={n}")).collect(),
             sizes: vec![(480, 270)],
+            variants: crepuscular::techniques::TECHNIQUES
+                .iter()
+                .filter(|t| t.gpu)
+                .map(|t| Variant::new(t.name, &[], t.name, None))
+                .collect(),
+            repeat: 3,
+            warmup: 1,
+            reference_steps: 256,
+        },
+        TEMPORAL_PRESET => BenchPlan {
+            name: name.into(),
+            description: "The temporal stage at each technique's default cost: every GPU technique at its \
+                          defaults on every built-in scene at 320×180, and the temporal column (turned on by \
+                          this preset, as `--temporal`): after 8 frames of a slow camera move, the row as \
+                          configured against the row with jitter and the temporal stage (docs/MODEL.md §7). \
+                          The goals it measures (docs/RESULTS.md, \"Temporal accumulation\"): PSNR ≥ 40 dB \
+                          and FLIP ≤ 0.02, flicker at most half of the technique's own."
+                .into(),
+            scenes: crepuscular_scene::builtin::builtin_names().iter().map(|(n, _)| n.to_string()).collect(),
+            sizes: vec![(320, 180)],
             variants: crepuscular::techniques::TECHNIQUES
                 .iter()
                 .filter(|t| t.gpu)

@@ -83,7 +83,52 @@ pub fn markdown(r: &BenchReport) -> String {
             if fl { format!(" {} |", fmt_opt(x.flicker.map(|f| 100.0 * f.relative), 3)) } else { String::new() },
         );
     }
+    s += &temporal_table(r);
     s += &paper_table(r);
+    s
+}
+
+/// The temporal column (`bench --temporal`): each measured row as configured and with jitter +
+/// the temporal stage, after the slow move's last frame.
+fn temporal_table(r: &BenchReport) -> String {
+    let (Some(t), Some([w, h])) = (&r.temporal, r.flicker_size) else { return String::new() };
+    if r.temporal_frames == 0 {
+        return String::new();
+    }
+    let mut s = format!(
+        "\n## Temporal stage\n\nEach row along a slow camera move at {w}×{h}: {} frames of the scene's `animate` path \
+         1/{} of its loop apart, lights still, each frame against its own reference; PSNR (dB) and FLIP of the last \
+         frame (the ones before it are its history), flicker (%) over all of them. \"as configured\" is the row \
+         itself; \"jitter + stage\" the row with `jitter=true` (where it has the setting; †: it has none) and \
+         `frame_index` advanced per frame, followed by the temporal stage (`history_weight` {}, `clip_sigma` {}, \
+         `history_filter` {}). Stage ms: its wall clock per frame.\n\n\
+         | scene | configuration | as configured PSNR / FLIP / flicker | jitter + stage PSNR / FLIP / flicker | ΔPSNR dB | flicker × | stage ms |\n\
+         |---|---|---|---|---|---|---|\n",
+        r.temporal_frames,
+        TEMPORAL_LOOP,
+        t.history_weight,
+        t.clip_sigma,
+        serde_json::to_string(&t.history_filter).unwrap_or_default(),
+    );
+    for x in &r.records {
+        let Some(c) = &x.temporal else { continue };
+        let ratio = if c.flicker_without.relative > 0.0 { c.flicker.relative / c.flicker_without.relative } else { f64::NAN };
+        s += &format!(
+            "| {} | {}{} | {:.2} / {:.4} / {:.3} | {:.2} / {:.4} / {:.3} | {:+.2} | {:.2} | {:.1} |\n",
+            x.scene,
+            x.label,
+            if x.settings_have_jitter() { "" } else { " †" },
+            c.psnr_db_without,
+            c.flip_without,
+            100.0 * c.flicker_without.relative,
+            c.psnr_db,
+            c.flip,
+            100.0 * c.flicker.relative,
+            c.psnr_db - c.psnr_db_without,
+            ratio,
+            c.stage_ms,
+        );
+    }
     s
 }
 

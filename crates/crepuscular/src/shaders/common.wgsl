@@ -641,9 +641,11 @@ fn pcg_hash(v: u32) -> u32 {
     return (word >> 22u) ^ word;
 }
 
-// Uniform in [0, 1) from a pixel and a frame index, mirrored by `pixel_jitter` in Rust.
+// A pixel's jitter in [0, 1): the golden-ratio sequence {hash(pixel) + frame/φ} (docs/MODEL.md
+// §7; low-discrepancy from frame to frame, uncorrelated between pixels), in integers modulo 2³²
+// so it is exact. Mirrored by `pixel_jitter` in Rust (`GOLDEN_STEP` = 2³²/φ).
 fn pixel_jitter(px: vec2<u32>, frame: u32) -> f32 {
-    let h = pcg_hash(px.x ^ pcg_hash(px.y ^ pcg_hash(frame)));
+    let h = pcg_hash(px.x ^ pcg_hash(px.y)) + frame * 2654435769u;
     return f32(h >> 8u) * (1.0 / 16777216.0);
 }
 

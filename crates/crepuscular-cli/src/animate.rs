@@ -751,14 +751,14 @@ impl Stage {
                 let out = g.create_output_texture(w, h);
                 let view = |t: &wgpu::Texture| t.create_view(&Default::default());
                 let mut enc = g.device.create_command_encoder(&Default::default());
-                t.encode(&mut enc, &frame.desc, &host.depth_view(), &view(current), &view(&out))?;
+                t.encode(&mut enc, &frame.desc, &host.depth_view(), &view(current), &view(&out), None)?;
                 g.queue.submit([enc.finish()]);
                 let img = g.read_image(&out)?;
                 let w = g.read_texture_f32(t.weights().context("temporal weights")?, 0)?;
                 Ok((img, mean(&w)))
             }
             (Stage::Cpu(t), ..) => {
-                let img = t.resolve(&frame.desc, &frame.depth, img)?;
+                let img = t.resolve(&frame.desc, &frame.depth, img, None)?;
                 Ok((img, mean(t.weights())))
             }
             (Stage::Gpu(_), ..) => {

@@ -673,7 +673,7 @@ impl Viewer {
                 let start = Instant::now();
                 let resolved = targets.resolved.create_view(&Default::default());
                 let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-                t.encode(&mut enc, &desc, frame.depth, &out_view, &resolved)?;
+                t.encode(&mut enc, &desc, frame.depth, &out_view, &resolved, None)?;
                 self.gpu.queue.submit([enc.finish()]);
                 self.gpu.wait()?;
                 stats.passes.push(PassTime { name: "temporal".into(), ms: start.elapsed().as_secs_f64() * 1e3 });

@@ -297,8 +297,8 @@ fn temporal_uniforms_match_their_wgsl_layout() {
             ("valid", offset_of!(T, valid)),
             ("clip", offset_of!(T, clip)),
             ("catmull_rom", offset_of!(T, catmull_rom)),
-            ("_pad1", offset_of!(T, _pad)),
-            ("_pad2", offset_of!(T, _pad) + 4),
+            ("motion", offset_of!(T, motion)),
+            ("_pad", offset_of!(T, _pad)),
         ],
         std::mem::size_of::<T>(),
     );

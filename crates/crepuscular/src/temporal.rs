@@ -10,7 +10,9 @@
 //!
 //! What the history is, is the caller's choice: each stage remembers the camera of the frame it
 //! resolved last and reprojects through it; [`Temporal::reset`] forgets it (a camera cut, a
-//! teleport). A new size, another set of lights (count, kinds, scattering scales), another
+//! teleport). An engine that renders motion vectors passes them too ([`Temporal::encode`]'s
+//! `motion`, [`CpuTemporal::resolve`]'s): the drawn pixels are then reprojected by them, so
+//! the history follows moving objects as well as the camera. A new size, another set of lights (count, kinds, scattering scales), another
 //! medium, or a light that jumps ([`TemporalSettings::light_jump_degrees`]) resets it by itself.
 
 use crate::error::Error;
@@ -206,11 +208,13 @@ pub struct TemporalUniforms {
     pub clip: u32,
     /// 1 for the Catmull-Rom history read ([`TemporalSettings::history_filter`]).
     pub catmull_rom: u32,
+    /// 1 when the frame's motion vectors are bound (drawn pixels reprojected by them).
+    pub motion: u32,
     /// Padding.
-    pub _pad: [u32; 2],
+    pub _pad: u32,
 }
 
-fn uniforms(s: &TemporalSettings, prev: Option<&Previous>) -> TemporalUniforms {
+fn uniforms(s: &TemporalSettings, prev: Option<&Previous>, motion: bool) -> TemporalUniforms {
     TemporalUniforms {
         prev_view_proj: prev.map_or(Mat4::IDENTITY, |p| p.view_proj).to_cols_array_2d(),
         prev_camera_pos: prev.map_or(Vec4::ZERO, |p| p.camera_pos.extend(1.0)).to_array(),
@@ -220,8 +224,23 @@ fn uniforms(s: &TemporalSettings, prev: Option<&Previous>) -> TemporalUniforms {
         valid: prev.is_some() as u32,
         clip: s.clip as u32,
         catmull_rom: (s.history_filter == HistoryFilter::CatmullRom) as u32,
-        _pad: [0; 2],
+        motion: motion as u32,
+        _pad: 0,
     }
+}
+
+/// Motion vectors as the stage reads them, per pixel: the pixel's screen position now minus
+/// where the surface it shows was in the previous frame, in UV units of the image (x right,
+/// y down, 1 = the image's width or height; Bevy's and most engines' convention). Only drawn
+/// pixels use them: sky pixels (nothing drawn, which engines often leave at zero motion) are
+/// reprojected through the camera. The pixel at p was at p − motion·(W, H) in the previous frame.
+pub const MOTION_VECTORS: &str = "current − previous screen position, UV units, x right, y down";
+
+/// Where the previous frame saw what pixel (x, y) of a `w`×`h` frame shows, by its motion vector
+/// `mv` ([`MOTION_VECTORS`]), in texel coordinates of the previous image (texel centres at
+/// integers). Mirrors the motion branch of `resolve` in temporal.wgsl.
+pub fn motion_source(x: u32, y: u32, w: u32, h: u32, mv: [f32; 2]) -> glam::Vec2 {
+    glam::Vec2::new(x as f32 - mv[0] * w as f32, y as f32 - mv[1] * h as f32)
 }
 
 /// This frame's view distance per pixel, row-major; -1 where nothing was drawn. Mirrors
@@ -257,7 +276,8 @@ pub fn catmull_rom_weights(f: f32) -> [f32; 4] {
 
 /// One pixel's resolve: (output rgb, history rgba, weight). `distances`: this frame's
 /// ([`view_distances`]); `history` and `history_distances`: the previous frame's (read only
-/// when `u.valid`). Mirrors `resolve` in temporal.wgsl.
+/// when `u.valid`); `motion`: the frame's motion vectors (read only when `u.motion`).
+/// Mirrors `resolve` in temporal.wgsl.
 #[allow(clippy::too_many_arguments)]
 pub fn resolve_pixel(
     desc: &FrameDesc,
@@ -266,6 +286,7 @@ pub fn resolve_pixel(
     current: &Image,
     history: &Image,
     history_distances: &[f32],
+    motion: &[[f32; 2]],
     x: u32,
     y: u32,
 ) -> ([f32; 3], [f32; 4], f32) {
@@ -283,51 +304,66 @@ pub fn resolve_pixel(
     let mut h = c;
     if u.valid == 1 {
         let x4 = if sky { dir.extend(0.0) } else { (desc.camera.position + dir * dist).extend(1.0) };
-        let clip = Mat4::from_cols_array_2d(&u.prev_view_proj) * x4;
-        if clip.w > 0.0 {
-            let ndc = clip.truncate().truncate() / clip.w;
-            if ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 {
-                let q =
-                    glam::Vec2::new((ndc.x * 0.5 + 0.5) * w_px as f32 - 0.5, (0.5 - ndc.y * 0.5) * h_px as f32 - 0.5);
-                // The distance the previous frame must have stored where it saw this point: the
-                // point's distance to the previous eye, -1 for sky.
-                let expected =
-                    if sky { -1.0 } else { (x4.truncate() - Vec3::from_slice(&u.prev_camera_pos[..3])).length() };
-                let b = q.floor();
-                let f = q - b;
-                let (ix, iy) = (b.x as i32, b.y as i32);
-                let mut acc = Vec4::ZERO;
-                let mut total = 0.0f32;
-                for k in 0..4 {
-                    let (ox, oy) = (k & 1, k >> 1);
-                    let t = at(ix + ox, iy + oy);
-                    let same = same_surface(history_distances[t], expected, u.depth_tolerance);
-                    let fw = (if ox == 1 { f.x } else { 1.0 - f.x }) * (if oy == 1 { f.y } else { 1.0 - f.y });
-                    if same && fw > 0.0 {
-                        acc += fw * Vec4::from_array(history.pixels[t]);
-                        total += fw;
-                    }
+        // Where the previous frame saw it: by the motion vector where one is given for a drawn
+        // pixel, else through the previous camera; outside the previous image, nowhere.
+        let mut q = glam::Vec2::ZERO;
+        let mut seen = false;
+        if u.motion == 1 && !sky {
+            q = motion_source(x, y, desc.width, desc.height, motion[at(x as i32, y as i32)]);
+            let hi = glam::Vec2::new(w_px as f32 - 0.5, h_px as f32 - 0.5);
+            seen = q.cmpge(glam::Vec2::splat(-0.5)).all() && q.cmple(hi).all();
+        } else {
+            let clip = Mat4::from_cols_array_2d(&u.prev_view_proj) * x4;
+            if clip.w > 0.0 {
+                let ndc = clip.truncate().truncate() / clip.w;
+                if ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 {
+                    q = glam::Vec2::new(
+                        (ndc.x * 0.5 + 0.5) * w_px as f32 - 0.5,
+                        (0.5 - ndc.y * 0.5) * h_px as f32 - 0.5,
+                    );
+                    seen = true;
                 }
-                if total > 1e-3 {
-                    h = acc.truncate() / total;
-                    n = acc.w / total;
-                    w = u.history_weight.min(n / (n + 1.0));
-                    if u.catmull_rom == 1 {
-                        // Catmull-Rom over the 4×4 texels around q, where all show the same
-                        // surface (a cubic's negative lobes cannot be renormalised over a
-                        // partial set); its overshoot clamped at 0.
-                        let (wx, wy) = (catmull_rom_weights(f.x), catmull_rom_weights(f.y));
-                        let mut cr = Vec3::ZERO;
-                        let mut all = true;
-                        for k in 0..16 {
-                            let (ox, oy) = (k & 3, k >> 2);
-                            let t = at(ix + ox - 1, iy + oy - 1);
-                            all &= same_surface(history_distances[t], expected, u.depth_tolerance);
-                            cr += wx[ox as usize] * wy[oy as usize] * rgb(history.pixels[t]);
-                        }
-                        if all {
-                            h = cr.max(Vec3::ZERO);
-                        }
+            }
+        }
+        if seen {
+            // The distance the previous frame must have stored where it saw this point: the
+            // point's distance to the previous eye, -1 for sky.
+            let expected =
+                if sky { -1.0 } else { (x4.truncate() - Vec3::from_slice(&u.prev_camera_pos[..3])).length() };
+            let b = q.floor();
+            let f = q - b;
+            let (ix, iy) = (b.x as i32, b.y as i32);
+            let mut acc = Vec4::ZERO;
+            let mut total = 0.0f32;
+            for k in 0..4 {
+                let (ox, oy) = (k & 1, k >> 1);
+                let t = at(ix + ox, iy + oy);
+                let same = same_surface(history_distances[t], expected, u.depth_tolerance);
+                let fw = (if ox == 1 { f.x } else { 1.0 - f.x }) * (if oy == 1 { f.y } else { 1.0 - f.y });
+                if same && fw > 0.0 {
+                    acc += fw * Vec4::from_array(history.pixels[t]);
+                    total += fw;
+                }
+            }
+            if total > 1e-3 {
+                h = acc.truncate() / total;
+                n = acc.w / total;
+                w = u.history_weight.min(n / (n + 1.0));
+                if u.catmull_rom == 1 {
+                    // Catmull-Rom over the 4×4 texels around q, where all show the same
+                    // surface (a cubic's negative lobes cannot be renormalised over a
+                    // partial set); its overshoot clamped at 0.
+                    let (wx, wy) = (catmull_rom_weights(f.x), catmull_rom_weights(f.y));
+                    let mut cr = Vec3::ZERO;
+                    let mut all = true;
+                    for k in 0..16 {
+                        let (ox, oy) = (k & 3, k >> 2);
+                        let t = at(ix + ox - 1, iy + oy - 1);
+                        all &= same_surface(history_distances[t], expected, u.depth_tolerance);
+                        cr += wx[ox as usize] * wy[oy as usize] * rgb(history.pixels[t]);
+                    }
+                    if all {
+                        h = cr.max(Vec3::ZERO);
                     }
                 }
             }
@@ -388,8 +424,16 @@ impl CpuTemporal {
     }
 
     /// Resolves `current` (the technique's in-scattering of `desc`, its depth `depth`) against
-    /// the history and keeps the result as the next frame's history.
-    pub fn resolve(&mut self, desc: &FrameDesc, depth: &[f32], current: &Image) -> Result<Image, Error> {
+    /// the history and keeps the result as the next frame's history. `motion`: the frame's
+    /// motion vectors, row-major, one per pixel ([`MOTION_VECTORS`]), or `None` to reproject
+    /// every pixel through the camera (right for a static scene).
+    pub fn resolve(
+        &mut self,
+        desc: &FrameDesc,
+        depth: &[f32],
+        current: &Image,
+        motion: Option<&[[f32; 2]]>,
+    ) -> Result<Image, Error> {
         let (w, h) = (desc.width, desc.height);
         let n = (w * h) as usize;
         if current.width != w || current.height != h || current.pixels.len() != n {
@@ -399,9 +443,17 @@ impl CpuTemporal {
         if depth.len() != n {
             return Err(Error::invalid("temporal depth", depth.len(), format!("must hold {w}×{h} values")));
         }
+        if let Some(m) = motion {
+            if m.len() != n {
+                return Err(Error::invalid("temporal motion", m.len(), format!("must hold {w}×{h} vectors")));
+            }
+            if let Some(v) = m.iter().find(|v| !(v[0].is_finite() && v[1].is_finite())) {
+                return Err(Error::invalid("temporal motion", format!("{v:?}"), "must be finite"));
+            }
+        }
         let jump = self.settings.light_jump_degrees;
         let prev = self.history.as_ref().filter(|(_, _, p)| p.serves(desc, jump));
-        let u = uniforms(&self.settings, prev.map(|(_, _, p)| p));
+        let u = uniforms(&self.settings, prev.map(|(_, _, p)| p), motion.is_some());
         // Without a history (u.valid = 0) resolve_pixel reads none: empty stand-ins.
         let (hist, hist_dist): (&Image, &[f32]) = match prev {
             Some((i, d, _)) => (i, d),
@@ -414,7 +466,8 @@ impl CpuTemporal {
         for y in 0..h {
             for x in 0..w {
                 let i = (y * w + x) as usize;
-                let (rgb, hp, wt) = resolve_pixel(desc, &u, &distances, current, hist, hist_dist, x, y);
+                let mv = motion.unwrap_or(&[]);
+                let (rgb, hp, wt) = resolve_pixel(desc, &u, &distances, current, hist, hist_dist, mv, x, y);
                 out.pixels[i] = [rgb[0], rgb[1], rgb[2], current.pixels[i][3]];
                 next.pixels[i] = hp;
                 self.weights[i] = wt;
@@ -475,6 +528,7 @@ impl Temporal {
                 pass::storage_texture_entry(7),
                 pass::storage_texture_entry_of(8, R32Float),
                 pass::storage_texture_entry_of(9, R32Float),
+                pass::texture_entry(10, d2),
             ],
         });
         let frame_buffer =
@@ -532,7 +586,10 @@ impl Temporal {
     /// `Rgba32Float` or `Rgba16Float` texture of the frame's size) with the frame's `depth` into
     /// `output` (a `STORAGE_BINDING` view of the frame's size, `Rgba32Float` or `Rgba16Float`)
     /// in the caller's `encoder`. No submit, no wait. `current` and `output` must be different
-    /// textures. Errors name an input whose size or format does not fit.
+    /// textures. `motion`: the engine's motion vectors ([`MOTION_VECTORS`]; a view of the
+    /// frame's size, `Rg16Float`, `Rg32Float`, `Rgba16Float` or `Rgba32Float`, x and y in the
+    /// first two channels), or `None` to reproject every pixel through the camera (right for a
+    /// static scene). Errors name an input whose size or format does not fit.
     pub fn encode(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -540,9 +597,23 @@ impl Temporal {
         depth: &wgpu::TextureView,
         current: &wgpu::TextureView,
         output: &wgpu::TextureView,
+        motion: Option<&wgpu::TextureView>,
     ) -> Result<(), Error> {
         let (w, h) = (desc.width, desc.height);
-        for (key, t) in [("depth", depth.texture()), ("current", current.texture()), ("output", output.texture())] {
+        let mut inputs = vec![("depth", depth.texture()), ("current", current.texture()), ("output", output.texture())];
+        if let Some(m) = motion {
+            use wgpu::TextureFormat::{Rg16Float, Rg32Float, Rgba16Float, Rgba32Float};
+            let f = m.texture().format();
+            if ![Rg16Float, Rg32Float, Rgba16Float, Rgba32Float].contains(&f) {
+                return Err(Error::invalid(
+                    "temporal motion",
+                    format!("{f:?}"),
+                    "must be Rg16Float, Rg32Float, Rgba16Float or Rgba32Float",
+                ));
+            }
+            inputs.push(("motion", m.texture()));
+        }
+        for (key, t) in inputs {
             if (t.width(), t.height()) != (w, h) {
                 return Err(Error::invalid(
                     format!("temporal {key}"),
@@ -571,7 +642,7 @@ impl Temporal {
         // several frames recorded into one encoder each read their own.
         for (dst, bytes) in [
             (&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()).to_vec()),
-            (&self.params_buffer, bytemuck::bytes_of(&uniforms(&self.settings, prev.as_ref())).to_vec()),
+            (&self.params_buffer, bytemuck::bytes_of(&uniforms(&self.settings, prev.as_ref(), motion.is_some())).to_vec()),
         ] {
             let staging = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("temporal uniforms upload"),
@@ -584,7 +655,14 @@ impl Temporal {
         let write = 1 - read;
         // One bind group per direction of the ping-pong (read history a, write b; and back),
         // both built when the caller's views or the size change, not every frame.
-        let key = vec![Bound::View(depth.clone()), Bound::View(current.clone()), Bound::View(output.clone())];
+        // Without motion vectors the depth view stands in at their binding (never read).
+        let motion = motion.unwrap_or(depth);
+        let key = vec![
+            Bound::View(depth.clone()),
+            Bound::View(current.clone()),
+            Bound::View(output.clone()),
+            Bound::View(motion.clone()),
+        ];
         if !self.binds.is_current(&key) {
             let sized = self.sized.as_ref().expect("allocated above");
             let view = |t: &wgpu::Texture| t.create_view(&Default::default());
@@ -611,6 +689,7 @@ impl Temporal {
                         wgpu::BindGroupEntry { binding: 7, resource: tv(&hw) },
                         wgpu::BindGroupEntry { binding: 8, resource: tv(&dw) },
                         wgpu::BindGroupEntry { binding: 9, resource: tv(&wt) },
+                        wgpu::BindGroupEntry { binding: 10, resource: tv(motion) },
                     ],
                 })
             };

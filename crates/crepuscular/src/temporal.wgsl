@@ -24,8 +24,9 @@ struct Temporal {
     clip: u32,
     // 1 for the Catmull-Rom history read (temporal.rs HistoryFilter::CatmullRom).
     catmull_rom: u32,
-    _pad1: u32,
-    _pad2: u32,
+    // 1 when motion_tex holds the frame's motion vectors (temporal.rs MOTION_VECTORS).
+    motion: u32,
+    _pad: u32,
 }
 
 // temporal.rs catmull_rom_weights: the weights of the texels at -1, 0, 1, 2 at fraction f.
@@ -51,6 +52,9 @@ const MAX_FRAMES: f32 = 1024.0;
 @group(0) @binding(7) var history_out: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(8) var distance_out: texture_storage_2d<r32float, write>;
 @group(0) @binding(9) var weight_out: texture_storage_2d<r32float, write>;
+// Current minus previous screen position, UV units (x right, y down); read only when
+// params.motion is 1, and then only for drawn pixels.
+@group(0) @binding(10) var motion_tex: texture_2d<f32>;
 
 // This frame's view distance at pixel p; -1 where nothing was drawn (temporal.rs
 // view_distances; one pass, so each read recomputes it).
@@ -95,52 +99,66 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
         if !sky {
             x4 = vec4<f32>(frame.camera_pos.xyz + dir * dist, 1.0);
         }
-        let clip = params.prev_view_proj * x4;
-        if clip.w > 0.0 {
-            let ndc = clip.xy / clip.w;
-            if abs(ndc.x) <= 1.0 && abs(ndc.y) <= 1.0 {
-                let q = vec2<f32>((ndc.x * 0.5 + 0.5) * f32(size.x) - 0.5, (0.5 - ndc.y * 0.5) * f32(size.y) - 0.5);
-                // The distance the previous frame must have stored where it saw this point: the
-                // point's distance to the previous eye, -1 for sky.
-                let expected = select(length(x4.xyz - params.prev_camera_pos.xyz), -1.0, sky);
-                // Bilinear over the four history texels around q, each kept only where the
-                // previous frame saw the same surface (or sky) there.
-                let b = floor(q);
-                let f = q - b;
-                let i = vec2<i32>(b);
-                var acc = vec4<f32>(0.0);
-                var total = 0.0;
-                for (var k = 0; k < 4; k++) {
-                    let o = vec2<i32>(k & 1, k >> 1u);
-                    let t = clamp(i + o, vec2<i32>(0), size - 1);
-                    let same = same_surface(textureLoad(distance_tex, t, 0).r, expected);
-                    let fw = select(1.0 - f.x, f.x, o.x == 1) * select(1.0 - f.y, f.y, o.y == 1);
-                    if same && fw > 0.0 {
-                        acc += fw * textureLoad(history_tex, t, 0);
-                        total += fw;
-                    }
+        // Where the previous frame saw it: by the motion vector for a drawn pixel when they are
+        // given (temporal.rs motion_source), else through the previous camera; outside the
+        // previous image, nowhere.
+        var q = vec2<f32>(0.0);
+        var seen = false;
+        if params.motion == 1u && !sky {
+            let mv = textureLoad(motion_tex, px, 0).xy;
+            q = vec2<f32>(f32(px.x) - mv.x * f32(size.x), f32(px.y) - mv.y * f32(size.y));
+            seen = all(q >= vec2<f32>(-0.5)) && all(q <= vec2<f32>(size) - 0.5);
+        } else {
+            let clip = params.prev_view_proj * x4;
+            if clip.w > 0.0 {
+                let ndc = clip.xy / clip.w;
+                if abs(ndc.x) <= 1.0 && abs(ndc.y) <= 1.0 {
+                    q = vec2<f32>((ndc.x * 0.5 + 0.5) * f32(size.x) - 0.5, (0.5 - ndc.y * 0.5) * f32(size.y) - 0.5);
+                    seen = true;
                 }
-                if total > 1e-3 {
-                    h = acc.rgb / total;
-                    n = acc.a / total;
-                    w = min(params.history_weight, n / (n + 1.0));
-                    if params.catmull_rom == 1u {
-                        // Catmull-Rom over the 4×4 texels around q, where all show the same
-                        // surface (a cubic's negative lobes cannot be renormalised over a
-                        // partial set); its overshoot clamped at 0.
-                        let wx = catmull_rom_weights(f.x);
-                        let wy = catmull_rom_weights(f.y);
-                        var cr = vec3<f32>(0.0);
-                        var all = true;
-                        for (var k = 0; k < 16; k++) {
-                            let o = vec2<i32>(k & 3, k >> 2u);
-                            let t = clamp(i + o - vec2<i32>(1), vec2<i32>(0), size - 1);
-                            all = all && same_surface(textureLoad(distance_tex, t, 0).r, expected);
-                            cr += wx[o.x] * wy[o.y] * textureLoad(history_tex, t, 0).rgb;
-                        }
-                        if all {
-                            h = max(cr, vec3<f32>(0.0));
-                        }
+            }
+        }
+        if seen {
+            // The distance the previous frame must have stored where it saw this point: the
+            // point's distance to the previous eye, -1 for sky.
+            let expected = select(length(x4.xyz - params.prev_camera_pos.xyz), -1.0, sky);
+            // Bilinear over the four history texels around q, each kept only where the
+            // previous frame saw the same surface (or sky) there.
+            let b = floor(q);
+            let f = q - b;
+            let i = vec2<i32>(b);
+            var acc = vec4<f32>(0.0);
+            var total = 0.0;
+            for (var k = 0; k < 4; k++) {
+                let o = vec2<i32>(k & 1, k >> 1u);
+                let t = clamp(i + o, vec2<i32>(0), size - 1);
+                let same = same_surface(textureLoad(distance_tex, t, 0).r, expected);
+                let fw = select(1.0 - f.x, f.x, o.x == 1) * select(1.0 - f.y, f.y, o.y == 1);
+                if same && fw > 0.0 {
+                    acc += fw * textureLoad(history_tex, t, 0);
+                    total += fw;
+                }
+            }
+            if total > 1e-3 {
+                h = acc.rgb / total;
+                n = acc.a / total;
+                w = min(params.history_weight, n / (n + 1.0));
+                if params.catmull_rom == 1u {
+                    // Catmull-Rom over the 4×4 texels around q, where all show the same
+                    // surface (a cubic's negative lobes cannot be renormalised over a
+                    // partial set); its overshoot clamped at 0.
+                    let wx = catmull_rom_weights(f.x);
+                    let wy = catmull_rom_weights(f.y);
+                    var cr = vec3<f32>(0.0);
+                    var all = true;
+                    for (var k = 0; k < 16; k++) {
+                        let o = vec2<i32>(k & 3, k >> 2u);
+                        let t = clamp(i + o - vec2<i32>(1), vec2<i32>(0), size - 1);
+                        all = all && same_surface(textureLoad(distance_tex, t, 0).r, expected);
+                        cr += wx[o.x] * wy[o.y] * textureLoad(history_tex, t, 0).rgb;
+                    }
+                    if all {
+                        h = max(cr, vec3<f32>(0.0));
                     }
                 }
             }

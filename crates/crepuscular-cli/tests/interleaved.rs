@@ -527,8 +527,24 @@ fn interleaved_vs_reference_on_every_builtin_scene_cpu() {
              interleaved without depth awareness {pn:.2} / {fna:.4}"
         );
         check_quality(name, "cpu", psnr, flip);
-        // §4.1's claim: at the same per-pixel cost, interleaving beats marching N/M² steps.
-        assert!(psnr > p4 && flip < f4, "{name}: interleaved {psnr:.2}/{flip:.4} vs brute-force 4 {p4:.2}/{f4:.4}");
+        // §4.1's claim: at the same per-pixel cost, interleaving beats marching N/M² steps —
+        // with the paper's equal steps (eq. 1). Under the default equiangular steps, 4 steps
+        // already integrate a local light's 1/d² exactly and the claim holds on FLIP, not on
+        // PSNR (cage: brute-force 4 57.6 dB / 0.167 against interleaved 48.5 / 0.040, the 4×4
+        // sum mixing neighbours' peaks near the lamp).
+        let uniform = crepuscular::march::LocalSteps::Uniform;
+        let il_u = cpu::render(&frame, &InterleavedSettings { local_steps: uniform, ..Default::default() }).unwrap().0;
+        let bf_u = brute_force::cpu::march(
+            &frame,
+            &BruteForceSettings { steps: 4, local_steps: uniform, ..Default::default() },
+        )
+        .unwrap()
+        .0;
+        let (pu, fu) = metrics(&frame, &h.surface, &rf, &il_u, scene.render.exposure);
+        let (p4u, f4u) = metrics(&frame, &h.surface, &rf, &bf_u, scene.render.exposure);
+        eprintln!("cpu {name}, uniform steps: interleaved {pu:.2} dB / {fu:.4}, brute-force 4 {p4u:.2} / {f4u:.4}");
+        assert!(pu > p4u && fu < f4u, "{name}: interleaved {pu:.2}/{fu:.4} vs brute-force 4 {p4u:.2}/{f4u:.4}");
+        assert!(flip < f4, "{name}: interleaved FLIP {flip:.4} vs brute-force 4 {f4:.4} (equiangular steps)");
     }
 }
 

@@ -79,23 +79,26 @@ pub fn validate_spot_denominator(key: &str, v: f32) -> Result<(), Error> {
 }
 
 /// How the N steps of a local (spot or point) light's march are spread over its interval
-/// (`local_steps` in every ray-marching technique's settings; docs/MODEL.md §9).
+/// (`local_steps` in every ray-marching technique's settings; docs/MODEL.md §9 has the model
+/// and the measurements). A sun is always marched in equal steps.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum LocalSteps {
     /// Equal steps in distance along the ray (eq. 1 of Tóth & Umenhoffer 2009), as for the sun;
     /// a point light then shares one march with the other lights that share theirs. Where a ray
     /// passes within a step of the light, its 1/d² peak falls between samples or on one, and
-    /// neighbouring pixels disagree by up to the peak. The default.
-    #[default]
+    /// neighbouring pixels disagree by up to the peak (the robustness sweep's point lights next
+    /// to the view rays: NMAE up to 0.58 at 64 steps, converging only slowly with N).
     Uniform,
     /// Equal steps in the angle the ray subtends at the light: short steps where the ray passes
     /// the light, long ones far from it, so each step carries about the same share of the 1/d²
-    /// falloff. Every local light then gets its own march of N steps over its interval (a point
-    /// light no longer shares the sun's), which costs N more samples per point light on rays
-    /// that also see a sun or another point light, and a sine and cosine per step boundary; far
-    /// from the light its steps are coarser than uniform ones (docs/MODEL.md §9 has the
-    /// measured trade-off).
+    /// falloff, which is then integrated exactly. The default: it fixes those views (0.58 →
+    /// 0.002) and gains up to 26 dB on the built-in local-light scenes (docs/MODEL.md §9).
+    /// Costs a sine and cosine per step boundary, N more samples per point light on rays that
+    /// also see a sun (every local light gets its own march), and far from the light its steps
+    /// are coarser than uniform ones, so the worst pixel of a smooth unshadowed frame converges
+    /// more slowly with N.
+    #[default]
     Equiangular,
 }
 

@@ -7,6 +7,7 @@ mod common;
 
 use crepuscular::frame::FrameDesc;
 use crepuscular::gpu::{UploadedFrame, test_gpu};
+use crepuscular::march::LocalSteps;
 use crepuscular::model::segment_transmittance;
 use crepuscular::techniques::AnyGpuTechnique;
 use crepuscular::techniques::minmax::{MinmaxSettings, cpu};
@@ -65,19 +66,23 @@ fn an_unshadowed_point_light_converges_with_its_segments() {
     let m = wall_media()[0].clone();
     let (d, depth, sm) = wall_frame(lamp, m, W, H);
     let frame = cpu_frame(&d, &depth, &sm);
-    let (fine, _) =
-        cpu::render_with(&frame, &MinmaxSettings { light_steps: 1024, ..settings([256, 256], 13) }, None).unwrap();
-    let mut last = f32::MAX;
-    for steps in [4, 16, 64] {
-        let (img, _) =
-            cpu::render_with(&frame, &MinmaxSettings { light_steps: steps, ..settings([256, 256], 13) }, None).unwrap();
-        let e = common::max_rel(&img, &fine, 1e-9);
-        eprintln!("{steps} segments: {e}");
-        assert!(e < last, "the error must fall with more segments: {e} after {last}");
-        last = e;
+    // Each layout against its own 1024-segment answer. Equal steps converge fastest on this
+    // smooth frame; equal angles (the default) put their segments where the ray passes the
+    // light and are coarser far from it, so the worst pixel converges more slowly
+    // (docs/MODEL.md §9). Measured at 64 segments: uniform 1.2e-4, equiangular 4.0e-3.
+    for (local, bound) in [(LocalSteps::Uniform, 3e-4), (LocalSteps::Equiangular, 1e-2)] {
+        let s = |n: u32| MinmaxSettings { light_steps: n, local_steps: local, ..settings([256, 256], 13) };
+        let (fine, _) = cpu::render_with(&frame, &s(1024), None).unwrap();
+        let mut last = f32::MAX;
+        for steps in [4, 16, 64] {
+            let (img, _) = cpu::render_with(&frame, &s(steps), None).unwrap();
+            let e = common::max_rel(&img, &fine, 1e-9);
+            eprintln!("{local:?}, {steps} segments: {e}");
+            assert!(e < last, "{local:?}: the error must fall with more segments: {e} after {last}");
+            last = e;
+        }
+        assert!(last < bound, "{local:?}, 64 segments: {last}");
     }
-    // Measured 1.2e-4 (2026-12-02).
-    assert!(last < 3e-4, "64 segments: {last}");
 }
 
 /// On a shadowed frame (a sun over a half-plane), every pixel equals a dense march of its own

@@ -42,15 +42,10 @@ pub struct BruteForceSettings {
     /// The App. B denominator: the constant of `appendix-b-constant`, the smoothstep floor of
     /// `appendix-b-smoothstep` (a sine, in (0, 1]). Smaller marches longer chords. Default 0.3.
     pub spot_denominator: f32,
-    /// How a point or spot light's steps are spread over its interval: `"uniform"` (equal
-    /// lengths, as eq. 1; point lights share the sun's march) or `"equiangular"` (equal angles
-    /// seen from the light: short steps where the ray passes it, so a 1/d² peak narrower than a
-    /// step is resolved; every local light then gets its own march). Ignored for a sun.
-    /// Equiangular costs a sine and cosine per step boundary (brute-force on cage, CPU: about
-    /// 1.1–1.7× the time), N more samples per point light on rays that also see a sun, and
-    /// coarser steps far from the light; it fixes the sweep's point lights next to the view
-    /// rays (NMAE 0.58 → 0.002) and gains 0.2–26 dB on the built-in local-light scenes, but is
-    /// not yet the default (docs/MODEL.md §9 says why). Default `"uniform"`.
+    /// How a point or spot light's steps are spread over its interval: `"equiangular"` (equal
+    /// angles seen from the light, so a 1/d² peak narrower than a step is resolved; every local
+    /// light gets its own march) or `"uniform"` (equal lengths, as eq. 1). Ignored for a sun.
+    /// Cost and effect, measured: [`LocalSteps`] and docs/MODEL.md §9. Default `"equiangular"`.
     pub local_steps: LocalSteps,
 }
 
@@ -62,7 +57,7 @@ impl Default for BruteForceSettings {
             frame_index: 0,
             spot_steps: SpotSteps::ExactCone,
             spot_denominator: DEFAULT_SPOT_DENOMINATOR,
-            local_steps: LocalSteps::Uniform,
+            local_steps: LocalSteps::Equiangular,
         }
     }
 }

@@ -250,7 +250,7 @@ pub struct BenchReport {
     /// Frames of the flicker measurement (0: not measured): frames 1/24 of the scene's
     /// `animate` loop apart, at [`BenchReport::flicker_size`], for the rows of the smallest size.
     pub flicker_frames: u32,
-    /// Size the flicker was measured at.
+    /// Size the flicker and the temporal column were measured at ([`flicker_sizes`]).
     pub flicker_size: Option<[u32; 2]>,
     /// Frames of the temporal column (0: not measured); its size is the flicker's rule's.
     pub temporal_frames: u32,

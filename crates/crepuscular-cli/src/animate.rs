@@ -704,11 +704,12 @@ pub(crate) fn with_jitter(name: &str, scene: &Scene, overrides: &[String]) -> Re
     let first = parse_technique(name, scene, overrides)?;
     let has_jitter = serde_json::to_value(&first)?.get("jitter").is_some();
     let set_by_user = overrides.iter().any(|o| o.split_once('=').is_some_and(|(k, _)| k.trim() == "jitter"));
+    let add = has_jitter && !set_by_user;
     let mut o = overrides.to_vec();
-    if has_jitter && !set_by_user {
+    if add {
         o.push("jitter=true".into());
     }
-    Ok((o, has_jitter && !set_by_user))
+    Ok((o, add))
 }
 
 /// The temporal stage after one technique along a path (`animate --temporal`, bench's temporal

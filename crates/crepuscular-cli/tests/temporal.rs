@@ -260,7 +260,7 @@ fn the_catmull_rom_history_read_is_closer_than_bilinear_through_a_camera_move() 
     assert!(c80 <= b80, "Catmull-Rom's 80th-percentile error {c80} is above bilinear's {b80}");
 }
 
-/// Motion vectors (temporal.rs MOTION_VECTORS) of the surfaces `desc` and `depth` show, each
+/// Motion vectors (temporal.rs motion_source) of the surfaces `desc` and `depth` show, each
 /// point as it was seen through `prev`'s camera: UV now minus UV then. A point behind the
 /// previous camera gets a vector that leaves the image.
 fn motion_vectors(prev: &FrameDesc, desc: &FrameDesc, depth: &[f32]) -> Vec<[f32; 2]> {

@@ -229,16 +229,15 @@ fn uniforms(s: &TemporalSettings, prev: Option<&Previous>, motion: bool) -> Temp
     }
 }
 
+/// Where the previous frame saw what pixel (x, y) of a `w`×`h` frame shows, by its motion vector
+/// `mv`, in texel coordinates of the previous image (texel centres at integers).
+///
 /// Motion vectors as the stage reads them, per pixel: the pixel's screen position now minus
 /// where the surface it shows was in the previous frame, in UV units of the image (x right,
-/// y down, 1 = the image's width or height; Bevy's and most engines' convention). Only drawn
-/// pixels use them: sky pixels (nothing drawn, which engines often leave at zero motion) are
-/// reprojected through the camera. The pixel at p was at p − motion·(W, H) in the previous frame.
-pub const MOTION_VECTORS: &str = "current − previous screen position, UV units, x right, y down";
-
-/// Where the previous frame saw what pixel (x, y) of a `w`×`h` frame shows, by its motion vector
-/// `mv` ([`MOTION_VECTORS`]), in texel coordinates of the previous image (texel centres at
-/// integers). Mirrors the motion branch of `resolve` in temporal.wgsl.
+/// y down, 1 = the image's width or height; Bevy's and most engines' convention), so the pixel
+/// at p was at p − mv·(W, H). Only drawn pixels use them: sky pixels (nothing drawn, which
+/// engines often leave at zero motion) are reprojected through the camera. Mirrors the motion
+/// branch of `resolve` in temporal.wgsl.
 pub fn motion_source(x: u32, y: u32, w: u32, h: u32, mv: [f32; 2]) -> glam::Vec2 {
     glam::Vec2::new(x as f32 - mv[0] * w as f32, y as f32 - mv[1] * h as f32)
 }
@@ -425,7 +424,7 @@ impl CpuTemporal {
 
     /// Resolves `current` (the technique's in-scattering of `desc`, its depth `depth`) against
     /// the history and keeps the result as the next frame's history. `motion`: the frame's
-    /// motion vectors, row-major, one per pixel ([`MOTION_VECTORS`]), or `None` to reproject
+    /// motion vectors, row-major, one per pixel (the convention of [`motion_source`]), or `None` to reproject
     /// every pixel through the camera (right for a static scene).
     pub fn resolve(
         &mut self,
@@ -463,10 +462,10 @@ impl CpuTemporal {
         let mut out = Image::new(w, h);
         let mut next = Image::new(w, h);
         self.weights = vec![0.0; n];
+        let mv = motion.unwrap_or(&[]);
         for y in 0..h {
             for x in 0..w {
                 let i = (y * w + x) as usize;
-                let mv = motion.unwrap_or(&[]);
                 let (rgb, hp, wt) = resolve_pixel(desc, &u, &distances, current, hist, hist_dist, mv, x, y);
                 out.pixels[i] = [rgb[0], rgb[1], rgb[2], current.pixels[i][3]];
                 next.pixels[i] = hp;
@@ -586,7 +585,7 @@ impl Temporal {
     /// `Rgba32Float` or `Rgba16Float` texture of the frame's size) with the frame's `depth` into
     /// `output` (a `STORAGE_BINDING` view of the frame's size, `Rgba32Float` or `Rgba16Float`)
     /// in the caller's `encoder`. No submit, no wait. `current` and `output` must be different
-    /// textures. `motion`: the engine's motion vectors ([`MOTION_VECTORS`]; a view of the
+    /// textures. `motion`: the engine's motion vectors ([`motion_source`] says what they hold; a view of the
     /// frame's size, `Rg16Float`, `Rg32Float`, `Rgba16Float` or `Rgba32Float`, x and y in the
     /// first two channels), or `None` to reproject every pixel through the camera (right for a
     /// static scene). Errors name an input whose size or format does not fit.
@@ -642,7 +641,10 @@ impl Temporal {
         // several frames recorded into one encoder each read their own.
         for (dst, bytes) in [
             (&self.frame_buffer, bytemuck::bytes_of(&desc.uniforms()).to_vec()),
-            (&self.params_buffer, bytemuck::bytes_of(&uniforms(&self.settings, prev.as_ref(), motion.is_some())).to_vec()),
+            (
+                &self.params_buffer,
+                bytemuck::bytes_of(&uniforms(&self.settings, prev.as_ref(), motion.is_some())).to_vec(),
+            ),
         ] {
             let staging = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("temporal uniforms upload"),

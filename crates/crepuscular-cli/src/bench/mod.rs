@@ -13,7 +13,9 @@
 //! Split along its seams: the plan and its run here; [`presets`] the papers' experiments;
 //! [`report`] bench.md's tables; [`plot`] the plots and the files written.
 
-use crate::animate::{AnimatedTechnique, Flicker, FlickerMeter, MotionPath, PathRenderer, Stage, frame_time, with_jitter};
+use crate::animate::{
+    AnimatedTechnique, Flicker, FlickerMeter, MotionPath, PathRenderer, Stage, frame_time, with_jitter,
+};
 use crate::metrics::Quality;
 use crate::render::{self, AdapterStats, adapter_stats, frame_desc, load_scene, parse_technique};
 use anyhow::{Context, Result, bail};
@@ -705,22 +707,22 @@ pub fn measure_temporal(
 
 /// Checks `--temporal-frames` against the plan before any work.
 pub fn check_temporal_frames(frames: u32, reference_steps: u32) -> Result<()> {
-    if frames == 1 || frames > 1000 {
-        bail!("--temporal-frames {frames}: must be 0 (no temporal column) or in 2..=1000");
-    }
-    if frames > 0 && reference_steps == 0 {
-        bail!("--temporal-frames {frames}: the temporal column is measured against the reference; it needs --reference-steps > 0");
-    }
-    Ok(())
+    check_measured_frames("--temporal-frames", "temporal column", frames, reference_steps)
 }
 
 /// Checks `--flicker-frames` against the plan before any work.
 pub fn check_flicker_frames(frames: u32, reference_steps: u32) -> Result<()> {
+    check_measured_frames("--flicker-frames", "flicker", frames, reference_steps)
+}
+
+/// A frame count of a measurement along the path against the reference (`what`, set by
+/// `option`): 0 (off) or 2..=1000, and only with a reference.
+fn check_measured_frames(option: &str, what: &str, frames: u32, reference_steps: u32) -> Result<()> {
     if frames == 1 || frames > 1000 {
-        bail!("--flicker-frames {frames}: must be 0 (no flicker) or in 2..=1000");
+        bail!("{option} {frames}: must be 0 (no {what}) or in 2..=1000");
     }
     if frames > 0 && reference_steps == 0 {
-        bail!("--flicker-frames {frames}: flicker is measured against the reference; it needs --reference-steps > 0");
+        bail!("{option} {frames}: {what} is measured against the reference; it needs --reference-steps > 0");
     }
     Ok(())
 }

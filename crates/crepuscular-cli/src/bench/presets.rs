@@ -86,6 +86,15 @@ pub const KLEHM_TABLE2: &[(u32, u32, u32)] = &[
     (1024, 1024, 128),
 ];
 
+/// Every GPU technique at its defaults, one variant each (`lights`, `temporal`).
+fn gpu_techniques_at_defaults() -> Vec<Variant> {
+    crepuscular::techniques::TECHNIQUES
+        .iter()
+        .filter(|t| t.gpu)
+        .map(|t| Variant::new(t.name, &[], t.name, None))
+        .collect()
+}
+
 /// A named preset.
 pub fn preset(name: &str) -> Result<BenchPlan> {
     let plan = match name {
@@ -390,11 +399,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
                 .into(),
             scenes: LIGHT_COUNTS.iter().map(|n| format!("{LIGHTS_SCENE}:lights={n}")).collect(),
             sizes: vec![(480, 270)],
-            variants: crepuscular::techniques::TECHNIQUES
-                .iter()
-                .filter(|t| t.gpu)
-                .map(|t| Variant::new(t.name, &[], t.name, None))
-                .collect(),
+            variants: gpu_techniques_at_defaults(),
             repeat: 3,
             warmup: 1,
             reference_steps: 256,
@@ -410,11 +415,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
                 .into(),
             scenes: crepuscular_scene::builtin::builtin_names().iter().map(|(n, _)| n.to_string()).collect(),
             sizes: vec![(320, 180)],
-            variants: crepuscular::techniques::TECHNIQUES
-                .iter()
-                .filter(|t| t.gpu)
-                .map(|t| Variant::new(t.name, &[], t.name, None))
-                .collect(),
+            variants: gpu_techniques_at_defaults(),
             repeat: 3,
             warmup: 1,
             reference_steps: 256,

@@ -112,7 +112,8 @@ fn temporal_table(r: &BenchReport) -> String {
     );
     for x in &r.records {
         let Some(c) = &x.temporal else { continue };
-        let ratio = if c.flicker_without.relative > 0.0 { c.flicker.relative / c.flicker_without.relative } else { f64::NAN };
+        let ratio =
+            if c.flicker_without.relative > 0.0 { c.flicker.relative / c.flicker_without.relative } else { f64::NAN };
         s += &format!(
             "| {} | {}{} | {:.2} / {:.4} / {:.3} | {:.2} / {:.4} / {:.3} | {:+.2} | {:.2} | {:.1} |\n",
             x.scene,

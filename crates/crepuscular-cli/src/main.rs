@@ -224,7 +224,7 @@ struct BenchArgs {
     /// loop apart, lights still), as configured and with `jitter=true` followed by the temporal
     /// stage (docs/MODEL.md §7), each frame against its own reference; PSNR and FLIP of the last
     /// frame, flicker over all. Cost: per scene that many references and host frames, per row
-    /// twice that many frames.
+    /// twice that many frames (once where jitter adds nothing).
     #[arg(long)]
     temporal: bool,
     /// A temporal-stage setting for that column, `key=value` (with --temporal), e.g.

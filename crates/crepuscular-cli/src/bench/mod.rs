@@ -599,7 +599,7 @@ pub const TEMPORAL_LOOP: u32 = 96;
 /// path with the lights still, 1/[`TEMPORAL_LOOP`] of the loop apart, each rendered by
 /// `reference` (the plan's reference steps, seed 1), by every row as configured and by every
 /// row with jitter and the temporal stage `settings`. Costs per scene `frames` host frames and
-/// references, per row 2 × `frames` frames and `frames` stage passes. `frames` = 0 does nothing.
+/// references, per row 2 × `frames` frames (`frames` where jitter adds nothing) and `frames` stage passes. `frames` = 0 does nothing.
 pub fn measure_temporal(
     report: &mut BenchReport,
     gpu: Option<&GpuContext>,
@@ -617,7 +617,9 @@ pub fn measure_temporal(
     struct Row {
         record: usize,
         plain: AnimatedTechnique,
-        jittered: AnimatedTechnique,
+        /// The row with `jitter=true`; None where that adds nothing (no such setting, or the
+        /// row sets it): the stage is then fed the row's own frames, rendered once.
+        jittered: Option<AnimatedTechnique>,
         stage: Stage,
         jitter_added: bool,
         meters: [FlickerMeter; 2],
@@ -636,7 +638,11 @@ pub fn measure_temporal(
                 rows.push(Row {
                     record: i,
                     plain: AnimatedTechnique::new(&v.technique, &scene, &v.overrides)?,
-                    jittered: AnimatedTechnique::new(&v.technique, &scene, &jo)?,
+                    jittered: if jitter_added {
+                        Some(AnimatedTechnique::new(&v.technique, &scene, &jo)?)
+                    } else {
+                        None
+                    },
                     stage: Stage::new(settings, gpu, &v.technique)?,
                     jitter_added,
                     meters: [FlickerMeter::new(), FlickerMeter::new()],
@@ -673,9 +679,16 @@ pub fn measure_temporal(
             for row in &mut rows {
                 // The row as configured: its frame_index advanced only if it jitters already.
                 let (plain, _) = row.plain.render(gpu, &mut frame, f, &|_, _| {})?;
-                let (raw, _) = row.jittered.render(gpu, &mut frame, f, &|_, _| {})?;
+                let jittered = match &mut row.jittered {
+                    Some(j) => Some((j.render(gpu, &mut frame, f, &|_, _| {})?.0, j.gpu_output())),
+                    None => None,
+                };
+                let (raw, fed) = match &jittered {
+                    Some((img, out)) => (img, *out),
+                    None => (&plain, row.plain.gpu_output()),
+                };
                 let start = std::time::Instant::now();
-                let (out, _) = row.stage.resolve(gpu, &frame, row.jittered.gpu_output(), &raw)?;
+                let (out, _) = row.stage.resolve(gpu, &frame, fed, raw)?;
                 row.stage_ms.push(start.elapsed().as_secs_f64() * 1e3);
                 row.meters[0].push(&plain, &q.inscatter)?;
                 row.meters[1].push(&out, &q.inscatter)?;

@@ -125,16 +125,28 @@ fn lamp() -> Light {
     Light::Point { position: Vec3::new(0.0, 12.0, -14.0), color: Vec3::new(1.0, 0.8, 0.6), intensity: 50.0 }
 }
 
+/// A lamp 3.5 cm from the view rays that pass nearest it, on screen: its 1/d² peak is a few
+/// centimetres wide on 30 m rays.
+fn lamp_by_the_rays() -> Light {
+    Light::Point { position: Vec3::new(0.031, 0.017, -14.0), color: Vec3::new(1.0, 0.8, 0.6), intensity: 50.0 }
+}
+
 #[test]
 fn point_light_reference_matches_an_independent_quadrature() {
-    for m in media() {
-        let (d, depth, sm) = frame(lamp(), m.clone());
-        let exact = point_quadrature(&d);
-        let (img, _) =
-            reference::render(&cpu_frame(&d, &depth, &sm), &ReferenceSettings { steps: 2048, seed: 5 }, &|_, _| {})
-                .unwrap();
-        let e = common::max_rel(&img, &exact, 1e-9);
-        assert!(e < 5e-3, "{m:?}: reference off the quadrature by {e}");
+    // The reference's strata are equal in the angle seen from a local light (docs/MODEL.md §9),
+    // so the lamp by the rays converges as fast as the one far from them. Measured worst over
+    // the media at 2048 strata: 1.8e-4 (far lamp), 2.6e-4 (lamp by the rays); strata equal in
+    // transmittance measured 3.1e-5 and 2.6e-3, so the bound tells the two layouts apart.
+    for lamp in [lamp(), lamp_by_the_rays()] {
+        for m in media() {
+            let (d, depth, sm) = frame(lamp.clone(), m.clone());
+            let exact = point_quadrature(&d);
+            let (img, _) =
+                reference::render(&cpu_frame(&d, &depth, &sm), &ReferenceSettings { steps: 2048, seed: 5 }, &|_, _| {})
+                    .unwrap();
+            let e = common::max_rel(&img, &exact, 1e-9);
+            assert!(e < 1e-3, "{lamp:?}, {m:?}: reference off the quadrature by {e}");
+        }
     }
 }
 

@@ -2,10 +2,13 @@
 //!
 //! CPU only, f64 throughout, the same shadow map as every technique (so the visibility term is
 //! identical and differences measure the technique, not the shadow map). Each pixel's integral
-//! L_scatt = ∫₀ˢ T(t)·σs·p(cos θ)·L_in(x_t)·V(x_t) dt (docs/MODEL.md §1) is estimated with N
-//! stratified samples: stratum k covers [kΔ, (k+1)Δ], Δ = s/N, with one uniformly jittered
-//! sample in it; the estimator Σ f(t_k)·Δ is unbiased. Convergence is estimated per pixel by
-//! comparing it with the N/2-stratum estimator built from the even strata alone (weight 2Δ).
+//! L_scatt = ∫₀ˢ T(t)·σs·p(cos θ)·L_in(x_t)·V(x_t) dt (docs/MODEL.md §1) is estimated, per
+//! light over its own interval, with N stratified samples, one uniformly jittered sample in each
+//! stratum; the estimator Σ f(t_k)·w_k is unbiased. The strata are equal in the transmittance's
+//! integral for a sun and equal in the angle seen from the light for a point or spot light (the
+//! change of variables of docs/MODEL.md §9, which cancels the 1/d² falloff), so the yardstick is
+//! finest where each integrand peaks. Convergence is estimated per pixel by comparing it with
+//! the N/2-stratum estimator built from the even strata alone (weight 2·w_k).
 
 use crate::error::Error;
 use crate::frame::CpuFrame;
@@ -142,6 +145,64 @@ impl<'a> Integrand<'a> {
     }
 }
 
+/// Where the N strata of one light's interval [t_lo, t_hi] lie on a view ray, and what each
+/// sample weighs (its stratum's length over its density, so Σ f(t_k)·w_k is unbiased).
+enum Strata {
+    /// Equal in the transmittance's integral: t = t_lo − ln(1 − ξ·(1 − e^(−σ̄·len)))/σ̄ with
+    /// density σ̄·e^(−σ̄(t − t_lo))/(1 − e^(−σ̄·len)) (σ̄ the mean extinction of the three
+    /// channels), so a dense medium's first few centimetres get the samples they need. A sun's
+    /// integrand varies only with the transmittance (and the shadows).
+    Transmittance { t_lo: f64, sigma: f64, norm: f64 },
+    /// Equal lengths, where σ̄·len is tiny.
+    Uniform { t_lo: f64, len: f64 },
+    /// Equal in the angle seen from a local light (docs/MODEL.md §9): t = Δ + D·tan θ, θ
+    /// uniform in [θ_lo, θ_hi], density D/((θ_hi − θ_lo)·d²) with d² = D² + (t − Δ)², so the
+    /// 1/d² falloff of a point or spot light's radiance cancels in f/density and a lamp next
+    /// to the ray gets strata as fine as its peak. Δ is the light's foot on the ray, D its
+    /// distance from the ray.
+    Equiangular { foot: f64, dist: f64, theta_lo: f64, theta_span: f64 },
+}
+
+impl Strata {
+    fn new(integrand: &Integrand, eye: DVec3, dir: DVec3, (t_lo, t_hi): (f64, f64), sigma_mean: f64) -> Self {
+        let len = (t_hi - t_lo).max(0.0);
+        if !matches!(integrand.light.light, Light::Directional { .. }) {
+            let v = integrand.light_pos - eye;
+            let foot = v.dot(dir);
+            let dist = (v - dir * foot).length();
+            // A light on the ray (to f64 rounding at its distance) has a non-integrable peak
+            // there; keep the transmittance strata rather than divide by D ≈ 0.
+            if dist > 1e-9 * v.length().max(1.0) {
+                let theta_lo = ((t_lo - foot) / dist).atan();
+                let theta_hi = ((t_hi - foot) / dist).atan();
+                return Self::Equiangular { foot, dist, theta_lo, theta_span: theta_hi - theta_lo };
+            }
+        }
+        if sigma_mean * len > 1e-3 {
+            Self::Transmittance { t_lo, sigma: sigma_mean, norm: -(-sigma_mean * len).exp_m1() }
+        } else {
+            Self::Uniform { t_lo, len }
+        }
+    }
+
+    /// The sample at the fraction ξ ∈ [0, 1) of the strata's measure, and its weight with `n`
+    /// strata in all.
+    fn sample(&self, xi: f64, n: u32) -> (f64, f64) {
+        let n = n as f64;
+        match *self {
+            Self::Transmittance { t_lo, sigma, norm } => {
+                let dt = -(-xi * norm).ln_1p() / sigma;
+                (t_lo + dt, norm / (sigma * (-sigma * dt).exp() * n))
+            }
+            Self::Uniform { t_lo, len } => (t_lo + xi * len, len / n),
+            Self::Equiangular { foot, dist, theta_lo, theta_span } => {
+                let tan = (theta_lo + xi * theta_span).tan();
+                (foot + dist * tan, theta_span * dist * (1.0 + tan * tan) / n)
+            }
+        }
+    }
+}
+
 impl ReferenceSettings {
     /// Checks the ranges.
     pub fn validate(&self) -> Result<(), Error> {
@@ -218,25 +279,15 @@ pub fn render(
                         _ => (t_lo, t_hi),
                     };
                     let len = (t_hi - t_lo).max(0.0);
-                    // Strata in transmittance: t = t_lo − ln(1 − ξ·(1 − e^(−σ̄·len)))/σ̄ with pdf
-                    // σ̄·e^(−σ̄(t − t_lo))/(1 − e^(−σ̄·len)) (σ̄ the mean extinction of the three
-                    // channels), so a dense medium's first few centimetres get the samples they
-                    // need; uniform strata where σ̄·len is tiny.
-                    let importance = sigma_mean * len > 1e-3;
-                    let norm = if importance { -(-sigma_mean * len).exp_m1() } else { 0.0 };
+                    let strata = Strata::new(integrand, eye, dir, (t_lo, t_hi), sigma_mean);
+                    if len <= 0.0 {
+                        rng = pcg_hash(rng); // the draw an empty interval has always consumed
+                        continue;
+                    }
                     for k in 0..n {
                         rng = pcg_hash(rng);
                         let u = (rng >> 8) as f64 / 16777216.0;
-                        let xi = (k as f64 + u) / n as f64;
-                        let (t, w) = if importance {
-                            let dt = -(-xi * norm).ln_1p() / sigma_mean;
-                            (t_lo + dt, norm / (sigma_mean * (-sigma_mean * dt).exp() * n as f64))
-                        } else {
-                            (t_lo + xi * len, len / n as f64)
-                        };
-                        if len <= 0.0 {
-                            break;
-                        }
+                        let (t, w) = strata.sample((k as f64 + u) / n as f64, n);
                         let f = integrand.density(dir, eye + dir * t) * (-integrand.sigma_t * t).exp();
                         full += f * w;
                         if k % 2 == 0 {

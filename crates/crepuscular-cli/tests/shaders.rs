@@ -181,6 +181,7 @@ fn subsampled_params_match_the_wgsl_layout_in_every_pass() {
         ("grid_height", offset_of!(SubsampledParams, grid_height)),
         ("depth_tolerance", offset_of!(SubsampledParams, depth_tolerance)),
         ("edge_remarch", offset_of!(SubsampledParams, edge_remarch)),
+        ("cone_aware", offset_of!(SubsampledParams, cone_aware)),
     ];
     for (name, wgsl, entry) in
         [("subsampled/march", MARCH_WGSL, "march"), ("subsampled/upsample", UPSAMPLE_WGSL, "upsample")]

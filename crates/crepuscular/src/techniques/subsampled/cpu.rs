@@ -5,7 +5,7 @@ use super::{MIN_WEIGHT, SubsampledSettings, stats_extra};
 use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
-use crate::march::{MarchLights, PixelMarch, march_pixel};
+use crate::march::{MarchLights, PixelMarch, cone_interval, march_pixel};
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -68,6 +68,23 @@ pub fn depth_weight(r: f32, tol: f32) -> f32 {
     1.0 - t * t * (3.0 - 2.0 * t)
 }
 
+/// Mirrors `cone_set` in upsample.wgsl: bit k set when the ray `eye` + t·`dir`, t in [0, s],
+/// meets the cone of the frame's light k, a spot (the exact ray–cone test of `exact-cone`).
+/// Outside a spot's cone its light is exactly zero, so rays with different sets see different
+/// lights.
+pub fn cone_set(frame: &CpuFrame, lights: &MarchLights, dir: Vec3, s: f32) -> u32 {
+    let eye = frame.desc.camera.position;
+    let mut set = 0;
+    for (&k, cone) in lights.indices.iter().zip(&lights.cones) {
+        if let Some(c) = cone
+            && cone_interval(c, eye, dir, s).is_some()
+        {
+            set |= 1 << k;
+        }
+    }
+    set
+}
+
 /// Per-frame constants of the upsampling.
 struct Ctx<'a> {
     frame: &'a CpuFrame<'a>,
@@ -86,19 +103,33 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
     let by = bracket(y, desc.height, gh);
     let taps = [c.grid.get(bx.i0, by.i0), c.grid.get(bx.i1, by.i0), c.grid.get(bx.i0, by.i1), c.grid.get(bx.i1, by.i1)];
     let bilinear = [(1.0 - bx.t) * (1.0 - by.t), bx.t * (1.0 - by.t), (1.0 - bx.t) * by.t, bx.t * by.t];
+    // The source pixels of the four taps, in the order of `taps`.
+    let (sx, sy) = (
+        [source_pixel(bx.i0, desc.width, gw), source_pixel(bx.i1, desc.width, gw)],
+        [source_pixel(by.i0, desc.height, gh), source_pixel(by.i1, desc.height, gh)],
+    );
+    let sources = [(sx[0], sy[0]), (sx[1], sy[0]), (sx[0], sy[1]), (sx[1], sy[1])];
+    let cones = c.settings.cone_aware && c.lights.cones.iter().any(Option::is_some);
+    let own_cones = if cones { cone_set(c.frame, &c.lights, dir, s) } else { 0 };
     let inv_s = 1.0 / s.max(1e-6);
     let mut sum = Vec3::ZERO;
     let mut wsum = 0.0f32;
     let mut nearest = 0;
     let mut nearest_diff = (taps[0][3] - s).abs();
+    let mut nearest_mismatch = true;
     for k in 0..4 {
+        // A tap that sees other spot cones than the pixel is as far as a depth step: it counts
+        // neither in the blend nor as the nearest, unless every tap is such.
+        let mismatch =
+            cones && cone_set(c.frame, &c.lights, desc.pixel_ray(sources[k].0, sources[k].1), taps[k][3]) != own_cones;
         let diff = (taps[k][3] - s).abs();
-        let w = bilinear[k] * depth_weight(diff * inv_s, c.settings.depth_tolerance);
+        let w = if mismatch { 0.0 } else { bilinear[k] * depth_weight(diff * inv_s, c.settings.depth_tolerance) };
         sum += w * Vec3::new(taps[k][0], taps[k][1], taps[k][2]);
         wsum += w;
-        if diff < nearest_diff {
+        if (nearest_mismatch && !mismatch) || (mismatch == nearest_mismatch && diff < nearest_diff) {
             nearest = k;
             nearest_diff = diff;
+            nearest_mismatch = mismatch;
         }
     }
     if wsum >= MIN_WEIGHT {

@@ -16,7 +16,7 @@ struct Params {
     grid_height: u32,
     depth_tolerance: f32,
     edge_remarch: u32,
-    _pad0: u32,
+    cone_aware: u32,
     _pad1: u32,
     _pad2: u32,
 }

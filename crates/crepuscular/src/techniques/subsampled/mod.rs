@@ -74,6 +74,15 @@ pub struct SubsampledSettings {
     /// Costs N steps per such pixel (counted in `remarched_pixels`); exact at silhouettes and
     /// on geometry thinner than the grid spacing. Default true.
     pub edge_remarch: bool,
+    /// Treat a grid sample whose ray meets a different set of spot-light cones than the
+    /// pixel's ray as incompatible, as a depth step is: the pixel blends only the samples that
+    /// see the same cones, or is re-marched (`edge_remarch`) when none does. A beam narrower
+    /// than the grid spacing then keeps its edges instead of being spread over the samples
+    /// around it, and a pixel whose ray misses a cone gets that spot's exact zero. Costs one
+    /// ray–cone test per spot light for the pixel and each of its four samples, plus the
+    /// re-marched pixels along the cones' edges; nothing in a frame without spot lights.
+    /// Measured: docs/ROBUSTNESS.md (the sweep's spot views). Default true.
+    pub cone_aware: bool,
     /// Offset each ray's samples by a per-pixel random fraction of a step (the jitter of the
     /// grid sample's source pixel, as `brute-force` would use there) instead of the step
     /// midpoint. Trades banding for noise at no extra cost. Default false.
@@ -107,6 +116,7 @@ impl Default for SubsampledSettings {
             steps: 64,
             depth_tolerance: 0.1,
             edge_remarch: true,
+            cone_aware: true,
             jitter: false,
             frame_index: 0,
             spot_steps: SpotSteps::ExactCone,
@@ -180,8 +190,10 @@ pub struct SubsampledParams {
     pub depth_tolerance: f32,
     /// 1 to re-march pixels without a depth-compatible neighbour.
     pub edge_remarch: u32,
+    /// 1 to treat samples that meet other spot cones than the pixel as incompatible.
+    pub cone_aware: u32,
     /// Padding.
-    pub _pad: [u32; 3],
+    pub _pad: [u32; 2],
 }
 
 const _: () = assert!(std::mem::size_of::<SubsampledParams>() == 48);
@@ -199,7 +211,8 @@ impl SubsampledParams {
             grid_height: grid.1,
             depth_tolerance: s.depth_tolerance,
             edge_remarch: s.edge_remarch as u32,
-            _pad: [0; 3],
+            cone_aware: s.cone_aware as u32,
+            _pad: [0; 2],
         }
     }
 }

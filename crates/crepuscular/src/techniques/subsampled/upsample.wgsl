@@ -18,7 +18,7 @@ struct Params {
     grid_height: u32,
     depth_tolerance: f32,
     edge_remarch: u32,
-    _pad0: u32,
+    cone_aware: u32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -90,6 +90,33 @@ fn depth_weight(r: f32, tol: f32) -> f32 {
     return 1.0 - t * t * (3.0 - 2.0 * t);
 }
 
+// cpu.rs cone_set: bit k set when the ray o + t·dir, t in [0, s], meets the cone of spot light
+// k (the exact ray–cone test of the `exact-cone` policy); 0 for every other light. Outside a
+// spot's cone its light is exactly zero, so two rays with different sets see different lights.
+fn cone_set(dir: vec3<f32>, s: f32) -> u32 {
+    var cones = 0u;
+    for (var k = 0u; k < lights.count; k++) {
+        let l = lights.items[k];
+        if l.kind == LIGHT_SPOT {
+            let c = cone_interval(l, frame.camera_pos.xyz, dir, s);
+            if c.y > c.x {
+                cones |= 1u << k;
+            }
+        }
+    }
+    return cones;
+}
+
+// cpu.rs any_spot: whether the frame has a spot light (else every cone set is 0).
+fn any_spot() -> bool {
+    for (var k = 0u; k < lights.count; k++) {
+        if lights.items[k].kind == LIGHT_SPOT {
+            return true;
+        }
+    }
+    return false;
+}
+
 struct Upsampled {
     radiance: vec3<f32>,
     remarched: bool,
@@ -114,19 +141,43 @@ fn upsample_pixel(px: vec2<u32>) -> Upsampled {
         (1.0 - bx.t) * by.t,
         bx.t * by.t,
     );
+    // The source pixels of the four taps, in the order of `taps`.
+    let gw = params.grid_width;
+    let gh = params.grid_height;
+    let sx = vec2<u32>(source_pixel(bx.i0, frame.width, gw), source_pixel(bx.i1, frame.width, gw));
+    let sy = vec2<u32>(source_pixel(by.i0, frame.height, gh), source_pixel(by.i1, frame.height, gh));
+    let sources = array<vec2<u32>, 4>(
+        vec2<u32>(sx.x, sy.x),
+        vec2<u32>(sx.y, sy.x),
+        vec2<u32>(sx.x, sy.y),
+        vec2<u32>(sx.y, sy.y),
+    );
+    let cones = params.cone_aware == 1u && any_spot();
+    var own_cones = 0u;
+    if cones {
+        own_cones = cone_set(dir, s);
+    }
     let inv_s = 1.0 / max(s, 1e-6);
     var sum = vec3<f32>(0.0);
     var wsum = 0.0;
     var nearest = 0u;
     var nearest_diff = abs(taps[0].a - s);
+    var nearest_mismatch = true;
     for (var k = 0u; k < 4u; k++) {
+        // A tap that sees other spot cones than the pixel is as far as a depth step: it counts
+        // neither in the blend nor as the nearest, unless every tap is such.
+        var mismatch = false;
+        if cones {
+            mismatch = cone_set(pixel_ray(frame, sources[k]), taps[k].a) != own_cones;
+        }
         let diff = abs(taps[k].a - s);
-        let w = bilinear[k] * depth_weight(diff * inv_s, params.depth_tolerance);
+        let w = select(bilinear[k] * depth_weight(diff * inv_s, params.depth_tolerance), 0.0, mismatch);
         sum += w * taps[k].rgb;
         wsum += w;
-        if diff < nearest_diff {
+        if (nearest_mismatch && !mismatch) || (mismatch == nearest_mismatch && diff < nearest_diff) {
             nearest = k;
             nearest_diff = diff;
+            nearest_mismatch = mismatch;
         }
     }
     if wsum >= MIN_WEIGHT {

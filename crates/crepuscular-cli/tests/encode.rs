@@ -252,27 +252,28 @@ fn bind_groups_are_built_on_resize_and_new_inputs_not_per_frame() {
     }
 }
 
-/// An IEEE half-float's value.
-fn half_to_f32(h: u16) -> f32 {
-    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
-    let exp = ((h >> 10) & 0x1f) as i32;
-    let frac = (h & 0x3ff) as f32;
-    match exp {
-        0 => sign * frac * 2f32.powi(-24),
-        31 => {
-            if frac == 0.0 {
-                sign * f32::INFINITY
-            } else {
-                f32::NAN
-            }
-        }
-        e => sign * (1.0 + frac / 1024.0) * 2f32.powi(e - 15),
-    }
-}
+/// PSNR floors (dB) of the `Rgba16Float` frame against the `Rgba32Float` one, per scene, for
+/// the techniques whose radiance intermediates follow the output format
+/// (`pass::intermediate_format`: interleaved's partial sums, subsampled's grid, epipolar's
+/// marched and interpolated samples). Measured 2026-12-03 (llvmpipe, 80×45): colonnade 75.6 /
+/// 74.8 / 71.8 dB, cage 84.8 / 96.2 / 102.8 dB (interleaved / subsampled / epipolar; the
+/// techniques without such intermediates: 78.4–78.7 and 104.3–104.9 dB, the output's own
+/// rounding). Each floor is 10 dB below its measurement, still 15 dB above the 30–55 dB that
+/// separate the techniques from the reference.
+const HALF_INTERMEDIATES_PSNR: &[(&str, &str, f64)] = &[
+    ("colonnade", "interleaved", 65.0),
+    ("colonnade", "subsampled", 64.0),
+    ("colonnade", "epipolar", 61.0),
+    ("cage", "interleaved", 74.0),
+    ("cage", "subsampled", 86.0),
+    ("cage", "epipolar", 92.0),
+];
 
 #[test]
-fn rgba16float_output_is_the_rgba32float_frame_rounded_to_half_floats() {
-    let Some(gpu) = test_gpu("rgba16float_output_is_the_rgba32float_frame_rounded_to_half_floats") else { return };
+fn rgba16float_output_costs_at_most_the_half_float_rounding_of_its_intermediates() {
+    let Some(gpu) = test_gpu("rgba16float_output_costs_at_most_the_half_float_rounding_of_its_intermediates") else {
+        return;
+    };
     for scene_name in ["colonnade", "cage"] {
         let scene = small(scene_name);
         let desc = frame_desc(&scene).unwrap();
@@ -286,6 +287,7 @@ fn rgba16float_output_is_the_rgba32float_frame_rounded_to_half_floats() {
             let mut full = Scattering::from_gpu(&gpu, settings.clone()).unwrap();
             let full_out = gpu.create_output_texture(w, h);
             full.render(&frame, &full_out.create_view(&Default::default())).unwrap();
+            let full_memory = full.technique().gpu_memory_bytes();
             let want = gpu.read_texture_f32(&full_out, 0).unwrap();
 
             let mut half = Scattering::from_gpu(&gpu, settings).unwrap();
@@ -298,25 +300,41 @@ fn rgba16float_output_is_the_rgba32float_frame_rounded_to_half_floats() {
             let half_out =
                 crepuscular::gpu::storage_texture(&gpu.device, "half", wgpu::TextureFormat::Rgba16Float, w, h);
             half.render(&frame, &half_out.create_view(&Default::default())).unwrap();
-            let bytes = gpu.read_texture_bytes(&half_out, 0).unwrap();
-            let got: Vec<f32> = bytes.chunks_exact(2).map(|b| half_to_f32(u16::from_le_bytes([b[0], b[1]]))).collect();
+            let half_memory = half.technique().gpu_memory_bytes();
+            let got = gpu.read_texture_f32(&half_out, 0).unwrap();
             assert_eq!(got.len(), want.len());
-            // Every value is the f32 frame's value converted to a half float, within one half
-            // ulp (relative 2⁻¹⁰; the conversion may truncate rather than round — llvmpipe's
-            // does — and subnormals are 2⁻²⁴ apart): the technique computed exactly the same.
+            let floor = HALF_INTERMEDIATES_PSNR.iter().find(|(s, t, _)| *s == scene_name && *t == name).map(|r| r.2);
             let (mut se, mut peak) = (0.0f64, 0.0f64);
             for (i, (g, f)) in got.iter().zip(&want).enumerate() {
                 if i % 4 == 3 {
                     continue; // alpha
                 }
-                assert!((g - f).abs() <= f.abs() * 2f32.powi(-10) + 2f32.powi(-24), "{scene_name} {name}: {g} vs {f}");
+                assert!(g.is_finite(), "{scene_name} {name}: {g}");
+                if floor.is_none() {
+                    // No radiance intermediate: every value is the f32 frame's value converted
+                    // to a half float, within one half ulp (relative 2⁻¹⁰; the conversion may
+                    // truncate rather than round — llvmpipe's does — and subnormals are 2⁻²⁴
+                    // apart): the technique computed exactly the same.
+                    assert!(
+                        (g - f).abs() <= f.abs() * 2f32.powi(-10) + 2f32.powi(-24),
+                        "{scene_name} {name}: {g} vs {f}"
+                    );
+                }
                 se += ((g - f) as f64).powi(2);
                 peak = peak.max(*f as f64);
             }
             let mse = se / (w * h * 3) as f64;
             let psnr = 10.0 * (peak * peak / mse.max(1e-30)).log10();
-            eprintln!("{scene_name} {name}: Rgba16Float vs Rgba32Float output: PSNR {psnr:.1} dB (peak {peak:.3})");
+            eprintln!(
+                "{scene_name} {name}: Rgba16Float vs Rgba32Float output: PSNR {psnr:.1} dB (peak {peak:.3}); memory {half_memory} vs {full_memory} bytes"
+            );
             assert!(peak > 1e-3, "{scene_name} {name}: a black frame");
+            if let Some(floor) = floor {
+                assert!(psnr >= floor, "{scene_name} {name}: PSNR {psnr:.1} dB below {floor}");
+                assert!(half_memory < full_memory, "{scene_name} {name}: its intermediates did not shrink");
+            } else {
+                assert_eq!(half_memory, full_memory, "{scene_name} {name}");
+            }
         }
     }
 }

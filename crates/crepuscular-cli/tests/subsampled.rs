@@ -71,7 +71,13 @@ fn mirror_settings() -> Vec<SubsampledSettings> {
         SubsampledSettings::default(),
         SubsampledSettings { factor: 2, ..Default::default() },
         SubsampledSettings { grid: Some([64, 36]), steps: 24, ..Default::default() },
-        SubsampledSettings { edge_remarch: false, jitter: true, frame_index: 3, cone_aware: false, ..Default::default() },
+        SubsampledSettings {
+            edge_remarch: false,
+            jitter: true,
+            frame_index: 3,
+            cone_aware: false,
+            ..Default::default()
+        },
         SubsampledSettings { steps: 32, spot_steps: SpotSteps::ExactCone, ..Default::default() },
     ]
 }

@@ -241,10 +241,15 @@ impl GpuContext {
         }
     }
 
-    /// Reads back a whole single-layer 2D texture of a 4-byte-per-texel (`R32Float`,
-    /// `Depth32Float`) or 16-byte-per-texel (`Rgba32Float`) format as f32s.
+    /// Reads back layer `layer` of a 2D texture of a 32-bit float format (`R32Float`,
+    /// `Depth32Float`, `Rgba32Float`) or a 16-bit one (`R16Float`, `Rg16Float`, `Rgba16Float`,
+    /// widened exactly) as f32s.
     pub fn read_texture_f32(&self, texture: &wgpu::Texture, layer: u32) -> Result<Vec<f32>, Error> {
+        use wgpu::TextureFormat::{R16Float, Rg16Float, Rgba16Float};
         let bytes = self.read_texture_bytes(texture, layer)?;
+        if matches!(texture.format(), R16Float | Rg16Float | Rgba16Float) {
+            return Ok(bytes.chunks_exact(2).map(|c| half::f16::from_le_bytes([c[0], c[1]]).to_f32()).collect());
+        }
         Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
     }
 

@@ -57,14 +57,33 @@ pub const OUTPUT_FORMATS: [wgpu::TextureFormat; 2] =
 
 /// A final pass's source with its output (`out_tex`) declared in `output`'s storage format.
 pub fn with_output(src: &str, output: wgpu::TextureFormat) -> String {
-    let name = match output {
+    with_storage_format(src, "out_tex", output)
+}
+
+/// `src` with its storage texture `var` (declared `texture_storage_2d<rgba32float, write>` in
+/// the shader) declared in `format`'s storage format, `Rgba32Float` or `Rgba16Float`.
+pub fn with_storage_format(src: &str, var: &str, format: wgpu::TextureFormat) -> String {
+    let name = match format {
         wgpu::TextureFormat::Rgba16Float => "rgba16float",
         _ => "rgba32float",
     };
-    src.replace(
-        "var out_tex: texture_storage_2d<rgba32float, write>;",
-        &format!("var out_tex: texture_storage_2d<{name}, write>;"),
-    )
+    let declared = format!("var {var}: texture_storage_2d<rgba32float, write>;");
+    debug_assert!(src.contains(&declared), "the shader declares no `{declared}`");
+    src.replace(&declared, &format!("var {var}: texture_storage_2d<{name}, write>;"))
+}
+
+/// The format of a technique's radiance intermediates (interleaved's partial sums,
+/// subsampled's grid, epipolar's marched and interpolated samples): the output's, so a caller
+/// who chooses `Rgba16Float` halves their memory and bandwidth too. Intermediates that hold
+/// positions or depths (epipolar's coordinates, prefiltered's and minmax's maps) stay 32-bit.
+/// The cost in PSNR, measured: README, "Rgba16Float".
+pub fn intermediate_format(output: wgpu::TextureFormat) -> wgpu::TextureFormat {
+    output
+}
+
+/// Bytes per texel of an `Rgba32Float` or `Rgba16Float` texture.
+pub fn texel_bytes(format: wgpu::TextureFormat) -> u64 {
+    format.block_copy_size(None).unwrap_or(16) as u64
 }
 
 /// A storage buffer at `binding` of at least `min_size` bytes (None: any).

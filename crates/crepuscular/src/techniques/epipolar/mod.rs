@@ -344,7 +344,8 @@ impl Sized {
     fn bytes(&self) -> u64 {
         let texels = self.key[0] as u64 * self.key[1] as u64;
         let pixels = self.key[2] as u64 * self.key[3] as u64;
-        self.lines.size() + self.list.size() + self.claims.size() + texels * (16 + 4 + 16) + pixels * 16
+        let radiance = pass::texel_bytes(self.marched.format());
+        self.lines.size() + self.list.size() + self.claims.size() + texels * (16 + 4 + radiance) + pixels * radiance
     }
 }
 
@@ -377,6 +378,8 @@ pub struct Epipolar {
     binds: pass::BindCache<Binds>,
     /// `march = "minmax"`: the tree and the walk's pipeline, built on the first such frame.
     minmax: Option<MinmaxMarch>,
+    /// The format of the marched and interpolated radiance ([`pass::intermediate_format`]).
+    inter: wgpu::TextureFormat,
 }
 
 /// What `march = "minmax"` adds: the min-max tree of the frame and the march that walks it.
@@ -388,15 +391,16 @@ struct MinmaxMarch {
 }
 
 impl MinmaxMarch {
-    fn new(device: &wgpu::Device) -> Self {
+    fn new(device: &wgpu::Device, inter: wgpu::TextureFormat) -> Self {
         use pass::storage_buffer_entry as buf;
-        let layout = pass::frame_pass_layout(
+        let layout = pass::frame_pass_layout_to(
             device,
             "epipolar march (minmax)",
             &[buf(6, true, None), buf(7, true, Some(4)), buf(8, true, Some(16))],
+            inter,
         );
-        let pipeline =
-            pass::compute_pipeline(device, "epipolar/march_minmax.wgsl", &march_minmax_source(), "march", &layout);
+        let src = pass::with_storage_format(&march_minmax_source(), "marched_tex", inter);
+        let pipeline = pass::compute_pipeline(device, "epipolar/march_minmax.wgsl", &src, "march", &layout);
         Self { tree: crate::techniques::minmax::TreeBuilder::new(device), layout, pipeline, binds: Default::default() }
     }
 }
@@ -462,6 +466,7 @@ fn uint_texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
 impl Layouts {
     fn new(device: &wgpu::Device, output: wgpu::TextureFormat) -> Self {
         use pass::{storage_buffer_entry as buf, texture_entry as tex, uniform_entry as uni};
+        let inter = pass::intermediate_format(output);
         use wgpu::TextureFormat as F;
         use wgpu::TextureViewDimension::{D2, D2Array};
         let layout = |label: &str, entries: &[wgpu::BindGroupLayoutEntry]| {
@@ -498,10 +503,15 @@ impl Layouts {
                     buf(8, false, Some(4)),
                 ],
             ),
-            march: pass::frame_pass_layout(device, "epipolar march", &[buf(7, true, Some(4)), buf(8, true, Some(16))]),
+            march: pass::frame_pass_layout_to(
+                device,
+                "epipolar march",
+                &[buf(7, true, Some(4)), buf(8, true, Some(16))],
+                inter,
+            ),
             interpolate: layout(
                 "epipolar interpolate",
-                &[uni(0), uni(1), tex(2, D2), uint_texture_entry(3), tex(4, D2), storage_entry(5, F::Rgba32Float)],
+                &[uni(0), uni(1), tex(2, D2), uint_texture_entry(3), tex(4, D2), storage_entry(5, inter)],
             ),
             upsample: pass::frame_pass_layout_to(
                 device,
@@ -519,6 +529,7 @@ impl Epipolar {
         settings.validate()?;
         gpu.scoped("creating the epipolar pipelines", || {
             let device = &gpu.device;
+            let inter = pass::intermediate_format(output);
             let layouts = Layouts::new(device, output);
             let pipe = |name: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
                 pass::compute_pipeline(device, &format!("{name}.wgsl ({entry})"), &pass_source(src), entry, layout)
@@ -529,8 +540,18 @@ impl Epipolar {
                 coordinates: pipe("epipolar/lines", LINES_WGSL, "coordinates", &layouts.lines),
                 refine: pipe("epipolar/refine", REFINE_WGSL, "refine", &layouts.refine),
                 args: pipe("epipolar/refine", REFINE_WGSL, "args", &layouts.refine),
-                march: pipe("epipolar/march", MARCH_WGSL, "march", &layouts.march),
-                interpolate: pipe("epipolar/interpolate", INTERPOLATE_WGSL, "interpolate", &layouts.interpolate),
+                march: pipe(
+                    "epipolar/march",
+                    &pass::with_storage_format(MARCH_WGSL, "marched_tex", inter),
+                    "march",
+                    &layouts.march,
+                ),
+                interpolate: pipe(
+                    "epipolar/interpolate",
+                    &pass::with_storage_format(INTERPOLATE_WGSL, "radiance_tex", inter),
+                    "interpolate",
+                    &layouts.interpolate,
+                ),
                 upsample: pipe(
                     "epipolar/upsample",
                     &pass::with_output(UPSAMPLE_WGSL, output),
@@ -570,6 +591,7 @@ impl Epipolar {
                 last_params: None,
                 binds: Default::default(),
                 minmax: None,
+                inter,
             }
         })
     }
@@ -577,7 +599,8 @@ impl Epipolar {
     /// Bytes of GPU memory this technique holds: uniform, counter and indirect buffers, the
     /// 1×1 white texture, the line buffer, the sample list, the per-pixel claims (4 B per
     /// pixel), the three line textures (coordinates 16 B, interpolation 4 B, radiance 16 B per
-    /// texel), the marched texture (16 B per pixel) and the prefiltered spot texture.
+    /// texel), the marched texture (16 B per pixel) and the prefiltered spot texture; the
+    /// radiance and marched textures take 8 B when the output is `Rgba16Float`.
     pub fn gpu_memory_bytes(&self) -> u64 {
         let pre = self.prefiltered.as_ref().map_or(0, |p| p.texture.width() as u64 * p.texture.height() as u64 * 16);
         self.buffers.size()
@@ -600,12 +623,12 @@ impl Epipolar {
     pub fn interpolation_texture(&self) -> Option<&wgpu::Texture> {
         self.sized.as_ref().map(|s| &s.interp)
     }
-    /// The ray-marched samples of the last frame, by pixel (`Rgba32Float`, image size:
+    /// The ray-marched samples of the last frame, by pixel (the output's format, image size:
     /// in-scattering, s); pixels that were not ray-marched hold stale values.
     pub fn marched_texture(&self) -> Option<&wgpu::Texture> {
         self.sized.as_ref().map(|s| &s.marched)
     }
-    /// The radiance texture of the last frame (`Rgba32Float`: in-scattering interpolated
+    /// The radiance texture of the last frame (the output's format: in-scattering interpolated
     /// along the lines, view distance s in alpha; 0 on culled lines).
     pub fn radiance_texture(&self) -> Option<&wgpu::Texture> {
         self.sized.as_ref().map(|s| &s.radiance)
@@ -672,8 +695,8 @@ impl Epipolar {
             use wgpu::TextureFormat as F;
             let coords = texture("epipolar coordinates", F::Rgba32Float, samples, slices);
             let interp = texture("epipolar interpolation", F::R32Uint, samples, slices);
-            let marched = texture("epipolar marched radiance", F::Rgba32Float, width, height);
-            let radiance = texture("epipolar radiance", F::Rgba32Float, samples, slices);
+            let marched = texture("epipolar marched radiance", self.inter, width, height);
+            let radiance = texture("epipolar radiance", self.inter, samples, slices);
             let views = [&coords, &interp, &marched, &radiance].map(|t| t.create_view(&Default::default()));
             Sized {
                 key,
@@ -876,7 +899,7 @@ impl Epipolar {
         let minmax_march = s.march == EpipolarMarch::Minmax;
         if minmax_march {
             // The tree (minmax's `rectify` and `build`), then the walk per listed pixel.
-            let mm = self.minmax.get_or_insert_with(|| MinmaxMarch::new(&gpu.device));
+            let mm = self.minmax.get_or_insert_with(|| MinmaxMarch::new(&gpu.device, self.inter));
             let march_frame = GpuFrame { spot_textures: Some(march_spot), ..*frame };
             // Always resampled (epipolar asks the host for no rectified raster), as on the CPU.
             mm.tree.encode(gpu, rec, &march_frame, &s.minmax(), &self.buffers, false)?;

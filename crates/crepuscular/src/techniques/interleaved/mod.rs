@@ -354,13 +354,16 @@ pub struct Interleaved {
     no_lut: wgpu::Buffer,
     lut: Option<GpuLut>,
     targets: Option<Targets>,
+    /// The partial sums' format ([`pass::intermediate_format`]).
+    inter: wgpu::TextureFormat,
     binds: pass::BindCache<[wgpu::BindGroup; 3]>,
 }
 
 /// The march pass's layout: the frame-pass bindings 0–5 (frame, params, depth, shadow map,
-/// spot texture, output) plus the phase table (binding 6, read-only storage).
-fn march_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    pass::frame_pass_layout(device, "interleaved march", &[pass::storage_buffer_entry(6, true, None)])
+/// spot texture, the partial sums in `format`) plus the phase table (binding 6, read-only
+/// storage).
+fn march_layout(device: &wgpu::Device, format: wgpu::TextureFormat) -> wgpu::BindGroupLayout {
+    pass::frame_pass_layout_to(device, "interleaved march", &[pass::storage_buffer_entry(6, true, None)], format)
 }
 
 impl Interleaved {
@@ -373,11 +376,17 @@ impl Interleaved {
             let pipeline = |name: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
                 pass::compute_pipeline(device, name, src, entry, layout)
             };
-            use pass::{storage_texture_entry, texture_entry, uniform_entry};
-            let march_layout = march_layout(device);
+            use pass::{storage_texture_entry_of, texture_entry, uniform_entry};
+            let inter = pass::intermediate_format(output);
+            let march_layout = march_layout(device, inter);
             let rows_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("interleaved sum_rows"),
-                entries: &[uniform_entry(0), uniform_entry(1), texture_entry(2, D::D2), storage_texture_entry(3)],
+                entries: &[
+                    uniform_entry(0),
+                    uniform_entry(1),
+                    texture_entry(2, D::D2),
+                    storage_texture_entry_of(3, inter),
+                ],
             });
             let columns_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("interleaved sum_columns"),
@@ -386,11 +395,13 @@ impl Interleaved {
                     uniform_entry(1),
                     texture_entry(2, D::D2),
                     texture_entry(3, D::D2),
-                    pass::storage_texture_entry_of(4, output),
+                    storage_texture_entry_of(4, output),
                 ],
             });
-            let march_pipeline = pipeline("interleaved/march.wgsl", MARCH_WGSL, "march", &march_layout);
-            let rows_pipeline = pipeline("interleaved/sum_rows.wgsl", SUM_ROWS_WGSL, "sum_rows", &rows_layout);
+            let march_src = pass::with_output(MARCH_WGSL, inter);
+            let march_pipeline = pipeline("interleaved/march.wgsl", &march_src, "march", &march_layout);
+            let rows_src = pass::with_output(SUM_ROWS_WGSL, inter);
+            let rows_pipeline = pipeline("interleaved/sum_rows.wgsl", &rows_src, "sum_rows", &rows_layout);
             let columns_pipeline = pipeline(
                 "interleaved/sum_columns.wgsl",
                 &pass::with_output(SUM_COLUMNS_WGSL, output),
@@ -421,15 +432,18 @@ impl Interleaved {
                 no_lut,
                 lut: None,
                 targets: None,
+                inter,
                 binds: Default::default(),
             }
         })
     }
 
     /// Bytes of GPU memory this technique holds: uniforms, the 1×1 white spot texture, the
-    /// phase table, and the two intermediate `Rgba32Float` textures (16 bytes per pixel each).
+    /// phase table, and the two intermediate textures (16 bytes per pixel each, 8 when the
+    /// output is `Rgba16Float`).
     pub fn gpu_memory_bytes(&self) -> u64 {
-        let targets = self.targets.as_ref().map_or(0, |t| 2 * 16 * t.width as u64 * t.height as u64);
+        let texel = pass::texel_bytes(self.inter);
+        let targets = self.targets.as_ref().map_or(0, |t| 2 * texel * t.width as u64 * t.height as u64);
         let lut = self.lut.as_ref().map_or(0, |l| l.buffer.size());
         self.buffers.size() + self.params_buffer.size() + 16 + self.no_lut.size() + lut + targets
     }
@@ -453,9 +467,7 @@ impl Interleaved {
         gpu.check_texture_size("image size", width, height)?;
         self.targets = None;
         let targets = gpu.scoped("allocating the interleaved textures", || {
-            let tex = |label| {
-                crate::gpu::storage_texture(&gpu.device, label, wgpu::TextureFormat::Rgba32Float, width, height)
-            };
+            let tex = |label| crate::gpu::storage_texture(&gpu.device, label, self.inter, width, height);
             let march = tex("interleaved march");
             let rows = tex("interleaved rows");
             let march_view = march.create_view(&Default::default());

@@ -217,7 +217,7 @@ impl SubsampledParams {
     }
 }
 
-/// The low-resolution grid texture (`Rgba32Float`: in-scattering, view distance).
+/// The low-resolution grid texture (in-scattering, view distance; in the output's format).
 struct Grid {
     texture: wgpu::Texture,
     view: wgpu::TextureView,
@@ -237,6 +237,8 @@ pub struct Subsampled {
     counter: wgpu::Buffer,
     white: wgpu::TextureView,
     grid: Option<Grid>,
+    /// The grid's format ([`pass::intermediate_format`]).
+    inter: wgpu::TextureFormat,
     binds: pass::BindCache<[wgpu::BindGroup; 2]>,
 }
 
@@ -257,10 +259,12 @@ impl Subsampled {
         settings.validate()?;
         gpu.scoped("creating the subsampled pipelines", || {
             let device = &gpu.device;
-            let march_layout = pass::frame_pass_layout(device, "subsampled march", &[]);
+            let inter = pass::intermediate_format(output);
+            let march_layout = pass::frame_pass_layout_to(device, "subsampled march", &[], inter);
             let upsample_layout = upsample_layout(device, output);
+            let march_src = pass::with_storage_format(MARCH_WGSL, "grid_tex", inter);
             let march_pipeline =
-                pass::compute_pipeline(device, "subsampled/march.wgsl", MARCH_WGSL, "march", &march_layout);
+                pass::compute_pipeline(device, "subsampled/march.wgsl", &march_src, "march", &march_layout);
             let upsample_pipeline = pass::compute_pipeline(
                 device,
                 "subsampled/upsample.wgsl",
@@ -296,6 +300,7 @@ impl Subsampled {
                 counter,
                 white,
                 grid: None,
+                inter,
                 binds: Default::default(),
             }
         })
@@ -303,11 +308,12 @@ impl Subsampled {
 
     /// Bytes of GPU memory this technique holds (buffers, the 1×1 white texture and the grid).
     pub fn gpu_memory_bytes(&self) -> u64 {
-        let grid = self.grid.as_ref().map_or(0, |g| g.texture.width() as u64 * g.texture.height() as u64 * 16);
+        let texel = pass::texel_bytes(self.inter);
+        let grid = self.grid.as_ref().map_or(0, |g| g.texture.width() as u64 * g.texture.height() as u64 * texel);
         self.buffers.size() + self.params_buffer.size() + self.counter.size() + 16 + grid
     }
 
-    /// The low-resolution grid of the last frame (`Rgba32Float`, w×h: in-scattering in rgb,
+    /// The low-resolution grid of the last frame (w×h, in the output's format: in-scattering in rgb,
     /// view distance in alpha), for tests and debugging; None before the first render.
     pub fn grid_texture(&self) -> Option<&wgpu::Texture> {
         self.grid.as_ref().map(|g| &g.texture)
@@ -330,13 +336,7 @@ impl Subsampled {
         gpu.check_texture_size("subsampled grid", gw, gh)?;
         if self.grid.as_ref().is_none_or(|g| g.texture.width() != gw || g.texture.height() != gh) {
             self.grid = Some(gpu.scoped("allocating the subsampled grid", || {
-                let texture = crate::gpu::storage_texture(
-                    &gpu.device,
-                    "subsampled grid",
-                    wgpu::TextureFormat::Rgba32Float,
-                    gw,
-                    gh,
-                );
+                let texture = crate::gpu::storage_texture(&gpu.device, "subsampled grid", self.inter, gw, gh);
                 let view = texture.create_view(&Default::default());
                 Grid { texture, view }
             })?);

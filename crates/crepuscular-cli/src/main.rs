@@ -279,12 +279,14 @@ struct RenderArgs {
     /// Exposure multiplier before the tone curve (overrides the scene's).
     #[arg(long)]
     exposure: Option<f32>,
-    /// Also write a debug view of the technique (`epipolar`: `classification`, the sample
-    /// classification of Engelhardt & Dachsbacher 2010 Fig. 9 bottom; `radiance`, the lines ×
-    /// samples radiance texture scaled up; `interleaved`: `pattern`, each pixel's block offset
-    /// over the image) as `<output stem>.<view>.png`, tone-mapped like the image. Costs one
-    /// more run of the technique (epipolar).
-    #[arg(long, value_enum, value_name = "VIEW")]
+    /// Also write a debug view of the technique as `<output stem>.<view>.png`, tone-mapped like
+    /// the image (the library's `crepuscular::debug::DebugView`): `epipolar` — `classification`
+    /// (the sample classification of Engelhardt & Dachsbacher 2010 Fig. 9 bottom), `radiance`
+    /// (the lines × samples radiance texture scaled up); `interleaved` — `pattern` (each
+    /// pixel's block offset over the image); `prefiltered` — `rectified-map`, `basis`,
+    /// `visibility`; `minmax` — `nodes` (the tree nodes each pixel's walk visits). Costs one
+    /// more run of the technique.
+    #[arg(long, value_name = "VIEW", value_parser = parse_debug_view)]
     debug: Option<render::DebugView>,
 }
 
@@ -342,7 +344,7 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
     if let Some(view) = a.debug
         && !render::DebugView::of(&technique).contains(&view)
     {
-        bail!("--debug {}: not a debug view of `{}` ({})", view.name(), technique.name(), render::debug_view_list());
+        bail!("--debug {}: not a debug view of `{}` ({})", view.name(), technique.name(), render::DebugView::list());
     }
     let notice = |m: &str| eprintln!("{m}");
     let gpu = render::open_gpu(a.backend, &notice)?;
@@ -746,4 +748,9 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// `--debug VIEW`: one of the library's debug views, by name.
+fn parse_debug_view(s: &str) -> Result<render::DebugView, String> {
+    s.parse().map_err(|e: crepuscular::Error| e.to_string())
 }

@@ -172,27 +172,8 @@ pub fn abs_error_heatmap(reference: &Image, test: &Image) -> Result<Vec<u8>> {
     Ok(out)
 }
 
-/// Magma-like colour ramp for `v` in `[0, 1]`: piecewise-linear through matplotlib's magma
-/// sampled at eighths (0, 1/8, …, 1). Values outside are clamped; NaN gives the top colour.
-pub fn magma_ramp(v: f32) -> [u8; 3] {
-    const STOPS: [[f32; 3]; 9] = [
-        [0.0, 0.0, 4.0],
-        [28.0, 16.0, 68.0],
-        [79.0, 18.0, 123.0],
-        [129.0, 37.0, 129.0],
-        [181.0, 54.0, 122.0],
-        [229.0, 80.0, 100.0],
-        [251.0, 135.0, 97.0],
-        [254.0, 194.0, 135.0],
-        [252.0, 253.0, 191.0],
-    ];
-    let v = if v.is_nan() { 1.0 } else { v.clamp(0.0, 1.0) };
-    let x = v * (STOPS.len() - 1) as f32;
-    let i = (x.floor() as usize).min(STOPS.len() - 2);
-    let f = x - i as f32;
-    let (a, b) = (STOPS[i], STOPS[i + 1]);
-    [0, 1, 2].map(|c| (a[c] + (b[c] - a[c]) * f).round().clamp(0.0, 255.0) as u8)
-}
+/// The magma ramp of the FLIP error maps and the nodes view (one copy, in the library).
+pub use crepuscular::debug::magma_ramp;
 
 #[cfg(test)]
 mod tests {

@@ -5,11 +5,10 @@ use anyhow::{Context, Result, bail};
 use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::GpuContext;
 use crepuscular::stats::{PassTime, TechniqueStats};
-use crepuscular::techniques::{epipolar, interleaved, minmax, prefiltered};
+use crepuscular::techniques::prefiltered;
 use crepuscular::tonemap::composite;
 use crepuscular::{
-    AnyGpuTechnique, Composite, CompositeInputs, CompositeTarget, CpuFrame, GpuFrame, Image, Scattering, StatsMode,
-    TechniqueSettings,
+    Composite, CompositeInputs, CompositeTarget, CpuFrame, GpuFrame, Image, Scattering, StatsMode, TechniqueSettings,
 };
 use crepuscular_scene::{Geometry, GpuHost, Scene, builtin, file, host, host_cpu};
 use serde::Serialize;
@@ -382,72 +381,12 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
     Ok(RenderOutput { inscatter, surface, final_radiance, depth, stats })
 }
 
-/// A debug view of `render --debug`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum DebugView {
-    /// `epipolar`: Engelhardt & Dachsbacher 2010, Fig. 9 bottom — every valid epipolar line's
-    /// texels drawn faint over the final image, the initial ray-march samples in red and the
-    /// samples the refinement placed at depth discontinuities in green.
-    Classification,
-    /// `epipolar`: the radiance texture (one row per epipolar line, one column per sample
-    /// along it; culled lines black), scaled up to at least 1024 pixels wide.
-    Radiance,
-    /// `interleaved`: the interleaving pattern (Tóth & Umenhoffer 2009 §4.1) — each pixel
-    /// coloured by its offset k of the M×M block (which of the N/M² terms of eq. 1 it
-    /// marches), blended half and half over the final image.
-    Pattern,
-    /// `prefiltered`: the rectified shadow map (Klehm et al. 2014, §2.2, §4) — one row per
-    /// epipolar slice, view rays left to right, grey = normalised occluder depth (white:
-    /// unoccluded).
-    RectifiedMap,
-    /// `prefiltered`: the first filtered-basis layer (bases 0–2 as RGB), the prefix-summed
-    /// Fourier bases as stored (§3.3, Appendix A).
-    Basis,
-    /// `prefiltered`: the prefiltered average visibility of every pixel's ray (Listing 4), the
-    /// ray-marched epipole disc (§5) in red.
-    Visibility,
-    /// `minmax`: the tree nodes each pixel's walk visits (Chen et al. 2011: the cost follows the
-    /// changes of visibility along the ray), magma from 0 (black) to the frame's most (pale
-    /// yellow), the ray-marched epipole disc in red.
-    Nodes,
-}
-
-impl DebugView {
-    /// Name, as on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            DebugView::Classification => "classification",
-            DebugView::Radiance => "radiance",
-            DebugView::Pattern => "pattern",
-            DebugView::RectifiedMap => "rectified-map",
-            DebugView::Basis => "basis",
-            DebugView::Visibility => "visibility",
-            DebugView::Nodes => "nodes",
-        }
-    }
-
-    /// The debug views `technique` has (empty: none).
-    pub fn of(technique: &TechniqueSettings) -> &'static [DebugView] {
-        match technique {
-            TechniqueSettings::Epipolar(_) => &[DebugView::Classification, DebugView::Radiance],
-            TechniqueSettings::Interleaved(_) => &[DebugView::Pattern],
-            TechniqueSettings::Prefiltered(_) => &[DebugView::RectifiedMap, DebugView::Basis, DebugView::Visibility],
-            TechniqueSettings::Minmax(_) => &[DebugView::Nodes],
-            _ => &[],
-        }
-    }
-}
-
-/// A colour per block offset k of `m2` = M² offsets: a hue wheel, so neighbouring offsets differ.
-fn offset_colour(k: u32, m2: u32) -> [f32; 3] {
-    let h = (k as f32 + 0.5) / m2.max(1) as f32 * 6.0;
-    // Hue → RGB at full saturation: each channel a trapezoid on the wheel, a third apart.
-    let c = |n: f32| 1.0 - (((n + h) % 6.0 - 3.0).abs() - 1.0).clamp(0.0, 1.0);
-    [c(0.0), c(4.0), c(2.0)]
-}
+pub use crepuscular::debug::DebugView;
 
 /// Renders `view` for the frame `render` drew (`final_radiance` is that frame's final image,
-/// the background of the classification). Runs the technique again with its debug readbacks,
+/// the background of the classification) through the library's debug views
+/// ([`crepuscular::Scattering::debug_view`] on the GPU, [`crepuscular::debug::debug_view_cpu`]
+/// on the CPU): the frame of the scene's first light that reaches the view is rendered again
 /// on the same backend. Returns a linear image (tone-map it like the final image).
 pub fn debug_view(
     scene: &Scene,
@@ -457,159 +396,42 @@ pub fn debug_view(
     final_radiance: &Image,
 ) -> Result<Image> {
     if !DebugView::of(technique).contains(&view) {
-        bail!("--debug {}: not a debug view of `{}` ({})", view.name(), technique.name(), debug_view_list());
+        bail!("--debug {}: not a debug view of `{}` ({})", view.name(), technique.name(), DebugView::list());
     }
-    if let TechniqueSettings::Interleaved(s) = technique {
-        let m2 = s.block * s.block;
-        let mut img = final_radiance.clone();
-        for y in 0..img.height {
-            for x in 0..img.width {
-                let c = offset_colour(interleaved::cpu::block_offset(s, x, y), m2);
-                let p = &mut img.pixels[(y * img.width + x) as usize];
-                for i in 0..3 {
-                    p[i] = 0.5 * p[i] + 0.5 * c[i];
-                }
-            }
-        }
-        return Ok(img);
-    }
-    if let TechniqueSettings::Prefiltered(s) = technique {
-        return prefiltered_debug_view(scene, gpu, s, view);
-    }
-    if let TechniqueSettings::Minmax(s) = technique {
-        return minmax_debug_view(scene, gpu, s);
-    }
-    let TechniqueSettings::Epipolar(settings) = technique else {
-        bail!("--debug {}: not a debug view of `{}`", view.name(), technique.name());
+    // Epipolar lines and rectified maps are one light's.
+    let desc = {
+        let desc = frame_desc(scene)?;
+        let k = desc.scattering_lights().first().copied().unwrap_or(0);
+        desc.with_light(k)
     };
-    let desc = debug_desc(scene)?;
-    let debug = match gpu {
+    let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
+    let rectified = || -> Option<Vec<f32>> {
+        let options = match technique {
+            TechniqueSettings::Prefiltered(s) => s.rectify_options(),
+            TechniqueSettings::Minmax(s) => s.rectify_options(),
+            _ => return None,
+        };
+        let rect = prefiltered::Rectification::new(&desc, &options);
+        rect.raster().map(|r| crepuscular_scene::raster::rasterize_rectified(&scene.geometry, &r))
+    };
+    match gpu {
         Some(gpu) => {
-            let host = GpuHost::for_scene(gpu, &scene)?;
+            let host = GpuHost::for_scene(gpu, scene)?;
             let tex = host.render(gpu, &desc)?;
             let mut runner = Scattering::from_gpu(gpu, technique.clone())?.with_stats(tool_stats_mode(gpu))?;
             let out = gpu.create_output_texture(desc.width, desc.height);
             let views = tex.views();
-            let frame = views.frame(&desc);
-            runner.render(&frame, &out.create_view(&Default::default()))?;
-            let AnyGpuTechnique::Epipolar(t) = runner.technique() else { unreachable!("built above") };
-            t.read_debug(gpu)?
-        }
-        None => {
-            let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-            let frame =
-                CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
-            epipolar::cpu::render_with_debug(&frame, settings)?.2
-        }
-    };
-    Ok(match view {
-        DebugView::Classification => epipolar::debug::classification_view(&debug, final_radiance),
-        DebugView::Radiance => {
-            let scale = 1024u32.div_ceil(debug.samples().max(1)).clamp(1, 16);
-            epipolar::debug::radiance_view(&debug, scale)
-        }
-        other => bail!("--debug {}: not a debug view of `epipolar`", other.name()),
-    })
-}
-
-/// The frame a per-light technique's debug view shows: the scene's first light that reaches
-/// the view alone (epipolar lines and rectified maps are one light's).
-fn debug_desc(scene: &Scene) -> Result<FrameDesc> {
-    let desc = frame_desc(scene)?;
-    let k = desc.scattering_lights().first().copied().unwrap_or(0);
-    Ok(desc.with_light(k))
-}
-
-/// `prefiltered`'s debug views: the frame rendered on the backend (with the host's rectified
-/// raster where the rectification is projective), its maps read back, and the view drawn.
-fn prefiltered_debug_view(
-    scene: &Scene,
-    gpu: Option<&GpuContext>,
-    settings: &prefiltered::PrefilteredSettings,
-    view: DebugView,
-) -> Result<Image> {
-    use prefiltered::debug;
-    let desc = debug_desc(scene)?;
-    let (passes, depth) = match gpu {
-        Some(gpu) => {
-            let host = GpuHost::for_scene(gpu, &scene)?;
-            let tex = host.render(gpu, &desc)?;
-            let mut runner = Scattering::from_gpu(gpu, TechniqueSettings::Prefiltered(settings.clone()))?
-                .with_stats(tool_stats_mode(gpu))?;
-            let out = gpu.create_output_texture(desc.width, desc.height);
-            let views = tex.views();
             render_gpu(&mut runner, Some(&host), &views.frame(&desc), &out.create_view(&Default::default()))?;
-            let AnyGpuTechnique::Prefiltered(t) = runner.technique() else { unreachable!("built above") };
-            let rect = t.last_rectification().context("no frame rendered")?.clone();
-            (
-                debug::passes_from_gpu(rect, settings.channels(&desc.lights[0].light), t.read_maps(gpu)?),
-                gpu.read_texture_f32(&tex.depth, 0)?,
-            )
-        }
-        None => {
-            let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-            let frame =
-                CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
-            let rect = prefiltered::Rectification::new(&desc, &settings.rectify_options());
-            let raster = rect.raster().map(|r| crepuscular_scene::raster::rasterize_rectified(&scene.geometry, &r));
-            (prefiltered::cpu::passes(&frame, settings, raster.as_deref())?.0, h.depth)
-        }
-    };
-    Ok(match view {
-        DebugView::RectifiedMap => debug::rectified_map_view(&passes),
-        DebugView::Basis => debug::basis_view(&passes, 0),
-        DebugView::Visibility => {
-            let epipole = prefiltered::epipole_pixel(&desc, settings.epipole_radius);
-            debug::visibility_view(&passes, &desc, &depth, settings.bases, epipole, settings.epipole_radius)
-        }
-        other => bail!("--debug {}: not a debug view of `prefiltered`", other.name()),
-    })
-}
-
-/// `minmax`'s `nodes` view: the frame rendered on the backend (with the host's rectified raster
-/// where the rectification is projective), its tree read back, every pixel's walk counted on the
-/// CPU over it.
-fn minmax_debug_view(scene: &Scene, gpu: Option<&GpuContext>, settings: &minmax::MinmaxSettings) -> Result<Image> {
-    let desc = debug_desc(scene)?;
-    let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-    let rect = prefiltered::Rectification::new(&desc, &settings.rectify_options());
-    let (depth, tree) = match gpu {
-        Some(gpu) => {
-            let host = GpuHost::for_scene(gpu, &scene)?;
-            let tex = host.render(gpu, &desc)?;
-            let mut runner = Scattering::from_gpu(gpu, TechniqueSettings::Minmax(settings.clone()))?
-                .with_stats(tool_stats_mode(gpu))?;
-            let out = gpu.create_output_texture(desc.width, desc.height);
-            let views = tex.views();
-            render_gpu(&mut runner, Some(&host), &views.frame(&desc), &out.create_view(&Default::default()))?;
-            let AnyGpuTechnique::Minmax(t) = runner.technique() else { unreachable!("built above") };
-            (gpu.read_texture_f32(&tex.depth, 0)?, t.read_tree(gpu)?)
+            // The depth as the GPU rendered it; the CPU host's shadow maps (minmax's walk is
+            // counted on the CPU over the GPU's tree).
+            let depth = gpu.read_texture_f32(&tex.depth, 0)?;
+            let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &h.shadow_maps, surface: None };
+            Ok(runner.debug_view(view, &frame, final_radiance)?)
         }
         None => {
             let frame =
                 CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
-            let raster = rect.raster().map(|r| crepuscular_scene::raster::rasterize_rectified(&scene.geometry, &r));
-            (h.depth.clone(), minmax::cpu::passes(&frame, settings, raster.as_deref())?.0.tree)
+            Ok(crepuscular::debug::debug_view_cpu(technique, view, &frame, rectified().as_deref(), final_radiance)?)
         }
-    };
-    let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &h.shadow_maps, surface: None };
-    let settings = &settings.for_frame(&desc);
-    let epipole = prefiltered::epipole_pixel(&desc, settings.epipole_radius);
-    let nodes = minmax::cpu::traverse(&frame, settings, &rect, &tree, epipole).2;
-    let most = nodes.iter().copied().filter(|&n| n != u32::MAX).max().unwrap_or(1).max(1);
-    let mut img = Image::new(desc.width, desc.height);
-    for (p, &n) in img.pixels.iter_mut().zip(&nodes) {
-        *p = if n == u32::MAX {
-            [1.0, 0.0, 0.0, 1.0]
-        } else {
-            let c = crate::metrics::magma_ramp(n as f32 / most as f32);
-            [c[0] as f32 / 255.0, c[1] as f32 / 255.0, c[2] as f32 / 255.0, 1.0]
-        };
     }
-    Ok(img)
-}
-
-/// "epipolar: classification, radiance; interleaved: pattern" — for error messages and help.
-pub fn debug_view_list() -> &'static str {
-    "debug views: epipolar — classification, radiance; interleaved — pattern; prefiltered — rectified-map, basis, visibility; minmax — nodes"
 }

@@ -9,6 +9,7 @@
 
 pub mod camera;
 pub mod composite;
+pub mod debug;
 pub mod error;
 pub mod frame;
 pub mod gpu;

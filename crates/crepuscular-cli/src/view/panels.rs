@@ -379,16 +379,7 @@ impl Viewer {
                 self.pending.push(Action::Screenshot);
             }
             for &view in DebugView::of(&self.technique) {
-                let tip = match view {
-                    DebugView::Classification => "epipolar: sample classification (Fig. 9)",
-                    DebugView::Radiance => "epipolar: the lines × samples radiance texture",
-                    DebugView::Pattern => "interleaved: each pixel's offset in the M×M block",
-                    DebugView::RectifiedMap => "prefiltered: the rectified shadow map (rows = epipolar slices)",
-                    DebugView::Basis => "prefiltered: filtered-basis layer 0 (bases 0–2 as RGB)",
-                    DebugView::Visibility => "prefiltered: average visibility per pixel (epipole disc red)",
-                    DebugView::Nodes => "minmax: tree nodes each pixel's walk visits (epipole disc red)",
-                };
-                if ui.button(view.name()).on_hover_text(tip).clicked() {
+                if ui.button(view.name()).on_hover_text(view.label()).clicked() {
                     self.pending.push(Action::Debug(view));
                 }
             }

@@ -80,8 +80,10 @@ pub struct SubsampledSettings {
     /// than the grid spacing then keeps its edges instead of being spread over the samples
     /// around it, and a pixel whose ray misses a cone gets that spot's exact zero. Costs one
     /// ray–cone test per spot light for the pixel and each of its four samples, plus the
-    /// re-marched pixels along the cones' edges; nothing in a frame without spot lights.
-    /// Measured: docs/ROBUSTNESS.md (the sweep's spot views). Default true.
+    /// re-marched pixels along the cones' edges; nothing in a frame without spot lights. With
+    /// several spots a tap must meet the same set of all the frame's cones, so the frame is no
+    /// longer the sum of each light's own upsampling (off, it is; tests/lights.rs). Measured:
+    /// docs/ROBUSTNESS.md (the sweep's spot views). Default true.
     pub cone_aware: bool,
     /// Offset each ray's samples by a per-pixel random fraction of a step (the jitter of the
     /// grid sample's source pixel, as `brute-force` would use there) instead of the step

@@ -36,8 +36,10 @@ pub struct MinmaxSettings {
     /// unrefined spans; `rays_over_budget` in the stats counts such rays. A bound on the cost
     /// with the tree's full height (`levels` at its default): with fewer levels the rest of the
     /// row is still walked node by node at the top level (columns / 2^levels nodes at most).
-    /// Default 1024 (never reached on the built-in scenes at the default map; the conservative level 0 made forest's walks up to 516 nodes long; see
-    /// docs/RESULTS.md).
+    /// Default 1024: never reached on the one-light built-in scenes at the default map (forest's
+    /// longest walk is 573 nodes at 320×180), but reached by 9 % of night-street's walks (a
+    /// pixel and a light each; mean 899 nodes, at most 6486 at 160×90) and by a few hundred of
+    /// atrium's; see docs/RESULTS.md, "minmax's walk on every built-in scene".
     pub max_nodes: u32,
     /// The rectification, as `prefiltered`'s (§4 of Klehm et al. 2014): `"auto"` (default),
     /// `"projective"` or `"epipolar"`.

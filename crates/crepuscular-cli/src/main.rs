@@ -341,10 +341,9 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
         scene.render.exposure = e;
     }
     let technique = crepuscular_cli::view::parse_technique(&a.technique, &scene, a.preset, &a.set)?;
-    if let Some(view) = a.debug
-        && !render::DebugView::of(&technique).contains(&view)
-    {
-        bail!("--debug {}: not a debug view of `{}` ({})", view.name(), technique.name(), render::DebugView::list());
+    if let Some(view) = a.debug {
+        // Refused before anything is rendered.
+        view.check(&technique).with_context(|| format!("--debug {}", view.name()))?;
     }
     let notice = |m: &str| eprintln!("{m}");
     let gpu = render::open_gpu(a.backend, &notice)?;

@@ -5,7 +5,6 @@ use anyhow::{Context, Result, bail};
 use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::GpuContext;
 use crepuscular::stats::{PassTime, TechniqueStats};
-use crepuscular::techniques::prefiltered;
 use crepuscular::tonemap::composite;
 use crepuscular::{
     Composite, CompositeInputs, CompositeTarget, CpuFrame, GpuFrame, Image, Scattering, StatsMode, TechniqueSettings,
@@ -395,8 +394,9 @@ pub fn debug_view(
     view: DebugView,
     final_radiance: &Image,
 ) -> Result<Image> {
-    if !DebugView::of(technique).contains(&view) {
-        bail!("--debug {}: not a debug view of `{}` ({})", view.name(), technique.name(), DebugView::list());
+    view.check(technique).with_context(|| format!("--debug {}", view.name()))?;
+    if let TechniqueSettings::Interleaved(s) = technique {
+        return Ok(crepuscular::debug::pattern_view(s, final_radiance));
     }
     // Epipolar lines and rectified maps are one light's.
     let desc = {
@@ -404,16 +404,7 @@ pub fn debug_view(
         let k = desc.scattering_lights().first().copied().unwrap_or(0);
         desc.with_light(k)
     };
-    let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
-    let rectified = || -> Option<Vec<f32>> {
-        let options = match technique {
-            TechniqueSettings::Prefiltered(s) => s.rectify_options(),
-            TechniqueSettings::Minmax(s) => s.rectify_options(),
-            _ => return None,
-        };
-        let rect = prefiltered::Rectification::new(&desc, &options);
-        rect.raster().map(|r| crepuscular_scene::raster::rasterize_rectified(&scene.geometry, &r))
-    };
+    let cpu_host = || host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     match gpu {
         Some(gpu) => {
             let host = GpuHost::for_scene(gpu, scene)?;
@@ -422,16 +413,28 @@ pub fn debug_view(
             let out = gpu.create_output_texture(desc.width, desc.height);
             let views = tex.views();
             render_gpu(&mut runner, Some(&host), &views.frame(&desc), &out.create_view(&Default::default()))?;
-            // The depth as the GPU rendered it; the CPU host's shadow maps (minmax's walk is
-            // counted on the CPU over the GPU's tree).
+            // The depth as the GPU rendered it; the CPU host's shadow maps for minmax only (its
+            // walk is counted on the CPU over the GPU's tree), none for the others.
             let depth = gpu.read_texture_f32(&tex.depth, 0)?;
-            let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &h.shadow_maps, surface: None };
+            let shadow_maps = match technique {
+                TechniqueSettings::Minmax(_) => cpu_host().shadow_maps,
+                _ => Vec::new(),
+            };
+            let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &shadow_maps, surface: None };
             Ok(runner.debug_view(view, &frame, final_radiance)?)
         }
         None => {
+            let h = cpu_host();
             let frame =
                 CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: Some(&h.surface) };
-            Ok(crepuscular::debug::debug_view_cpu(technique, view, &frame, rectified().as_deref(), final_radiance)?)
+            // The host's rectified raster where the rectification is projective (as render_cpu).
+            let raster = technique
+                .raster_requests(&desc)
+                .into_iter()
+                .next()
+                .flatten()
+                .map(|r| crepuscular_scene::raster::rasterize_rectified(&scene.geometry, &r));
+            Ok(crepuscular::debug::debug_view_cpu(technique, view, &frame, raster.as_deref(), final_radiance)?)
         }
     }
 }

@@ -94,8 +94,8 @@ impl DebugView {
         "debug views: epipolar — classification, radiance; interleaved — pattern; prefiltered — rectified-map, basis, visibility; minmax — nodes"
     }
 
-    /// An error unless `technique` has this view.
-    fn check(self, technique: &TechniqueSettings) -> Result<(), Error> {
+    /// An error unless `technique` has this view (naming both and listing the views).
+    pub fn check(self, technique: &TechniqueSettings) -> Result<(), Error> {
         if DebugView::of(technique).contains(&self) {
             return Ok(());
         }
@@ -148,8 +148,9 @@ fn offset_colour(k: u32, m2: u32) -> [f32; 3] {
     [c(0.0), c(4.0), c(2.0)]
 }
 
-/// `interleaved`'s pattern over `final_radiance`.
-fn pattern_view(s: &interleaved::InterleavedSettings, final_radiance: &Image) -> Image {
+/// `interleaved`'s pattern over `final_radiance` ([`DebugView::Pattern`]): it needs no frame,
+/// only the settings and the final image.
+pub fn pattern_view(s: &interleaved::InterleavedSettings, final_radiance: &Image) -> Image {
     let m2 = s.block * s.block;
     let mut img = final_radiance.clone();
     for y in 0..img.height {

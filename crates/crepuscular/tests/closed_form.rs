@@ -80,15 +80,18 @@ use crepuscular::testing::wall_media as media;
 
 use common::{cpu_frame, sun};
 
+/// The largest relative error of `reference` at `settings` on the one-light frame against `exact`.
+fn reference_off(d: &FrameDesc, depth: &[f32], sm: &ShadowMap, settings: ReferenceSettings, exact: &Image) -> f32 {
+    let (img, _) = reference::render(&cpu_frame(d, depth, sm), &settings, &|_, _| {}).unwrap();
+    common::max_rel(&img, exact, 1e-9)
+}
+
 #[test]
 fn directional_reference_matches_the_closed_form_tightly() {
     for m in media() {
         let (d, depth, sm) = frame(sun(), m.clone());
-        let exact = directional_closed_form(&d);
-        let (img, _) =
-            reference::render(&cpu_frame(&d, &depth, &sm), &ReferenceSettings { steps: 1024, seed: 3 }, &|_, _| {})
-                .unwrap();
-        let e = common::max_rel(&img, &exact, 1e-9);
+        let e =
+            reference_off(&d, &depth, &sm, ReferenceSettings { steps: 1024, seed: 3 }, &directional_closed_form(&d));
         assert!(e < 1e-3, "{m:?}: reference off the closed form by {e}");
     }
 }
@@ -140,11 +143,7 @@ fn point_light_reference_matches_an_independent_quadrature() {
     for lamp in [lamp(), lamp_by_the_rays()] {
         for m in media() {
             let (d, depth, sm) = frame(lamp.clone(), m.clone());
-            let exact = point_quadrature(&d);
-            let (img, _) =
-                reference::render(&cpu_frame(&d, &depth, &sm), &ReferenceSettings { steps: 2048, seed: 5 }, &|_, _| {})
-                    .unwrap();
-            let e = common::max_rel(&img, &exact, 1e-9);
+            let e = reference_off(&d, &depth, &sm, ReferenceSettings { steps: 2048, seed: 5 }, &point_quadrature(&d));
             assert!(e < 1e-3, "{lamp:?}, {m:?}: reference off the quadrature by {e}");
         }
     }

@@ -614,7 +614,7 @@ fn new_scattering(device: &wgpu::Device, queue: &wgpu::Queue, settings: &Crepusc
 fn new_state(device: &wgpu::Device, queue: &wgpu::Queue, settings: &Crepuscular) -> Result<ViewState, String> {
     Ok(ViewState {
         scattering: new_scattering(device, queue, settings)?,
-        composite: Composite::new(device),
+        composite: Composite::new(device).map_err(|e| e.to_string())?,
         shadow_copy: ShadowCopy::new(device),
         inscatter: None,
         gobos: Vec::new(),

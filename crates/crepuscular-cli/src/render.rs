@@ -334,7 +334,12 @@ pub fn render(scene: &Scene, gpu: Option<&GpuContext>, opts: &RenderOptions) -> 
                         surface: &surface_view,
                     };
                     let target_view = target.create_view(&Default::default());
-                    Composite::new(&gpu.device).encode(&mut enc, &inputs, CompositeTarget::Into(&target_view), None)?;
+                    Composite::new(&gpu.device)?.encode(
+                        &mut enc,
+                        &inputs,
+                        CompositeTarget::Into(&target_view),
+                        None,
+                    )?;
                     gpu.queue.submit([enc.finish()]);
                     (inscatter, gpu.read_image(&target)?, stats)
                 }

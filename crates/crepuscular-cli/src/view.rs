@@ -408,7 +408,7 @@ impl Viewer {
         );
         let renderer = egui_wgpu::Renderer::new(&gpu.device, format, egui_wgpu::RendererOptions::default());
         let host = GpuHost::for_scene(&gpu, &scene)?;
-        let composite = crepuscular::Composite::new(&gpu.device);
+        let composite = crepuscular::Composite::new(&gpu.device)?;
         let built = Instant::now();
         let runner = render::scattering(&gpu, &technique)?;
         let runner_build_ms = built.elapsed().as_secs_f64() * 1e3;

@@ -26,7 +26,7 @@ fn texture(gpu: &GpuContext, w: u32, h: u32, format: wgpu::TextureFormat, usage:
 #[test]
 fn gpu_composite_matches_its_cpu_mirror() {
     let Some(gpu) = test_gpu("gpu_composite_matches_its_cpu_mirror") else { return };
-    let mut comp = Composite::new(&gpu.device);
+    let mut comp = Composite::new(&gpu.device).unwrap();
     for scene_name in ["colonnade", "cage", "stained-glass"] {
         let mut scene = builtin::builtin(scene_name).unwrap();
         scene.render.width = 96;
@@ -147,7 +147,7 @@ fn composite_refuses_targets_that_do_not_fit() {
     let out_view = out.create_view(&Default::default());
     let surface_view = tex.surface.create_view(&Default::default());
     let inputs = CompositeInputs { desc: &desc, depth: frame.depth, inscatter: &out_view, surface: &surface_view };
-    let mut comp = Composite::new(&gpu.device);
+    let mut comp = Composite::new(&gpu.device).unwrap();
     let mut enc = gpu.device.create_command_encoder(&Default::default());
     let wrong = composite_target(&gpu, 32, 36);
     let e = comp.encode(&mut enc, &inputs, CompositeTarget::Into(&wrong.create_view(&Default::default())), None);

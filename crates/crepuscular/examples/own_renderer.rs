@@ -258,7 +258,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
 
     // One frame of the engine: its passes, crepuscular's technique and composite, one submit.
-    let mut composite = Composite::new(&device);
+    let mut composite = Composite::new(&device)?;
     let mut frame = |scattering: &mut Scattering, index: u32| -> Result<FrameCamera, crepuscular::Error> {
         let jitter = (halton(index + 1, 2) - 0.5, halton(index + 1, 3) - 0.5);
         let jittered =

@@ -6,6 +6,7 @@
 
 use crate::error::Error;
 use crate::frame::FrameDesc;
+use crate::techniques::pass::Bindings;
 use crate::tonemap::ToneMap;
 use std::collections::HashMap;
 use wgpu::util::DeviceExt;
@@ -52,51 +53,28 @@ struct Params {
 pub struct Composite {
     device: wgpu::Device,
     module: wgpu::ShaderModule,
-    layout: wgpu::BindGroupLayout,
+    bindings: Bindings,
     pipeline_layout: wgpu::PipelineLayout,
     pipelines: HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
     scratch: Option<wgpu::Texture>,
 }
 
 impl Composite {
-    /// Builds the shader and layout on the caller's device.
-    pub fn new(device: &wgpu::Device) -> Self {
+    /// Builds the shader and layout on the caller's device (the layout read from the
+    /// shader's own declarations, [`crate::techniques::pass::Bindings`]).
+    pub fn new(device: &wgpu::Device) -> Result<Self, crate::Error> {
+        let source = crate::shaders::compose(COMPOSITE_WGSL);
+        let (bindings, _) = Bindings::new(device, "composite", &source, "fs", naga::ShaderStage::Fragment)?;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("composite.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(crate::shaders::compose(COMPOSITE_WGSL).into()),
-        });
-        let fragment = |binding, ty| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty,
-            count: None,
-        };
-        let uniform = wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        };
-        let texture = wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        };
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("composite"),
-            entries: &[
-                fragment(0, uniform),
-                fragment(1, uniform),
-                fragment(2, texture),
-                fragment(3, texture),
-                fragment(4, texture),
-            ],
+            source: wgpu::ShaderSource::Wgsl(source.into()),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("composite"),
-            bind_group_layouts: &[Some(&layout)],
+            bind_group_layouts: &[Some(bindings.layout())],
             immediate_size: 0,
         });
-        Self { device: device.clone(), module, layout, pipeline_layout, pipelines: HashMap::new(), scratch: None }
+        Ok(Self { device: device.clone(), module, bindings, pipeline_layout, pipelines: HashMap::new(), scratch: None })
     }
 
     fn pipeline(&mut self, format: wgpu::TextureFormat) -> &wgpu::RenderPipeline {
@@ -204,17 +182,16 @@ impl Composite {
         let frame_buffer = uniform("composite frame uniforms", bytemuck::bytes_of(&d.uniforms()));
         let params_buffer = uniform("composite params", bytemuck::bytes_of(&Params { tone: tone_params }));
         let view = wgpu::BindingResource::TextureView;
-        let bind = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("composite"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: frame_buffer.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: params_buffer.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: view(&surface_view) },
-                wgpu::BindGroupEntry { binding: 3, resource: view(inputs.inscatter) },
-                wgpu::BindGroupEntry { binding: 4, resource: view(inputs.depth) },
+        let bind = self.bindings.bind(
+            &self.device,
+            &[
+                ("f", frame_buffer.as_entire_binding()),
+                ("params", params_buffer.as_entire_binding()),
+                ("surface_tex", view(&surface_view)),
+                ("inscatter_tex", view(inputs.inscatter)),
+                ("depth_tex", view(inputs.depth)),
             ],
-        });
+        )?;
         let target_view = match target {
             CompositeTarget::Into(v) => v.clone(),
             CompositeTarget::InPlace(t) => t.create_view(&Default::default()),

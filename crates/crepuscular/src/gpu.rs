@@ -241,6 +241,11 @@ impl GpuContext {
         }
     }
 
+    /// [`GpuContext::scoped`] for an `f` that may fail itself: its error or the GPU's.
+    pub fn try_scoped<T>(&self, context: &str, f: impl FnOnce() -> Result<T, Error>) -> Result<T, Error> {
+        self.scoped(context, f)?
+    }
+
     /// Reads back layer `layer` of a 2D texture of a 32-bit float format (`R32Float`,
     /// `Depth32Float`, `Rgba32Float`) or a 16-bit one (`R16Float`, `Rg16Float`, `Rgba16Float`,
     /// widened exactly) as f32s.

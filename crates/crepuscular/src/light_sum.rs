@@ -6,14 +6,12 @@
 
 use crate::error::Error;
 use crate::gpu::{GpuContext, Recorder, storage_texture};
-use crate::techniques::pass;
+use crate::techniques::pass::{self, Pass};
 
 /// The add and clear passes and the scratch textures, kept between frames.
 pub(crate) struct LightSum {
-    add: wgpu::ComputePipeline,
-    clear: wgpu::ComputePipeline,
-    add_layout: wgpu::BindGroupLayout,
-    clear_layout: wgpu::BindGroupLayout,
+    add: Pass,
+    clear: Pass,
     format: wgpu::TextureFormat,
     /// The light being rendered, and the two running sums.
     scratch: Option<Scratch>,
@@ -32,23 +30,13 @@ const MAX_BINDS: usize = 8;
 
 impl LightSum {
     pub(crate) fn new(gpu: &GpuContext, format: wgpu::TextureFormat) -> Result<Self, Error> {
-        gpu.scoped("creating the light sum", || {
+        gpu.try_scoped("creating the light sum", || {
             let device = &gpu.device;
-            use wgpu::TextureViewDimension as D;
-            let out = pass::storage_texture_entry_of(2, format);
-            let add_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("light sum"),
-                entries: &[pass::texture_entry(0, D::D2), pass::texture_entry(1, D::D2), out],
-            });
-            let clear_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("light clear"),
-                entries: &[out],
-            });
             let src = pass::with_output(include_str!("shaders/light_sum.wgsl"), format);
-            let add = pass::compute_pipeline(device, "light_sum.wgsl", &src, "add", &add_layout);
+            let add = Pass::new(device, "light sum/add", &src, "add")?;
             let src = pass::with_output(include_str!("shaders/light_clear.wgsl"), format);
-            let clear = pass::compute_pipeline(device, "light_clear.wgsl", &src, "clear", &clear_layout);
-            Self { add, clear, add_layout, clear_layout, format, scratch: None, binds: Vec::new() }
+            let clear = Pass::new(device, "light sum/clear", &src, "clear")?;
+            Ok(Self { add, clear, format, scratch: None, binds: Vec::new() })
         })
     }
 
@@ -67,28 +55,17 @@ impl LightSum {
         Ok(self.scratch.as_ref().expect("allocated above").views.clone())
     }
 
-    fn bind(&mut self, gpu: &GpuContext, views: &[&wgpu::TextureView]) -> Result<wgpu::BindGroup, Error> {
-        let key: Vec<pass::Bound> = views.iter().map(|v| pass::Bound::View((*v).clone())).collect();
+    /// The bind group of `views` named as the add pass's shader names them (`a_tex`, `b_tex`,
+    /// `out_tex`) or, with `out_tex` alone, the clear pass's.
+    fn bind(&mut self, gpu: &GpuContext, views: &[(&str, &wgpu::TextureView)]) -> Result<wgpu::BindGroup, Error> {
+        let key: Vec<pass::Bound> = views.iter().map(|(_, v)| pass::Bound::View((*v).clone())).collect();
         if let Some((_, b)) = self.binds.iter().find(|(k, _)| *k == key) {
             return Ok(b.clone());
         }
-        let layout = if views.len() == 3 { &self.add_layout } else { &self.clear_layout };
-        let first = 3 - views.len() as u32;
-        let entries: Vec<wgpu::BindGroupEntry> = views
-            .iter()
-            .enumerate()
-            .map(|(i, v)| wgpu::BindGroupEntry {
-                binding: first + i as u32,
-                resource: wgpu::BindingResource::TextureView(v),
-            })
-            .collect();
-        let bind = gpu.scoped("binding the light sum", || {
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("light sum"),
-                layout,
-                entries: &entries,
-            })
-        })?;
+        let kernel = if views.len() == 3 { &self.add } else { &self.clear };
+        let resources: Vec<pass::Resource> =
+            views.iter().map(|(n, v)| (*n, wgpu::BindingResource::TextureView(v))).collect();
+        let bind = gpu.try_scoped("binding the light sum", || kernel.bind(&gpu.device, &resources))?;
         if self.binds.len() >= MAX_BINDS {
             self.binds.remove(0);
         }
@@ -105,18 +82,16 @@ impl LightSum {
         light: &wgpu::TextureView,
         out: &wgpu::TextureView,
     ) -> Result<(), Error> {
-        let bind = self.bind(gpu, &[sum, light, out])?;
+        let bind = self.bind(gpu, &[("a_tex", sum), ("b_tex", light), ("out_tex", out)])?;
         let size = out.texture().size();
-        let groups = [size.width.div_ceil(8), size.height.div_ceil(8), 1];
-        rec.dispatch("sum lights", "light sum", &self.add, &bind, groups)
+        self.add.dispatch(rec, "sum lights", &bind, self.add.groups_2d(size.width, size.height))
     }
 
     /// Records zero in-scattering into `out` (no light reaches the view).
     pub(crate) fn clear(&mut self, gpu: &GpuContext, rec: &mut Recorder, out: &wgpu::TextureView) -> Result<(), Error> {
-        let bind = self.bind(gpu, &[out])?;
+        let bind = self.bind(gpu, &[("out_tex", out)])?;
         let size = out.texture().size();
-        let groups = [size.width.div_ceil(8), size.height.div_ceil(8), 1];
-        rec.dispatch("no lights", "light clear", &self.clear, &bind, groups)
+        self.clear.dispatch(rec, "no lights", &bind, self.clear.groups_2d(size.width, size.height))
     }
 
     /// Bytes of GPU memory held.

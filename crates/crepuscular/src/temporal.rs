@@ -18,7 +18,7 @@
 use crate::error::Error;
 use crate::frame::FrameDesc;
 use crate::image::Image;
-use crate::techniques::pass::{self, BindCache, Bound};
+use crate::techniques::pass::{self, BindCache, Bound, Pass};
 use glam::{Mat4, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
 use std::hash::{Hash, Hasher};
@@ -495,8 +495,8 @@ struct Sized {
 pub struct Temporal {
     device: wgpu::Device,
     settings: TemporalSettings,
-    layout: wgpu::BindGroupLayout,
-    pipelines: std::collections::HashMap<wgpu::TextureFormat, wgpu::ComputePipeline>,
+    /// The resolve pass per output format (built on the first frame in that format).
+    passes: std::collections::HashMap<wgpu::TextureFormat, Pass>,
     frame_buffer: wgpu::Buffer,
     params_buffer: wgpu::Buffer,
     sized: Option<Sized>,
@@ -512,32 +512,13 @@ impl Temporal {
     /// (four storage textures in one compute stage, two of them `R32Float`).
     pub fn new(device: &wgpu::Device, settings: TemporalSettings) -> Result<Self, Error> {
         settings.validate()?;
-        use wgpu::TextureFormat::R32Float;
-        let d2 = wgpu::TextureViewDimension::D2;
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("temporal"),
-            entries: &[
-                pass::uniform_entry(0),
-                pass::uniform_entry(1),
-                pass::texture_entry(2, d2),
-                pass::texture_entry(3, d2),
-                pass::texture_entry(4, d2),
-                pass::texture_entry(5, d2),
-                pass::storage_texture_entry(6),
-                pass::storage_texture_entry(7),
-                pass::storage_texture_entry_of(8, R32Float),
-                pass::storage_texture_entry_of(9, R32Float),
-                pass::texture_entry(10, d2),
-            ],
-        });
         let frame_buffer =
             pass::uniform_buffer(device, "temporal frame uniforms", size_of::<crate::FrameUniforms>() as u64);
         let params_buffer = pass::uniform_buffer(device, "temporal uniforms", size_of::<TemporalUniforms>() as u64);
         Ok(Self {
             device: device.clone(),
             settings,
-            layout,
-            pipelines: Default::default(),
+            passes: Default::default(),
             frame_buffer,
             params_buffer,
             sized: None,
@@ -659,6 +640,12 @@ impl Temporal {
         // both built when the caller's views or the size change, not every frame.
         // Without motion vectors the depth view stands in at their binding (never read).
         let motion = motion.unwrap_or(depth);
+        if !self.passes.contains_key(&format) {
+            let src = pass::with_output(TEMPORAL_WGSL, format);
+            let built = Pass::new(&self.device, "temporal/resolve", &src, "resolve")?;
+            self.passes.insert(format, built);
+        }
+        let resolve = &self.passes[&format];
         let key = vec![
             Bound::View(depth.clone()),
             Bound::View(current.clone()),
@@ -677,37 +664,32 @@ impl Temporal {
                     view(&sized.distance[1 - read]),
                     view(&sized.weights),
                 );
-                self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("temporal"),
-                    layout: &self.layout,
-                    entries: &[
-                        wgpu::BindGroupEntry { binding: 0, resource: self.frame_buffer.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 2, resource: tv(depth) },
-                        wgpu::BindGroupEntry { binding: 3, resource: tv(current) },
-                        wgpu::BindGroupEntry { binding: 4, resource: tv(&hr) },
-                        wgpu::BindGroupEntry { binding: 5, resource: tv(&dr) },
-                        wgpu::BindGroupEntry { binding: 6, resource: tv(output) },
-                        wgpu::BindGroupEntry { binding: 7, resource: tv(&hw) },
-                        wgpu::BindGroupEntry { binding: 8, resource: tv(&dw) },
-                        wgpu::BindGroupEntry { binding: 9, resource: tv(&wt) },
-                        wgpu::BindGroupEntry { binding: 10, resource: tv(motion) },
+                resolve.bind(
+                    &self.device,
+                    &[
+                        ("frame", self.frame_buffer.as_entire_binding()),
+                        ("params", self.params_buffer.as_entire_binding()),
+                        ("depth_tex", tv(depth)),
+                        ("current_tex", tv(current)),
+                        ("motion_tex", tv(motion)),
+                        ("history_tex", tv(&hr)),
+                        ("distance_tex", tv(&dr)),
+                        ("out_tex", tv(output)),
+                        ("history_out", tv(&hw)),
+                        ("distance_out", tv(&dw)),
+                        ("weight_out", tv(&wt)),
                     ],
-                })
+                )
             };
-            let binds = [bind(0), bind(1)];
+            let binds = [bind(0)?, bind(1)?];
             self.binds.store(key, binds);
         }
-        let (device, layout) = (&self.device, &self.layout);
-        let pipeline = self.pipelines.entry(format).or_insert_with(|| {
-            let src = pass::with_output(TEMPORAL_WGSL, format);
-            pass::compute_pipeline(device, "temporal.wgsl", &src, "resolve", layout)
-        });
         let mut cpass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("temporal"), timestamp_writes: None });
-        cpass.set_pipeline(pipeline);
+        cpass.set_pipeline(resolve.pipeline());
         cpass.set_bind_group(0, &self.binds.value()[read], &[]);
-        cpass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        let [x, y, z] = resolve.groups_2d(w, h);
+        cpass.dispatch_workgroups(x, y, z);
         drop(cpass);
         self.latest = write;
         self.prev = Some(Previous::of(desc));

@@ -1,55 +1,9 @@
-//! What every technique's compute passes share: bind-group layout entries, the frame-pass
-//! layout and its bindings (frame uniforms, pass uniforms, depth, shadow maps, spot textures,
-//! output, lights), pipeline creation from a pass shader, and uniform buffers.
+//! What every technique's compute passes share: [`Pass`] (a pipeline whose bind group layout is
+//! read from its own WGSL, bound by the shader's variable names), the frame's resources
+//! ([`frame_resources`]), the output and intermediate formats, uniform buffers and the bind
+//! group cache.
 
 use crate::frame::GpuFrame;
-
-/// A uniform buffer at `binding`, visible to compute.
-pub fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-/// An unfilterable float texture (read with `textureLoad`) at `binding`.
-pub fn texture_entry(binding: u32, dim: wgpu::TextureViewDimension) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: dim,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
-/// A write-only `Rgba32Float` 2D storage texture at `binding`.
-pub fn storage_texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    storage_texture_entry_of(binding, wgpu::TextureFormat::Rgba32Float)
-}
-
-/// A write-only 2D storage texture of `format` at `binding`.
-pub fn storage_texture_entry_of(binding: u32, format: wgpu::TextureFormat) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::StorageTexture {
-            access: wgpu::StorageTextureAccess::WriteOnly,
-            format,
-            view_dimension: wgpu::TextureViewDimension::D2,
-        },
-        count: None,
-    }
-}
 
 /// The in-scattering formats a caller may choose ([`crate::Scattering::with_output_format`]).
 pub const OUTPUT_FORMATS: [wgpu::TextureFormat; 2] =
@@ -86,91 +40,13 @@ pub fn texel_bytes(format: wgpu::TextureFormat) -> u64 {
     format.block_copy_size(None).unwrap_or(16) as u64
 }
 
-/// A storage buffer at `binding` of at least `min_size` bytes (None: any).
-pub fn storage_buffer_entry(binding: u32, read_only: bool, min_size: Option<u64>) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: min_size.and_then(wgpu::BufferSize::new),
-        },
-        count: None,
-    }
-}
-
 /// The binding of the frame's lights (`lights` in common.wgsl, [`crate::LightsUniforms`]) in
 /// group 0 of every pass that evaluates a light.
 pub const LIGHTS_BINDING: u32 = 15;
 
-/// The lights' uniform buffer entry ([`LIGHTS_BINDING`]).
-pub fn lights_entry() -> wgpu::BindGroupLayoutEntry {
-    uniform_entry(LIGHTS_BINDING)
-}
-
 /// The bind group entry of the lights' uniform buffer.
 pub fn lights_binding(lights: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     wgpu::BindGroupEntry { binding: LIGHTS_BINDING, resource: lights.as_entire_binding() }
-}
-
-/// Bindings 0–5 and the lights of every per-pixel pass over the frame: frame uniforms, pass
-/// uniforms, depth, shadow maps (array), spot textures (array), the output in `output`'s
-/// format, the lights ([`LIGHTS_BINDING`]).
-pub fn frame_pass_entries(output: wgpu::TextureFormat) -> [wgpu::BindGroupLayoutEntry; 7] {
-    use wgpu::TextureViewDimension as D;
-    [
-        uniform_entry(0),
-        uniform_entry(1),
-        texture_entry(2, D::D2),
-        texture_entry(3, D::D2Array),
-        texture_entry(4, D::D2Array),
-        storage_texture_entry_of(5, output),
-        lights_entry(),
-    ]
-}
-
-/// The frame-pass layout ([`frame_pass_entries`], an `Rgba32Float` output) followed by a pass's
-/// own `extra` bindings.
-pub fn frame_pass_layout(
-    device: &wgpu::Device,
-    label: &str,
-    extra: &[wgpu::BindGroupLayoutEntry],
-) -> wgpu::BindGroupLayout {
-    frame_pass_layout_to(device, label, extra, wgpu::TextureFormat::Rgba32Float)
-}
-
-/// [`frame_pass_layout`] with the output in `output`'s format (a technique's final pass).
-pub fn frame_pass_layout_to(
-    device: &wgpu::Device,
-    label: &str,
-    extra: &[wgpu::BindGroupLayoutEntry],
-    output: wgpu::TextureFormat,
-) -> wgpu::BindGroupLayout {
-    let mut entries = frame_pass_entries(output).to_vec();
-    entries.extend_from_slice(extra);
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
-}
-
-/// The resources of [`frame_pass_entries`]: `white` (a one-layer array) stands in for missing
-/// spot textures.
-pub fn frame_pass_bindings<'a>(
-    buffers: &'a FrameBuffers,
-    params: &'a wgpu::Buffer,
-    frame: &GpuFrame<'a>,
-    white: &'a wgpu::TextureView,
-    output: &'a wgpu::TextureView,
-) -> [wgpu::BindGroupEntry<'a>; 7] {
-    let view = wgpu::BindingResource::TextureView;
-    [
-        wgpu::BindGroupEntry { binding: 0, resource: buffers.frame.as_entire_binding() },
-        wgpu::BindGroupEntry { binding: 1, resource: params.as_entire_binding() },
-        wgpu::BindGroupEntry { binding: 2, resource: view(frame.depth) },
-        wgpu::BindGroupEntry { binding: 3, resource: view(frame.shadow_maps) },
-        wgpu::BindGroupEntry { binding: 4, resource: view(frame.spot_textures.unwrap_or(white)) },
-        wgpu::BindGroupEntry { binding: 5, resource: view(output) },
-        lights_binding(&buffers.lights),
-    ]
 }
 
 /// A technique's frame uniforms and lights uniforms, written once per frame.
@@ -209,33 +85,6 @@ pub fn white_array(gpu: &crate::GpuContext) -> wgpu::TextureView {
     gpu.upload_spot_textures(&[]).create_view(&wgpu::TextureViewDescriptor {
         dimension: Some(wgpu::TextureViewDimension::D2Array),
         ..Default::default()
-    })
-}
-
-/// A compute pipeline from a pass shader (composed with common.wgsl), with one bind group.
-pub fn compute_pipeline(
-    device: &wgpu::Device,
-    label: &str,
-    pass_wgsl: &str,
-    entry: &str,
-    layout: &wgpu::BindGroupLayout,
-) -> wgpu::ComputePipeline {
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(label),
-        source: wgpu::ShaderSource::Wgsl(crate::shaders::compose(pass_wgsl).into()),
-    });
-    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &[Some(layout)],
-        immediate_size: 0,
-    });
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(label),
-        layout: Some(&pipeline_layout),
-        module: &module,
-        entry_point: Some(entry),
-        compilation_options: Default::default(),
-        cache: None,
     })
 }
 
@@ -306,5 +155,488 @@ impl<T> BindCache<T> {
     /// How many times the bind groups were built.
     pub fn builds(&self) -> u64 {
         self.builds
+    }
+}
+
+/// A shader entry point's bind group layout, declared once — by its WGSL. The layout is read
+/// from the shader's own `@group(0) @binding(n) var name: type;` declarations (naga's
+/// reflection of the globals the entry point uses: uniforms, storage buffers with their access,
+/// sampled textures with their dimension and sample type, storage textures with their format
+/// and access, samplers), and a bind group is built from resources named as the shader names
+/// them. So the shader is the one list of what a pass reads and writes: there is no binding
+/// number in Rust to keep in step with it, and a resource missing, unknown or given twice is an
+/// error naming the pass and the variable.
+///
+/// A sampled float texture is filterable exactly when the entry point samples it through a
+/// sampler (`textureSample*`); textures read with `textureLoad` are unfilterable, so
+/// `Rgba32Float` needs no `FLOAT32_FILTERABLE`.
+pub struct Bindings {
+    label: String,
+    layout: wgpu::BindGroupLayout,
+    /// (variable name, binding) of every global the entry point uses, in binding order.
+    slots: Vec<(String, u32)>,
+    /// Names declared in the module but unused by this entry point: accepted and skipped.
+    unused: Vec<String>,
+}
+
+/// A resource for the variable of the same name in a pass's WGSL.
+pub type Resource<'a> = (&'a str, wgpu::BindingResource<'a>);
+
+impl Bindings {
+    /// The layout of `entry` (a `stage` entry point) of the composed WGSL `source`; `label`
+    /// names it in errors and GPU captures.
+    pub fn new(
+        device: &wgpu::Device,
+        label: &str,
+        source: &str,
+        entry: &str,
+        stage: naga::ShaderStage,
+    ) -> Result<(Self, Reflected), crate::Error> {
+        let reflected = reflect(source, entry, stage)
+            .map_err(|message| crate::Error::Gpu { context: format!("reading the bindings of {label}"), message })?;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries: &reflected.entries,
+        });
+        let slots = reflected.slots.clone();
+        let unused = reflected.unused.clone();
+        Ok((Self { label: label.to_string(), layout, slots, unused }, reflected))
+    }
+
+    /// The bind group layout.
+    pub fn layout(&self) -> &wgpu::BindGroupLayout {
+        &self.layout
+    }
+
+    /// The variables the entry point binds, in binding order: (name, binding).
+    pub fn slots(&self) -> &[(String, u32)] {
+        &self.slots
+    }
+
+    /// A bind group of `resources`, each named as the shader names its variable. Every variable
+    /// the entry point uses must be given once; a name the module declares but this entry point
+    /// does not use is skipped (one resource list can serve several entry points of one shader);
+    /// any other name is an error.
+    pub fn bind(&self, device: &wgpu::Device, resources: &[Resource<'_>]) -> Result<wgpu::BindGroup, crate::Error> {
+        let err = |message: String| crate::Error::Gpu { context: format!("binding {}", self.label), message };
+        let mut entries = Vec::with_capacity(self.slots.len());
+        for (name, binding) in &self.slots {
+            let mut given = resources.iter().filter(|(n, _)| n == name);
+            let Some((_, resource)) = given.next() else {
+                return Err(err(format!("the shader's `{name}` (binding {binding}) was given no resource")));
+            };
+            if given.next().is_some() {
+                return Err(err(format!("`{name}` was given twice")));
+            }
+            entries.push(wgpu::BindGroupEntry { binding: *binding, resource: resource.clone() });
+        }
+        let declared = |n: &str| self.slots.iter().any(|(s, _)| s == n) || self.unused.iter().any(|u| u == n);
+        if let Some((name, _)) = resources.iter().find(|(n, _)| !declared(n)) {
+            return Err(err(format!("the shader declares no `{name}`")));
+        }
+        Ok(device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&self.label),
+            layout: &self.layout,
+            entries: &entries,
+        }))
+    }
+}
+
+/// One compute pass: a pipeline with the layout its WGSL declares ([`Bindings`]).
+pub struct Pass {
+    bindings: Bindings,
+    pipeline: wgpu::ComputePipeline,
+    workgroup: [u32; 3],
+}
+
+impl Pass {
+    /// Builds the pass `entry` of `pass_wgsl` (composed with common.wgsl), its layout read from
+    /// the shader. `label` names it in errors and GPU captures (`technique/pass`).
+    pub fn new(device: &wgpu::Device, label: &str, pass_wgsl: &str, entry: &str) -> Result<Self, crate::Error> {
+        let source = crate::shaders::compose(pass_wgsl);
+        let (bindings, reflected) = Bindings::new(device, label, &source, entry, naga::ShaderStage::Compute)?;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &[Some(bindings.layout())],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Ok(Self { bindings, pipeline, workgroup: reflected.workgroup })
+    }
+
+    /// The pass's name (`technique/pass`).
+    pub fn label(&self) -> &str {
+        &self.bindings.label
+    }
+
+    /// The entry point's `@workgroup_size`.
+    pub fn workgroup_size(&self) -> [u32; 3] {
+        self.workgroup
+    }
+
+    /// The workgroups that cover a `width`×`height` grid of invocations (one per pixel).
+    pub fn groups_2d(&self, width: u32, height: u32) -> [u32; 3] {
+        [width.div_ceil(self.workgroup[0]), height.div_ceil(self.workgroup[1]), 1]
+    }
+
+    /// The variables the pass binds, in binding order: (name, binding).
+    pub fn bindings(&self) -> &[(String, u32)] {
+        self.bindings.slots()
+    }
+
+    /// A bind group of `resources`, named as the shader names them ([`Bindings::bind`]).
+    pub fn bind(&self, device: &wgpu::Device, resources: &[Resource<'_>]) -> Result<wgpu::BindGroup, crate::Error> {
+        self.bindings.bind(device, resources)
+    }
+
+    /// Records the pass with `bind` over `groups` workgroups, timed as `name`
+    /// ([`crate::gpu::Recorder::dispatch`]).
+    pub fn dispatch(
+        &self,
+        rec: &mut crate::gpu::Recorder,
+        name: &str,
+        bind: &wgpu::BindGroup,
+        groups: [u32; 3],
+    ) -> Result<(), crate::Error> {
+        rec.dispatch(name, self.label(), &self.pipeline, bind, groups)
+    }
+
+    /// The compute pipeline (for passes recorded by hand: indirect, or sharing a compute pass).
+    pub fn pipeline(&self) -> &wgpu::ComputePipeline {
+        &self.pipeline
+    }
+}
+
+/// What [`reflect`] reads from a shader.
+#[derive(Clone, Debug)]
+pub struct Reflected {
+    /// The layout entries of the globals the entry point uses, in binding order.
+    pub entries: Vec<wgpu::BindGroupLayoutEntry>,
+    /// (name, binding) of each, in the same order.
+    pub slots: Vec<(String, u32)>,
+    /// Bound globals the entry point does not use.
+    pub unused: Vec<String>,
+    /// The entry point's workgroup size.
+    pub workgroup: [u32; 3],
+}
+
+/// Reads the bind group layout of the `stage` entry point `entry` of the composed WGSL
+/// `source`: every global in group 0 the entry point uses (naga's analysis), typed as the shader
+/// declares it, visible to that stage. Another group, an unnamed or unsupported binding, or a
+/// missing entry point is an error.
+pub fn reflect(source: &str, entry: &str, stage: naga::ShaderStage) -> Result<Reflected, String> {
+    use naga::{AddressSpace, ImageClass, ImageDimension, ScalarKind, StorageAccess, TypeInner};
+    let module = naga::front::wgsl::parse_str(source).map_err(|e| e.emit_to_string(source))?;
+    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
+        .validate(&module)
+        .map_err(|e| format!("{:?}", e.into_inner()))?;
+    let index = module
+        .entry_points
+        .iter()
+        .position(|ep| ep.name == entry && ep.stage == stage)
+        .ok_or_else(|| format!("no {stage:?} entry point `{entry}`"))?;
+    let visibility = match stage {
+        naga::ShaderStage::Vertex => wgpu::ShaderStages::VERTEX,
+        naga::ShaderStage::Fragment => wgpu::ShaderStages::FRAGMENT,
+        _ => wgpu::ShaderStages::COMPUTE,
+    };
+    let ep_info = info.get_entry_point(index);
+    let sampled: Vec<_> = ep_info.sampling_set.iter().map(|k| k.image).collect();
+    let mut found = Vec::new();
+    let mut unused = Vec::new();
+    for (handle, var) in module.global_variables.iter() {
+        let Some(rb) = &var.binding else { continue };
+        let name = var.name.clone().ok_or_else(|| format!("binding {} has no name", rb.binding))?;
+        if ep_info[handle].is_empty() {
+            unused.push(name);
+            continue;
+        }
+        if rb.group != 0 {
+            return Err(format!("`{name}` is in group {}; passes use group 0 only", rb.group));
+        }
+        let ty = match (&var.space, &module.types[var.ty].inner) {
+            (AddressSpace::Uniform, _) => wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            (AddressSpace::Storage { access }, _) => wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: !access.contains(StorageAccess::STORE) },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            (AddressSpace::Handle, TypeInner::Sampler { comparison }) => wgpu::BindingType::Sampler(if *comparison {
+                wgpu::SamplerBindingType::Comparison
+            } else {
+                wgpu::SamplerBindingType::Filtering
+            }),
+            (AddressSpace::Handle, TypeInner::Image { dim, arrayed, class }) => {
+                use wgpu::TextureViewDimension as D;
+                let view_dimension = match (dim, arrayed) {
+                    (ImageDimension::D1, false) => D::D1,
+                    (ImageDimension::D2, false) => D::D2,
+                    (ImageDimension::D2, true) => D::D2Array,
+                    (ImageDimension::D3, false) => D::D3,
+                    (ImageDimension::Cube, false) => D::Cube,
+                    (ImageDimension::Cube, true) => D::CubeArray,
+                    _ => return Err(format!("`{name}`: unsupported texture dimension")),
+                };
+                match class {
+                    ImageClass::Sampled { kind, multi } => wgpu::BindingType::Texture {
+                        sample_type: match kind {
+                            ScalarKind::Float => {
+                                wgpu::TextureSampleType::Float { filterable: sampled.contains(&handle) }
+                            }
+                            ScalarKind::Uint => wgpu::TextureSampleType::Uint,
+                            ScalarKind::Sint => wgpu::TextureSampleType::Sint,
+                            _ => return Err(format!("`{name}`: unsupported texel type")),
+                        },
+                        view_dimension,
+                        multisampled: *multi,
+                    },
+                    ImageClass::Depth { multi } => wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Depth,
+                        view_dimension,
+                        multisampled: *multi,
+                    },
+                    ImageClass::Storage { format, access } => wgpu::BindingType::StorageTexture {
+                        access: match (access.contains(StorageAccess::LOAD), access.contains(StorageAccess::STORE)) {
+                            (true, true) => wgpu::StorageTextureAccess::ReadWrite,
+                            (true, false) => wgpu::StorageTextureAccess::ReadOnly,
+                            _ => wgpu::StorageTextureAccess::WriteOnly,
+                        },
+                        format: storage_format(*format)
+                            .ok_or_else(|| format!("`{name}`: unsupported format {format:?}"))?,
+                        view_dimension,
+                    },
+                    ImageClass::External => return Err(format!("`{name}`: external textures are not supported")),
+                }
+            }
+            (space, _) => return Err(format!("`{name}`: unsupported binding in {space:?}")),
+        };
+        found.push((wgpu::BindGroupLayoutEntry { binding: rb.binding, visibility, ty, count: None }, name));
+    }
+    found.sort_by_key(|(e, _)| e.binding);
+    let workgroup = module.entry_points[index].workgroup_size;
+    let slots = found.iter().map(|(e, n)| (n.clone(), e.binding)).collect();
+    Ok(Reflected { entries: found.into_iter().map(|(e, _)| e).collect(), slots, unused, workgroup })
+}
+
+/// The wgpu format of a WGSL storage texel format the passes use.
+fn storage_format(format: naga::StorageFormat) -> Option<wgpu::TextureFormat> {
+    use naga::StorageFormat as S;
+    use wgpu::TextureFormat as T;
+    Some(match format {
+        S::Rgba32Float => T::Rgba32Float,
+        S::Rgba16Float => T::Rgba16Float,
+        S::Rg32Float => T::Rg32Float,
+        S::R32Float => T::R32Float,
+        S::R32Uint => T::R32Uint,
+        S::R32Sint => T::R32Sint,
+        S::Rgba32Uint => T::Rgba32Uint,
+        S::Rgba8Unorm => T::Rgba8Unorm,
+        S::Rg16Float => T::Rg16Float,
+        S::R16Float => T::R16Float,
+        _ => return None,
+    })
+}
+
+/// The frame's resources, named as common.wgsl's passes name them: `frame`, `params`,
+/// `depth_tex`, `shadow_map`, `spot_tex` (`white`, a one-layer array, stands in when no light
+/// has a texture) and `lights`. A pass adds what it writes (`out_tex`, …) and its own inputs.
+pub fn frame_resources<'a>(
+    buffers: &'a FrameBuffers,
+    params: &'a wgpu::Buffer,
+    frame: &GpuFrame<'a>,
+    white: &'a wgpu::TextureView,
+) -> Vec<Resource<'a>> {
+    let view = wgpu::BindingResource::TextureView;
+    vec![
+        ("frame", buffers.frame.as_entire_binding()),
+        ("params", params.as_entire_binding()),
+        ("depth_tex", view(frame.depth)),
+        ("shadow_map", view(frame.shadow_maps)),
+        ("spot_tex", view(frame.spot_textures.unwrap_or(white))),
+        ("lights", buffers.lights.as_entire_binding()),
+    ]
+}
+
+/// `resources` with `more` added; an entry of `more` replaces the one of the same name.
+pub fn with<'a>(mut resources: Vec<Resource<'a>>, more: impl IntoIterator<Item = Resource<'a>>) -> Vec<Resource<'a>> {
+    for (name, resource) in more {
+        match resources.iter_mut().find(|(n, _)| *n == name) {
+            Some(slot) => slot.1 = resource,
+            None => resources.push((name, resource)),
+        }
+    }
+    resources
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use wgpu::TextureViewDimension as D;
+
+    /// Every compute entry point of every library shader, composed as the passes compose it.
+    fn compute_entries() -> Vec<(String, String, String)> {
+        let mut out = Vec::new();
+        for (name, src) in crate::shaders::all_library_shaders() {
+            let module = naga::front::wgsl::parse_str(&src).expect(name);
+            for ep in module.entry_points.iter().filter(|e| e.stage == naga::ShaderStage::Compute) {
+                out.push((name.to_string(), src.clone(), ep.name.clone()));
+            }
+        }
+        out
+    }
+
+    fn reflected(name: &str, entry: &str) -> Reflected {
+        let (_, src, _) = compute_entries()
+            .into_iter()
+            .find(|(n, _, e)| n == name && e == entry)
+            .unwrap_or_else(|| panic!("no {name}/{entry}"));
+        reflect(&src, entry, naga::ShaderStage::Compute).unwrap()
+    }
+
+    #[test]
+    fn every_library_pass_reflects_its_layout() {
+        let entries = compute_entries();
+        assert!(entries.len() >= 25, "{} entry points", entries.len());
+        for (name, src, entry) in entries {
+            let r = reflect(&src, &entry, naga::ShaderStage::Compute).unwrap_or_else(|e| panic!("{name}/{entry}: {e}"));
+            assert!(!r.entries.is_empty(), "{name}/{entry} binds nothing");
+            assert_eq!(r.entries.len(), r.slots.len());
+            // Distinct bindings and names, in binding order.
+            for w in r.slots.windows(2) {
+                assert!(w[0].1 < w[1].1, "{name}/{entry}: {:?}", r.slots);
+            }
+            assert!(r.workgroup.iter().all(|&n| n >= 1), "{name}/{entry}: {:?}", r.workgroup);
+        }
+    }
+
+    #[test]
+    fn interleaved_march_layout_is_the_one_its_wgsl_declares() {
+        let r = reflected("interleaved/march", "march");
+        let names: Vec<(&str, u32)> = r.slots.iter().map(|(n, b)| (n.as_str(), *b)).collect();
+        assert_eq!(
+            names,
+            [
+                ("frame", 0),
+                ("params", 1),
+                ("depth_tex", 2),
+                ("shadow_map", 3),
+                ("spot_tex", 4),
+                ("out_tex", 5),
+                ("lut", 6),
+                ("lights", LIGHTS_BINDING)
+            ]
+        );
+        let uniform = wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        };
+        let texture = |dim| wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: dim,
+            multisampled: false,
+        };
+        let types: Vec<wgpu::BindingType> = r.entries.iter().map(|e| e.ty).collect();
+        assert_eq!(
+            types,
+            [
+                uniform,
+                uniform,
+                texture(D::D2),
+                texture(D::D2Array),
+                texture(D::D2Array),
+                wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::WriteOnly,
+                    format: wgpu::TextureFormat::Rgba32Float,
+                    view_dimension: D::D2,
+                },
+                wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: true },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                uniform,
+            ]
+        );
+        assert!(r.entries.iter().all(|e| e.visibility == wgpu::ShaderStages::COMPUTE));
+        assert_eq!(r.workgroup, [8, 8, 1]);
+    }
+
+    #[test]
+    fn a_texture_read_through_a_sampler_is_filterable_and_a_loaded_one_is_not() {
+        let r = reflected("prefiltered/evaluate", "evaluate");
+        let ty = |name: &str| {
+            let i = r.slots.iter().position(|(n, _)| n == name).unwrap_or_else(|| panic!("no {name}"));
+            r.entries[i].ty
+        };
+        let float = |filterable| wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable },
+            view_dimension: D::D2Array,
+            multisampled: false,
+        };
+        assert_eq!(ty("basis_tex"), float(true));
+        assert_eq!(ty("cumw_tex"), float(false));
+        assert_eq!(ty("basis_sampler"), wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering));
+    }
+
+    #[test]
+    fn storage_access_and_formats_follow_the_declarations() {
+        let r = reflected("epipolar/refine", "refine");
+        let ty = |name: &str| r.entries[r.slots.iter().position(|(n, _)| n == name).unwrap()].ty;
+        let buffer = |read_only| wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        };
+        assert_eq!(ty("lines_buf"), buffer(true));
+        assert_eq!(ty("counters"), buffer(false));
+        assert_eq!(
+            ty("interp_tex"),
+            wgpu::BindingType::StorageTexture {
+                access: wgpu::StorageTextureAccess::WriteOnly,
+                format: wgpu::TextureFormat::R32Uint,
+                view_dimension: D::D2,
+            }
+        );
+    }
+
+    #[test]
+    fn an_entry_point_binds_only_what_it_uses() {
+        // light_clear writes its output and reads nothing else, though common.wgsl declares
+        // the lights for every module.
+        let r = reflected("light_clear", "clear");
+        assert_eq!(r.slots, [("out_tex".to_string(), 2)]);
+        assert!(r.unused.contains(&"lights".to_string()), "{:?}", r.unused);
+        // refine.wgsl's `args` reads the counters and writes the indirect arguments only.
+        let args = reflected("epipolar/refine", "args");
+        let refine = reflected("epipolar/refine", "refine");
+        assert!(args.slots.len() < refine.slots.len(), "{:?} vs {:?}", args.slots, refine.slots);
+        assert!(args.slots.iter().any(|(n, _)| n == "dispatch"));
+    }
+
+    #[test]
+    fn a_missing_entry_point_or_a_foreign_group_is_an_error() {
+        let src = crate::shaders::compose(
+            "@group(1) @binding(0) var<uniform> u: vec4<f32>;\n@compute @workgroup_size(1) fn main() { _ = u.x; }",
+        );
+        let e = reflect(&src, "main", naga::ShaderStage::Compute).err().expect("group 1 refused");
+        assert!(e.contains("`u`") && e.contains("group 1"), "{e}");
+        let e = reflect(&src, "nope", naga::ShaderStage::Compute).err().expect("no entry point");
+        assert!(e.contains("nope"), "{e}");
     }
 }

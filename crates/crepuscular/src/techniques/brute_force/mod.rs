@@ -114,12 +114,11 @@ impl From<&BruteForceSettings> for MarchParams {
     }
 }
 
-/// The GPU side of `brute-force`: its pipeline and uniform buffers, built once and reused.
+/// The GPU side of `brute-force`: its pass and uniform buffers, built once and reused.
 pub struct BruteForce {
     /// Current settings; changes apply on the next [`BruteForce::encode`].
     pub settings: BruteForceSettings,
-    pipeline: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    march: pass::Pass,
     buffers: pass::FrameBuffers,
     params_buffer: wgpu::Buffer,
     white: wgpu::TextureView,
@@ -130,15 +129,13 @@ impl BruteForce {
     /// Builds the pipeline.
     pub fn new(gpu: &GpuContext, settings: BruteForceSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
-        gpu.scoped("creating the brute-force pipeline", || {
+        gpu.try_scoped("creating the brute-force pipeline", || {
             let device = &gpu.device;
-            let layout = pass::frame_pass_layout_to(device, "brute-force", &[], output);
-            let src = pass::with_output(MARCH_WGSL, output);
-            let pipeline = pass::compute_pipeline(device, "brute_force/march.wgsl", &src, "march", &layout);
+            let march = pass::Pass::new(device, "brute-force/march", &pass::with_output(MARCH_WGSL, output), "march")?;
             let buffers = pass::FrameBuffers::new(device);
             let params_buffer = pass::uniform_buffer(device, "march params", std::mem::size_of::<MarchParams>() as u64);
             let white = pass::white_array(gpu);
-            Self { settings, pipeline, layout, buffers, params_buffer, white, binds: Default::default() }
+            Ok(Self { settings, march, buffers, params_buffer, white, binds: Default::default() })
         })
     }
 
@@ -162,18 +159,15 @@ impl BruteForce {
         rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&MarchParams::from(&self.settings)));
         let key = pass::frame_key(frame, output);
         if !self.binds.is_current(&key) {
-            let bind = gpu.scoped("binding the brute-force inputs", || {
-                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("brute-force"),
-                    layout: &self.layout,
-                    entries: &pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, output),
-                })
+            let bind = gpu.try_scoped("binding the brute-force inputs", || {
+                let frame = pass::frame_resources(&self.buffers, &self.params_buffer, frame, &self.white);
+                self.march
+                    .bind(&gpu.device, &pass::with(frame, [("out_tex", wgpu::BindingResource::TextureView(output))]))
             })?;
             self.binds.store(key, bind);
         }
         let bind = self.binds.value();
-        let groups = [desc.width.div_ceil(8), desc.height.div_ceil(8), 1];
-        rec.dispatch("march", "brute-force march", &self.pipeline, bind, groups)?;
+        self.march.dispatch(rec, "march", bind, self.march.groups_2d(desc.width, desc.height))?;
         Ok(TechniqueStats {
             technique: "brute-force".into(),
             backend: "gpu".into(),

@@ -88,7 +88,7 @@ use crate::gpu::{GpuContext, Recorder, compute_pass};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
 use crate::model::Light;
 use crate::stats::TechniqueStats;
-use crate::techniques::pass::{self, Bound};
+use crate::techniques::pass::{self, Bound, Pass};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 pub use debug::{EpipolarDebug, classification_view, radiance_view};
@@ -363,8 +363,7 @@ struct Prefiltered {
 pub struct Epipolar {
     /// Current settings; changes apply on the next [`Epipolar::encode`].
     pub settings: EpipolarSettings,
-    layouts: Layouts,
-    pipelines: Pipelines,
+    passes: Passes,
     buffers: pass::FrameBuffers,
     /// The lights as the march reads them (the prefiltered spot texture's layer and size).
     march_lights: wgpu::Buffer,
@@ -385,23 +384,15 @@ pub struct Epipolar {
 /// What `march = "minmax"` adds: the min-max tree of the frame and the march that walks it.
 struct MinmaxMarch {
     tree: crate::techniques::minmax::TreeBuilder,
-    layout: wgpu::BindGroupLayout,
-    pipeline: wgpu::ComputePipeline,
+    march: Pass,
     binds: pass::BindCache<wgpu::BindGroup>,
 }
 
 impl MinmaxMarch {
-    fn new(device: &wgpu::Device, inter: wgpu::TextureFormat) -> Self {
-        use pass::storage_buffer_entry as buf;
-        let layout = pass::frame_pass_layout_to(
-            device,
-            "epipolar march (minmax)",
-            &[buf(6, true, None), buf(7, true, Some(4)), buf(8, true, Some(16))],
-            inter,
-        );
+    fn new(device: &wgpu::Device, inter: wgpu::TextureFormat) -> Result<Self, Error> {
         let src = pass::with_storage_format(&march_minmax_source(), "marched_tex", inter);
-        let pipeline = pass::compute_pipeline(device, "epipolar/march_minmax.wgsl", &src, "march", &layout);
-        Self { tree: crate::techniques::minmax::TreeBuilder::new(device), layout, pipeline, binds: Default::default() }
+        let march = Pass::new(device, "epipolar/march (minmax)", &src, "march")?;
+        Ok(Self { tree: crate::techniques::minmax::TreeBuilder::new(device)?, march, binds: Default::default() })
     }
 }
 
@@ -409,156 +400,57 @@ impl MinmaxMarch {
 struct Binds {
     prefilter: Option<wgpu::BindGroup>,
     lines: wgpu::BindGroup,
+    coordinates: wgpu::BindGroup,
     refine: wgpu::BindGroup,
+    args: wgpu::BindGroup,
     march: wgpu::BindGroup,
     interpolate: wgpu::BindGroup,
     upsample: wgpu::BindGroup,
 }
 
-struct Layouts {
-    prefilter: wgpu::BindGroupLayout,
-    lines: wgpu::BindGroupLayout,
-    refine: wgpu::BindGroupLayout,
-    march: wgpu::BindGroupLayout,
-    interpolate: wgpu::BindGroupLayout,
-    upsample: wgpu::BindGroupLayout,
+/// The passes, in frame order (lines.wgsl and refine.wgsl hold two entry points each).
+struct Passes {
+    prefilter: Pass,
+    lines: Pass,
+    coordinates: Pass,
+    refine: Pass,
+    args: Pass,
+    march: Pass,
+    interpolate: Pass,
+    upsample: Pass,
 }
 
-struct Pipelines {
-    prefilter: wgpu::ComputePipeline,
-    lines: wgpu::ComputePipeline,
-    coordinates: wgpu::ComputePipeline,
-    refine: wgpu::ComputePipeline,
-    args: wgpu::ComputePipeline,
-    march: wgpu::ComputePipeline,
-    interpolate: wgpu::ComputePipeline,
-    upsample: wgpu::ComputePipeline,
-}
-
-/// A write-only 2D storage texture of `format` at `binding`.
-fn storage_entry(binding: u32, format: wgpu::TextureFormat) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::StorageTexture {
-            access: wgpu::StorageTextureAccess::WriteOnly,
-            format,
-            view_dimension: wgpu::TextureViewDimension::D2,
-        },
-        count: None,
-    }
-}
-
-/// A `texture_2d<u32>` at `binding`.
-fn uint_texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Uint,
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
-impl Layouts {
-    fn new(device: &wgpu::Device, output: wgpu::TextureFormat) -> Self {
-        use pass::{storage_buffer_entry as buf, texture_entry as tex, uniform_entry as uni};
+impl Passes {
+    fn new(device: &wgpu::Device, output: wgpu::TextureFormat) -> Result<Self, Error> {
         let inter = pass::intermediate_format(output);
-        use wgpu::TextureFormat as F;
-        use wgpu::TextureViewDimension::{D2, D2Array};
-        let layout = |label: &str, entries: &[wgpu::BindGroupLayoutEntry]| {
-            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries })
+        let pass = |name: &str, src: &str, entry: &str| {
+            Pass::new(device, &format!("epipolar/{name}"), &pass_source(src), entry)
         };
-        Self {
-            prefilter: layout(
-                "epipolar prefilter",
-                &[uni(0), tex(1, D2Array), storage_entry(2, F::Rgba32Float), pass::lights_entry()],
-            ),
-            lines: layout(
-                "epipolar lines",
-                &[
-                    uni(0),
-                    uni(1),
-                    tex(2, D2),
-                    buf(3, false, Some(32)),
-                    storage_entry(4, F::Rgba32Float),
-                    buf(5, false, Some(16)),
-                    pass::lights_entry(),
-                ],
-            ),
-            refine: layout(
-                "epipolar refine",
-                &[
-                    uni(0),
-                    uni(1),
-                    tex(2, D2),
-                    buf(3, true, Some(32)),
-                    storage_entry(4, F::R32Uint),
-                    buf(5, false, Some(4)),
-                    buf(6, false, Some(16)),
-                    buf(7, false, Some(12)),
-                    buf(8, false, Some(4)),
-                ],
-            ),
-            march: pass::frame_pass_layout_to(
-                device,
-                "epipolar march",
-                &[buf(7, true, Some(4)), buf(8, true, Some(16))],
-                inter,
-            ),
-            interpolate: layout(
-                "epipolar interpolate",
-                &[uni(0), uni(1), tex(2, D2), uint_texture_entry(3), tex(4, D2), storage_entry(5, inter)],
-            ),
-            upsample: pass::frame_pass_layout_to(
-                device,
-                "epipolar upsample",
-                &[tex(6, D2), buf(7, true, Some(32)), buf(8, false, Some(16))],
-                output,
-            ),
-        }
+        Ok(Self {
+            prefilter: pass("prefilter", PREFILTER_WGSL, "prefilter")?,
+            lines: pass("lines", LINES_WGSL, "lines")?,
+            coordinates: pass("coordinates", LINES_WGSL, "coordinates")?,
+            refine: pass("refine", REFINE_WGSL, "refine")?,
+            args: pass("args", REFINE_WGSL, "args")?,
+            march: pass("march", &pass::with_storage_format(MARCH_WGSL, "marched_tex", inter), "march")?,
+            interpolate: pass(
+                "interpolate",
+                &pass::with_storage_format(INTERPOLATE_WGSL, "radiance_tex", inter),
+                "interpolate",
+            )?,
+            upsample: pass("upsample", &pass::with_output(UPSAMPLE_WGSL, output), "upsample")?,
+        })
     }
 }
 
 impl Epipolar {
-    /// Builds the pipelines and the size-independent buffers.
+    /// Builds the passes and the size-independent buffers.
     pub fn new(gpu: &GpuContext, settings: EpipolarSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
-        gpu.scoped("creating the epipolar pipelines", || {
+        gpu.try_scoped("creating the epipolar pipelines", || {
             let device = &gpu.device;
             let inter = pass::intermediate_format(output);
-            let layouts = Layouts::new(device, output);
-            let pipe = |name: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
-                pass::compute_pipeline(device, &format!("{name}.wgsl ({entry})"), &pass_source(src), entry, layout)
-            };
-            let pipelines = Pipelines {
-                prefilter: pipe("epipolar/prefilter", PREFILTER_WGSL, "prefilter", &layouts.prefilter),
-                lines: pipe("epipolar/lines", LINES_WGSL, "lines", &layouts.lines),
-                coordinates: pipe("epipolar/lines", LINES_WGSL, "coordinates", &layouts.lines),
-                refine: pipe("epipolar/refine", REFINE_WGSL, "refine", &layouts.refine),
-                args: pipe("epipolar/refine", REFINE_WGSL, "args", &layouts.refine),
-                march: pipe(
-                    "epipolar/march",
-                    &pass::with_storage_format(MARCH_WGSL, "marched_tex", inter),
-                    "march",
-                    &layouts.march,
-                ),
-                interpolate: pipe(
-                    "epipolar/interpolate",
-                    &pass::with_storage_format(INTERPOLATE_WGSL, "radiance_tex", inter),
-                    "interpolate",
-                    &layouts.interpolate,
-                ),
-                upsample: pipe(
-                    "epipolar/upsample",
-                    &pass::with_output(UPSAMPLE_WGSL, output),
-                    "upsample",
-                    &layouts.upsample,
-                ),
-            };
+            let passes = Passes::new(device, output)?;
             let buf = |label, size, usage| {
                 device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some(label),
@@ -568,10 +460,9 @@ impl Epipolar {
                 })
             };
             use wgpu::BufferUsages as U;
-            Self {
+            Ok(Self {
                 settings,
-                layouts,
-                pipelines,
+                passes,
                 buffers: pass::FrameBuffers::new(device),
                 march_lights: pass::uniform_buffer(
                     device,
@@ -592,7 +483,7 @@ impl Epipolar {
                 binds: Default::default(),
                 minmax: None,
                 inter,
-            }
+            })
         })
     }
 
@@ -783,123 +674,137 @@ impl Epipolar {
             _ => Bound::Choice(0),
         });
         if !self.binds.is_current(&key) {
-            let binds = gpu.scoped("binding the epipolar inputs", || {
+            let binds = gpu.try_scoped("binding the epipolar inputs", || {
                 use wgpu::BindingResource as R;
                 let device = &gpu.device;
-                let group = |label, layout, entries: &[wgpu::BindGroupEntry]| {
-                    device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries })
-                };
-                let e = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-                let fb = || self.buffers.frame.as_entire_binding();
-                let pb = || self.params_buffer.as_entire_binding();
+                let p = &self.passes;
                 let prefilter = match (&self.prefiltered, spot) {
-                    (Some(p), Some(src)) => Some(group(
-                        "epipolar prefilter",
-                        &self.layouts.prefilter,
+                    (Some(pre), Some(src)) => Some(p.prefilter.bind(
+                        device,
                         &[
-                            e(0, pb()),
-                            e(1, R::TextureView(src)),
-                            e(2, R::TextureView(&p.view)),
-                            pass::lights_binding(&self.buffers.lights),
+                            ("params", self.params_buffer.as_entire_binding()),
+                            ("lights", self.buffers.lights.as_entire_binding()),
+                            ("src_tex", R::TextureView(src)),
+                            ("dst_tex", R::TextureView(&pre.view)),
                         ],
-                    )),
+                    )?),
                     _ => None,
                 };
-                let lines = group(
-                    "epipolar lines",
-                    &self.layouts.lines,
-                    &[
-                        e(0, fb()),
-                        e(1, pb()),
-                        e(2, R::TextureView(frame.depth)),
-                        e(3, sized.lines.as_entire_binding()),
-                        e(4, R::TextureView(coords)),
-                        e(5, self.counters.as_entire_binding()),
-                        pass::lights_binding(&self.buffers.lights),
+                // Every pass reads the uniforms; each names what else it reads and writes.
+                let frame_res = || pass::frame_resources(&self.buffers, &self.params_buffer, frame, &self.white);
+                let uniforms = || {
+                    vec![
+                        ("frame", self.buffers.frame.as_entire_binding()),
+                        ("params", self.params_buffer.as_entire_binding()),
+                        ("lights", self.buffers.lights.as_entire_binding()),
+                    ]
+                };
+                let lines = pass::with(
+                    uniforms(),
+                    [
+                        ("depth_tex", R::TextureView(frame.depth)),
+                        ("lines_buf", sized.lines.as_entire_binding()),
+                        ("coord_tex", R::TextureView(coords)),
+                        ("counters", self.counters.as_entire_binding()),
                     ],
                 );
-                let refine = group(
-                    "epipolar refine",
-                    &self.layouts.refine,
-                    &[
-                        e(0, fb()),
-                        e(1, pb()),
-                        e(2, R::TextureView(coords)),
-                        e(3, sized.lines.as_entire_binding()),
-                        e(4, R::TextureView(interp)),
-                        e(5, sized.list.as_entire_binding()),
-                        e(6, self.counters.as_entire_binding()),
-                        e(7, self.indirect.as_entire_binding()),
-                        e(8, sized.claims.as_entire_binding()),
+                let refine = pass::with(
+                    uniforms(),
+                    [
+                        ("coord_tex", R::TextureView(coords)),
+                        ("lines_buf", sized.lines.as_entire_binding()),
+                        ("interp_tex", R::TextureView(interp)),
+                        ("list", sized.list.as_entire_binding()),
+                        ("counters", self.counters.as_entire_binding()),
+                        ("dispatch", self.indirect.as_entire_binding()),
+                        ("claims", sized.claims.as_entire_binding()),
                     ],
                 );
-                let mut me =
-                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, marched).to_vec();
-                me[4] = e(4, R::TextureView(march_spot));
-                me[6] = pass::lights_binding(&self.march_lights);
-                me.extend([e(7, sized.list.as_entire_binding()), e(8, self.counters.as_entire_binding())]);
-                let march = group("epipolar march", &self.layouts.march, &me);
-                let interpolate = group(
-                    "epipolar interpolate",
-                    &self.layouts.interpolate,
-                    &[
-                        e(0, fb()),
-                        e(1, pb()),
-                        e(2, R::TextureView(coords)),
-                        e(3, R::TextureView(interp)),
-                        e(4, R::TextureView(marched)),
-                        e(5, R::TextureView(radiance)),
+                // The march reads the prefiltered spot texture through its own lights.
+                let march = pass::with(
+                    frame_res(),
+                    [
+                        ("spot_tex", R::TextureView(march_spot)),
+                        ("lights", self.march_lights.as_entire_binding()),
+                        ("marched_tex", R::TextureView(marched)),
+                        ("list", sized.list.as_entire_binding()),
+                        ("counters", self.counters.as_entire_binding()),
                     ],
                 );
-                let mut ue =
-                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, output).to_vec();
-                ue.extend([
-                    e(6, R::TextureView(radiance)),
-                    e(7, sized.lines.as_entire_binding()),
-                    e(8, self.counters.as_entire_binding()),
-                ]);
-                let upsample = group("epipolar upsample", &self.layouts.upsample, &ue);
-                Binds { prefilter, lines, refine, march, interpolate, upsample }
+                let interpolate = pass::with(
+                    uniforms(),
+                    [
+                        ("coord_tex", R::TextureView(coords)),
+                        ("interp_tex", R::TextureView(interp)),
+                        ("marched_tex", R::TextureView(marched)),
+                        ("radiance_tex", R::TextureView(radiance)),
+                    ],
+                );
+                let upsample = pass::with(
+                    frame_res(),
+                    [
+                        ("radiance_tex", R::TextureView(radiance)),
+                        ("lines_buf", sized.lines.as_entire_binding()),
+                        ("counters", self.counters.as_entire_binding()),
+                        ("out_tex", R::TextureView(output)),
+                    ],
+                );
+                Ok(Binds {
+                    prefilter,
+                    lines: p.lines.bind(device, &lines)?,
+                    coordinates: p.coordinates.bind(device, &lines)?,
+                    refine: p.refine.bind(device, &refine)?,
+                    args: p.args.bind(device, &refine)?,
+                    march: p.march.bind(device, &march)?,
+                    interpolate: p.interpolate.bind(device, &interpolate)?,
+                    upsample: p.upsample.bind(device, &upsample)?,
+                })
             })?;
             self.binds.store(key, binds);
         }
-        let Binds {
-            prefilter: prefilter_bind,
-            lines: lines_bind,
-            refine: refine_bind,
-            march: march_bind,
-            interpolate: interpolate_bind,
-            upsample: upsample_bind,
-        } = self.binds.value();
+        let b = self.binds.value();
         let (samples, slices) = (params.samples, params.slices);
         let (w, h) = (desc.width, desc.height);
-        let p = &self.pipelines;
-        if let (Some(bind), Some(pre)) = (&prefilter_bind, &self.prefiltered) {
-            let (pw, ph) = (pre.texture.width(), pre.texture.height());
-            rec.dispatch("prefilter", "epipolar prefilter", &p.prefilter, bind, [pw.div_ceil(8), ph.div_ceil(8), 1])?;
+        let p = &self.passes;
+        if let (Some(bind), Some(pre)) = (&b.prefilter, &self.prefiltered) {
+            let groups = p.prefilter.groups_2d(pre.texture.width(), pre.texture.height());
+            p.prefilter.dispatch(rec, "prefilter", bind, groups)?;
         }
         rec.pass("lines", |enc, ts| {
             enc.clear_buffer(&self.counters, 0, None);
-            let mut pass = compute_pass(enc, "epipolar lines", ts);
-            pass.set_bind_group(0, lines_bind, &[]);
-            pass.set_pipeline(&p.lines);
-            pass.dispatch_workgroups(slices.div_ceil(64), 1, 1);
-            pass.set_pipeline(&p.coordinates);
-            pass.dispatch_workgroups(samples.div_ceil(8), slices.div_ceil(8), 1);
+            stage(
+                compute_pass(enc, "epipolar lines", ts),
+                &[
+                    (&p.lines, &b.lines, [slices.div_ceil(p.lines.workgroup_size()[0]), 1, 1]),
+                    (&p.coordinates, &b.coordinates, p.coordinates.groups_2d(samples, slices)),
+                ],
+            );
         })?;
         rec.pass("refine", |enc, ts| {
             enc.clear_buffer(&sized.claims, 0, None);
-            let mut pass = compute_pass(enc, "epipolar refine", ts);
-            pass.set_bind_group(0, refine_bind, &[]);
-            pass.set_pipeline(&p.refine);
-            pass.dispatch_workgroups(samples.div_ceil(8), slices.div_ceil(8), 1);
-            pass.set_pipeline(&p.args);
-            pass.dispatch_workgroups(1, 1, 1);
+            stage(
+                compute_pass(enc, "epipolar refine", ts),
+                &[(&p.refine, &b.refine, p.refine.groups_2d(samples, slices)), (&p.args, &b.args, [1, 1, 1])],
+            );
         })?;
         let minmax_march = s.march == EpipolarMarch::Minmax;
+        let indirect = |kernel: &Pass, bind: &wgpu::BindGroup, rec: &mut Recorder| {
+            rec.pass("march", |enc, ts| {
+                let mut pass = compute_pass(enc, kernel.label(), ts);
+                pass.set_pipeline(kernel.pipeline());
+                pass.set_bind_group(0, bind, &[]);
+                pass.dispatch_workgroups_indirect(&self.indirect, 0);
+            })
+        };
         if minmax_march {
             // The tree (minmax's `rectify` and `build`), then the walk per listed pixel.
-            let mm = self.minmax.get_or_insert_with(|| MinmaxMarch::new(&gpu.device, self.inter));
+            if self.minmax.is_none() {
+                self.minmax =
+                    Some(gpu.try_scoped("creating the epipolar min-max march", || {
+                        MinmaxMarch::new(&gpu.device, self.inter)
+                    })?);
+            }
+            let mm = self.minmax.as_mut().expect("built above");
             let march_frame = GpuFrame { spot_textures: Some(march_spot), ..*frame };
             // Always resampled (epipolar asks the host for no rectified raster), as on the CPU.
             mm.tree.encode(gpu, rec, &march_frame, &s.minmax(), &self.buffers, false)?;
@@ -907,49 +812,29 @@ impl Epipolar {
             let mut key = pass::frame_key(frame, marched);
             key.extend([Bound::Buffer(tree.clone()), Bound::View(march_spot.clone())]);
             if !mm.binds.is_current(&key) {
-                let group = gpu.scoped("binding the epipolar min-max march", || {
-                    let e = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-                    let mut me =
-                        pass::frame_pass_bindings(&self.buffers, mm.tree.params_buffer(), frame, &self.white, marched)
-                            .to_vec();
-                    me[4] = e(4, wgpu::BindingResource::TextureView(march_spot));
-                    me[6] = pass::lights_binding(&self.march_lights);
-                    me.extend([
-                        e(6, tree.as_entire_binding()),
-                        e(7, sized.list.as_entire_binding()),
-                        e(8, self.counters.as_entire_binding()),
-                    ]);
-                    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                        label: Some("epipolar march (minmax)"),
-                        layout: &mm.layout,
-                        entries: &me,
-                    })
+                let group = gpu.try_scoped("binding the epipolar min-max march", || {
+                    use wgpu::BindingResource as R;
+                    let res = pass::with(
+                        pass::frame_resources(&self.buffers, mm.tree.params_buffer(), frame, &self.white),
+                        [
+                            ("spot_tex", R::TextureView(march_spot)),
+                            ("lights", self.march_lights.as_entire_binding()),
+                            ("marched_tex", R::TextureView(marched)),
+                            ("tree", tree.as_entire_binding()),
+                            ("list", sized.list.as_entire_binding()),
+                            ("counters", self.counters.as_entire_binding()),
+                        ],
+                    );
+                    mm.march.bind(&gpu.device, &res)
                 })?;
                 mm.binds.store(key, group);
             }
-            let (pipeline, bind) = (&mm.pipeline, mm.binds.value());
-            rec.pass("march", |enc, ts| {
-                let mut pass = compute_pass(enc, "epipolar march (minmax)", ts);
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, bind, &[]);
-                pass.dispatch_workgroups_indirect(&self.indirect, 0);
-            })?;
+            indirect(&mm.march, mm.binds.value(), rec)?;
         } else {
-            rec.pass("march", |enc, ts| {
-                let mut pass = compute_pass(enc, "epipolar march", ts);
-                pass.set_pipeline(&p.march);
-                pass.set_bind_group(0, march_bind, &[]);
-                pass.dispatch_workgroups_indirect(&self.indirect, 0);
-            })?;
+            indirect(&p.march, &b.march, rec)?;
         }
-        let groups = [samples.div_ceil(8), slices.div_ceil(8), 1];
-        rec.dispatch("interpolate", "epipolar interpolate", &p.interpolate, interpolate_bind, groups)?;
-        rec.pass("upsample", |enc, ts| {
-            let mut pass = compute_pass(enc, "epipolar upsample", ts);
-            pass.set_pipeline(&p.upsample);
-            pass.set_bind_group(0, upsample_bind, &[]);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-        })?;
+        p.interpolate.dispatch(rec, "interpolate", &b.interpolate, p.interpolate.groups_2d(samples, slices))?;
+        p.upsample.dispatch(rec, "upsample", &b.upsample, p.upsample.groups_2d(w, h))?;
         self.last_params = Some(params);
         // The GPU-classified counts join the stats once the counters are read back (never with
         // StatsMode::Off: reading them at once would stall the frame).
@@ -974,6 +859,16 @@ impl Epipolar {
             gpu_memory_bytes: self.gpu_memory_bytes(),
             extra,
         })
+    }
+}
+
+/// Records `steps` (a pass, its bind group, its workgroups) into one compute pass: a timed stage
+/// whose entry points share it.
+fn stage(mut pass: wgpu::ComputePass<'_>, steps: &[(&Pass, &wgpu::BindGroup, [u32; 3])]) {
+    for (kernel, bind, [x, y, z]) in steps {
+        pass.set_pipeline(kernel.pipeline());
+        pass.set_bind_group(0, *bind, &[]);
+        pass.dispatch_workgroups(*x, *y, *z);
     }
 }
 

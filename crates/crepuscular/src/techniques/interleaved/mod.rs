@@ -47,7 +47,7 @@ use crate::gpu::{GpuContext, Recorder};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
 use crate::model::Phase;
 use crate::stats::TechniqueStats;
-use crate::techniques::pass::{self, Bound};
+use crate::techniques::pass::{self, Bound, Pass};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -336,18 +336,15 @@ struct GpuLut {
     max_rel_error: f64,
 }
 
-/// The GPU side of `interleaved`: three pipelines, their uniform buffers, the intermediate
+/// The GPU side of `interleaved`: three passes, their uniform buffers, the intermediate
 /// textures (reallocated only when the frame size changes) and the phase table (rebuilt only
 /// when the phase function or table size changes).
 pub struct Interleaved {
     /// Current settings; changes apply on the next [`Interleaved::encode`].
     pub settings: InterleavedSettings,
-    march_pipeline: wgpu::ComputePipeline,
-    rows_pipeline: wgpu::ComputePipeline,
-    columns_pipeline: wgpu::ComputePipeline,
-    march_layout: wgpu::BindGroupLayout,
-    rows_layout: wgpu::BindGroupLayout,
-    columns_layout: wgpu::BindGroupLayout,
+    march: Pass,
+    rows: Pass,
+    columns: Pass,
     buffers: pass::FrameBuffers,
     params_buffer: wgpu::Buffer,
     white: wgpu::TextureView,
@@ -359,55 +356,21 @@ pub struct Interleaved {
     binds: pass::BindCache<[wgpu::BindGroup; 3]>,
 }
 
-/// The march pass's layout: the frame-pass bindings 0–5 (frame, params, depth, shadow map,
-/// spot texture, the partial sums in `format`) plus the phase table (binding 6, read-only
-/// storage).
-fn march_layout(device: &wgpu::Device, format: wgpu::TextureFormat) -> wgpu::BindGroupLayout {
-    pass::frame_pass_layout_to(device, "interleaved march", &[pass::storage_buffer_entry(6, true, None)], format)
-}
-
 impl Interleaved {
-    /// Builds the three pipelines.
+    /// Builds the three passes.
     pub fn new(gpu: &GpuContext, settings: InterleavedSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
-        gpu.scoped("creating the interleaved pipelines", || {
-            use wgpu::TextureViewDimension as D;
+        gpu.try_scoped("creating the interleaved pipelines", || {
             let device = &gpu.device;
-            let pipeline = |name: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
-                pass::compute_pipeline(device, name, src, entry, layout)
-            };
-            use pass::{storage_texture_entry_of, texture_entry, uniform_entry};
             let inter = pass::intermediate_format(output);
-            let march_layout = march_layout(device, inter);
-            let rows_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("interleaved sum_rows"),
-                entries: &[
-                    uniform_entry(0),
-                    uniform_entry(1),
-                    texture_entry(2, D::D2),
-                    storage_texture_entry_of(3, inter),
-                ],
-            });
-            let columns_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("interleaved sum_columns"),
-                entries: &[
-                    uniform_entry(0),
-                    uniform_entry(1),
-                    texture_entry(2, D::D2),
-                    texture_entry(3, D::D2),
-                    storage_texture_entry_of(4, output),
-                ],
-            });
-            let march_src = pass::with_output(MARCH_WGSL, inter);
-            let march_pipeline = pipeline("interleaved/march.wgsl", &march_src, "march", &march_layout);
-            let rows_src = pass::with_output(SUM_ROWS_WGSL, inter);
-            let rows_pipeline = pipeline("interleaved/sum_rows.wgsl", &rows_src, "sum_rows", &rows_layout);
-            let columns_pipeline = pipeline(
-                "interleaved/sum_columns.wgsl",
+            let march = Pass::new(device, "interleaved/march", &pass::with_output(MARCH_WGSL, inter), "march")?;
+            let rows = Pass::new(device, "interleaved/sum_rows", &pass::with_output(SUM_ROWS_WGSL, inter), "sum_rows")?;
+            let columns = Pass::new(
+                device,
+                "interleaved/sum_columns",
                 &pass::with_output(SUM_COLUMNS_WGSL, output),
                 "sum_columns",
-                &columns_layout,
-            );
+            )?;
             let buffers = pass::FrameBuffers::new(device);
             let params_buffer =
                 pass::uniform_buffer(device, "interleaved params", std::mem::size_of::<InterleavedParams>() as u64);
@@ -418,14 +381,11 @@ impl Interleaved {
                 mapped_at_creation: false,
             });
             let white = pass::white_array(gpu);
-            Self {
+            Ok(Self {
                 settings,
-                march_pipeline,
-                rows_pipeline,
-                columns_pipeline,
-                march_layout,
-                rows_layout,
-                columns_layout,
+                march,
+                rows,
+                columns,
                 buffers,
                 params_buffer,
                 white,
@@ -434,7 +394,7 @@ impl Interleaved {
                 targets: None,
                 inter,
                 binds: Default::default(),
-            }
+            })
         })
     }
 
@@ -522,62 +482,39 @@ impl Interleaved {
             (Some(l), true) => &l.buffer,
             _ => &self.no_lut,
         };
-        let view = wgpu::BindingResource::TextureView;
         let mut key = pass::frame_key(frame, output);
         key.extend([Bound::View(targets.march_view.clone()), Bound::Buffer(lut.clone())]);
         if !self.binds.is_current(&key) {
-            let binds = gpu.scoped("binding the interleaved inputs", || {
-                let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-                let frame_entry = || entry(0, self.buffers.frame.as_entire_binding());
-                let params_entry = || entry(1, self.params_buffer.as_entire_binding());
-                let mut march_entries = pass::frame_pass_bindings(
-                    &self.buffers,
-                    &self.params_buffer,
-                    frame,
-                    &self.white,
-                    &targets.march_view,
-                )
-                .to_vec();
-                march_entries.push(entry(6, lut.as_entire_binding()));
-                let march = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("interleaved march"),
-                    layout: &self.march_layout,
-                    entries: &march_entries,
-                });
-                let rows = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("interleaved sum_rows"),
-                    layout: &self.rows_layout,
-                    entries: &[
-                        frame_entry(),
-                        params_entry(),
-                        entry(2, view(&targets.march_view)),
-                        entry(3, view(&targets.rows_view)),
-                    ],
-                });
-                let columns = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("interleaved sum_columns"),
-                    layout: &self.columns_layout,
-                    entries: &[
-                        frame_entry(),
-                        params_entry(),
-                        entry(2, view(&targets.rows_view)),
-                        entry(3, view(&targets.march_view)),
-                        entry(4, view(output)),
-                    ],
-                });
-                [march, rows, columns]
+            let binds = gpu.try_scoped("binding the interleaved inputs", || {
+                let device = &gpu.device;
+                let view = wgpu::BindingResource::TextureView;
+                let march = pass::with(
+                    pass::frame_resources(&self.buffers, &self.params_buffer, frame, &self.white),
+                    [("lut", lut.as_entire_binding()), ("out_tex", view(&targets.march_view))],
+                );
+                let uniforms = [
+                    ("frame", self.buffers.frame.as_entire_binding()),
+                    ("params", self.params_buffer.as_entire_binding()),
+                ];
+                let rows = [("march_tex", view(&targets.march_view)), ("out_tex", view(&targets.rows_view))];
+                let columns = [
+                    ("rows_tex", view(&targets.rows_view)),
+                    ("march_tex", view(&targets.march_view)),
+                    ("out_tex", view(output)),
+                ];
+                Ok([
+                    self.march.bind(device, &march)?,
+                    self.rows.bind(device, &[&uniforms[..], &rows].concat())?,
+                    self.columns.bind(device, &[&uniforms[..], &columns].concat())?,
+                ])
             })?;
             self.binds.store(key, binds);
         }
         let [march_bind, rows_bind, columns_bind] = self.binds.value();
-        let groups = (desc.width.div_ceil(8), desc.height.div_ceil(8));
-        for (name, pipeline, bind) in [
-            ("march", &self.march_pipeline, march_bind),
-            ("sum_rows", &self.rows_pipeline, rows_bind),
-            ("sum_columns", &self.columns_pipeline, columns_bind),
-        ] {
-            rec.dispatch(name, &format!("interleaved {name}"), pipeline, bind, [groups.0, groups.1, 1])?;
-        }
+        let groups = self.march.groups_2d(desc.width, desc.height);
+        self.march.dispatch(rec, "march", march_bind, groups)?;
+        self.rows.dispatch(rec, "sum_rows", rows_bind, groups)?;
+        self.columns.dispatch(rec, "sum_columns", columns_bind, groups)?;
         Ok(TechniqueStats {
             technique: "interleaved".into(),
             backend: "gpu".into(),

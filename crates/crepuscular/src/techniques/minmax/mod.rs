@@ -34,7 +34,7 @@ use crate::frame::GpuFrame;
 use crate::gpu::{GpuContext, Recorder};
 use crate::march::mean_extinction;
 use crate::stats::TechniqueStats;
-use crate::techniques::pass;
+use crate::techniques::pass::{self, Pass};
 use crate::techniques::prefiltered::{
     self, EPIPOLE_WGSL, Mode, PrefilteredParams, RESAMPLE_WGSL, Rectification, RectifiedRaster, epipole_box,
     epipole_pixel, epipole_samples, pass_source,
@@ -144,8 +144,7 @@ pub struct TreeFrame {
 /// `march = "minmax"` per ray-march sample (Yusov 2013). Its frame uniforms and lights are the
 /// owner's ([`pass::FrameBuffers`], written by the owner before [`TreeBuilder::encode`]).
 pub struct TreeBuilder {
-    build_pipeline: wgpu::ComputePipeline,
-    build_layout: wgpu::BindGroupLayout,
+    build: Pass,
     params_buffer: wgpu::Buffer,
     /// Bound in the host raster's place where the map is resampled (never read there).
     no_raster: wgpu::TextureView,
@@ -154,26 +153,13 @@ pub struct TreeBuilder {
 }
 
 impl TreeBuilder {
-    /// Builds the pipeline.
-    pub fn new(device: &wgpu::Device) -> Self {
-        use wgpu::TextureViewDimension as D;
-        let build_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("minmax build"),
-            entries: &[
-                pass::uniform_entry(0),
-                pass::uniform_entry(1),
-                pass::texture_entry(2, D::D2),
-                pass::storage_buffer_entry(3, false, None),
-                pass::texture_entry(4, D::D2Array),
-                pass::lights_entry(),
-            ],
-        });
+    /// Builds the pass.
+    pub fn new(device: &wgpu::Device) -> Result<Self, Error> {
         let src = pass_source(&build_wgsl(), prefiltered::BasisPrecision::Unorm8);
         let no_raster = crate::gpu::storage_texture(device, "minmax no raster", wgpu::TextureFormat::R32Float, 1, 1)
             .create_view(&Default::default());
-        Self {
-            build_pipeline: pass::compute_pipeline(device, "minmax/build.wgsl", &src, "build", &build_layout),
-            build_layout,
+        Ok(Self {
+            build: Pass::new(device, "minmax/build", &src, "build")?,
             params_buffer: pass::uniform_buffer(
                 device,
                 "minmax params",
@@ -182,7 +168,7 @@ impl TreeBuilder {
             no_raster,
             tree: None,
             binds: Default::default(),
-        }
+        })
     }
 
     /// The uniform block of the last frame (`Params` of the walk).
@@ -254,24 +240,24 @@ impl TreeBuilder {
         let mut key = pass::frame_key(frame, raster);
         key.push(pass::Bound::Buffer(tree.clone()));
         if !self.binds.is_current(&key) {
-            let bind = gpu.scoped("binding the minmax inputs", || {
-                let e = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("minmax build"),
-                    layout: &self.build_layout,
-                    entries: &[
-                        e(0, buffers.frame.as_entire_binding()),
-                        e(1, self.params_buffer.as_entire_binding()),
-                        e(2, wgpu::BindingResource::TextureView(raster)),
-                        e(3, tree.as_entire_binding()),
-                        e(4, wgpu::BindingResource::TextureView(frame.shadow_maps)),
-                        pass::lights_binding(&buffers.lights),
+            let bind = gpu.try_scoped("binding the minmax inputs", || {
+                let view = wgpu::BindingResource::TextureView;
+                self.build.bind(
+                    &gpu.device,
+                    &[
+                        ("frame", buffers.frame.as_entire_binding()),
+                        ("params", self.params_buffer.as_entire_binding()),
+                        ("lights", buffers.lights.as_entire_binding()),
+                        ("depth_map", view(raster)),
+                        ("shadow_map", view(frame.shadow_maps)),
+                        ("tree", tree.as_entire_binding()),
                     ],
-                })
+                )
             })?;
             self.binds.store(key, bind);
         }
-        rec.dispatch("build", "minmax build", &self.build_pipeline, self.binds.value(), [h, 1, 1])?;
+        // One workgroup per row of the map.
+        self.build.dispatch(rec, "build", self.binds.value(), [h, 1, 1])?;
         Ok(TreeFrame { rect, host: host.is_some() })
     }
 
@@ -293,9 +279,8 @@ pub struct MinMax {
     /// Current settings; changes apply on the next render.
     pub settings: MinmaxSettings,
     tree: TreeBuilder,
-    traverse_pipeline: wgpu::ComputePipeline,
-    epipole_pipeline: wgpu::ComputePipeline,
-    traverse_layout: wgpu::BindGroupLayout,
+    traverse: Pass,
+    epipole: Pass,
     buffers: pass::FrameBuffers,
     counters: wgpu::Buffer,
     white: wgpu::TextureView,
@@ -303,10 +288,10 @@ pub struct MinMax {
     binds: Binds,
 }
 
-/// The traverse pass's bind groups, with the tree builder's count for the trait.
+/// The traverse and epipole passes' bind groups, with the tree builder's count for the trait.
 #[derive(Default)]
 struct Binds {
-    traverse: pass::BindCache<wgpu::BindGroup>,
+    traverse: pass::BindCache<[wgpu::BindGroup; 2]>,
     tree_builds: u64,
 }
 
@@ -323,24 +308,14 @@ impl MinMax {
     /// Builds the pipelines and buffers.
     pub fn new(gpu: &GpuContext, settings: MinmaxSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
-        gpu.scoped("creating the minmax pipelines", || {
+        gpu.try_scoped("creating the minmax pipelines", || {
             let device = &gpu.device;
-            let traverse_layout = pass::frame_pass_layout_to(
-                device,
-                "minmax traverse",
-                &[pass::storage_buffer_entry(6, true, None), pass::storage_buffer_entry(7, false, None)],
-                output,
-            );
             let p = prefiltered::BasisPrecision::Unorm8;
             let traverse_src = pass_source(&pass::with_output(&traverse_wgsl(), output), p);
-            let pipe = |entry: &str| {
-                pass::compute_pipeline(device, "minmax/traverse.wgsl", &traverse_src, entry, &traverse_layout)
-            };
-            Self {
-                tree: TreeBuilder::new(device),
-                traverse_pipeline: pipe("traverse"),
-                epipole_pipeline: pipe("epipole"),
-                traverse_layout,
+            Ok(Self {
+                tree: TreeBuilder::new(device)?,
+                traverse: Pass::new(device, "minmax/traverse", &traverse_src, "traverse")?,
+                epipole: Pass::new(device, "minmax/epipole", &traverse_src, "epipole")?,
                 buffers: pass::FrameBuffers::new(device),
                 counters: device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("minmax counters"),
@@ -352,7 +327,7 @@ impl MinMax {
                 last: None,
                 binds: Binds::default(),
                 settings,
-            }
+            })
         })
     }
 
@@ -393,34 +368,31 @@ impl MinMax {
         let mut key = pass::frame_key(frame, output);
         key.push(pass::Bound::Buffer(tree.clone()));
         if !self.binds.traverse.is_current(&key) {
-            let bind = gpu.scoped("binding the minmax walk", || {
-                let mut entries =
-                    pass::frame_pass_bindings(&self.buffers, self.tree.params_buffer(), frame, &self.white, output)
-                        .to_vec();
-                entries.extend([
-                    wgpu::BindGroupEntry { binding: 6, resource: tree.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 7, resource: self.counters.as_entire_binding() },
-                ]);
-                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("minmax traverse"),
-                    layout: &self.traverse_layout,
-                    entries: &entries,
-                })
+            let binds = gpu.try_scoped("binding the minmax walk", || {
+                let res = pass::with(
+                    pass::frame_resources(&self.buffers, self.tree.params_buffer(), frame, &self.white),
+                    [
+                        ("tree", tree.as_entire_binding()),
+                        ("counters", self.counters.as_entire_binding()),
+                        ("out_tex", wgpu::BindingResource::TextureView(output)),
+                    ],
+                );
+                Ok([self.traverse.bind(&gpu.device, &res)?, self.epipole.bind(&gpu.device, &res)?])
             })?;
-            self.binds.traverse.store(key, bind);
+            self.binds.traverse.store(key, binds);
         }
-        let traverse_bind = self.binds.traverse.value();
+        let [traverse_bind, epipole_bind] = self.binds.traverse.value();
         rec.pass("traverse", |enc, ts| {
             enc.clear_buffer(&self.counters, 0, None);
-            let mut pass = crate::gpu::compute_pass(enc, "minmax traverse", ts);
-            pass.set_pipeline(&self.traverse_pipeline);
+            let mut pass = crate::gpu::compute_pass(enc, self.traverse.label(), ts);
+            pass.set_pipeline(self.traverse.pipeline());
             pass.set_bind_group(0, traverse_bind, &[]);
-            pass.dispatch_workgroups(desc.width.div_ceil(8), desc.height.div_ceil(8), 1);
+            let [x, y, z] = self.traverse.groups_2d(desc.width, desc.height);
+            pass.dispatch_workgroups(x, y, z);
         })?;
         let epipole = epipole_pixel(desc, s.epipole_radius);
         if let Some([x0, y0, x1, y1]) = epipole_box(desc, s.epipole_radius, epipole) {
-            let groups = [(x1 - x0).div_ceil(8), (y1 - y0).div_ceil(8), 1];
-            rec.dispatch("epipole", "minmax epipole", &self.epipole_pipeline, traverse_bind, groups)?;
+            self.epipole.dispatch(rec, "epipole", epipole_bind, self.epipole.groups_2d(x1 - x0, y1 - y0))?;
         }
         // The walks are counted on the GPU; their figures join the stats once the counters are
         // read back (never with StatsMode::Off).

@@ -32,7 +32,7 @@ use crate::frame::{FrameDesc, GpuFrame};
 use crate::gpu::{GpuContext, Recorder};
 use crate::march::mean_extinction;
 use crate::stats::TechniqueStats;
-use crate::techniques::pass;
+use crate::techniques::pass::{self, Pass};
 pub use raster::RectifiedRaster;
 use std::collections::BTreeMap;
 
@@ -153,17 +153,14 @@ struct Maps {
     sets: u32,
 }
 
-/// The GPU side of `prefiltered`: three pipelines, buffers, samplers and the map textures.
+/// The GPU side of `prefiltered`: four passes, buffers, samplers and the map textures.
 pub struct Prefiltered {
     /// Current settings; changes apply on the next render.
     pub settings: PrefilteredSettings,
-    rectify_pipeline: wgpu::ComputePipeline,
-    prefilter_pipeline: wgpu::ComputePipeline,
-    evaluate_pipeline: wgpu::ComputePipeline,
-    epipole_pipeline: wgpu::ComputePipeline,
-    rectify_layout: wgpu::BindGroupLayout,
-    prefilter_layout: wgpu::BindGroupLayout,
-    evaluate_layout: wgpu::BindGroupLayout,
+    rectify: Pass,
+    prefilter: Pass,
+    evaluate: Pass,
+    epipole: Pass,
     pipeline_precision: BasisPrecision,
     buffers: pass::FrameBuffers,
     params_buffer: wgpu::Buffer,
@@ -173,104 +170,21 @@ pub struct Prefiltered {
     white: wgpu::TextureView,
     maps: Option<Maps>,
     last: Option<Rectification>,
-    binds: pass::BindCache<[wgpu::BindGroup; 3]>,
+    binds: pass::BindCache<[wgpu::BindGroup; 4]>,
     /// The in-scattering's storage format (kept to rebuild the pipelines on `precision`).
     output: wgpu::TextureFormat,
 }
 
-fn storage_entry(
-    binding: u32,
-    format: wgpu::TextureFormat,
-    dim: wgpu::TextureViewDimension,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::StorageTexture {
-            access: wgpu::StorageTextureAccess::WriteOnly,
-            format,
-            view_dimension: dim,
-        },
-        count: None,
-    }
-}
-
-/// The layout of pass `rectify` (also `minmax`'s): frame and pass uniforms, the shadow maps,
-/// the per-row reference rays, the rectified depth (storage), the lights.
-fn rectify_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    use wgpu::TextureViewDimension as D;
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("prefiltered rectify"),
-        entries: &[
-            pass::uniform_entry(0),
-            pass::uniform_entry(1),
-            pass::texture_entry(2, D::D2Array),
-            pass::storage_buffer_entry(3, true, None),
-            storage_entry(4, wgpu::TextureFormat::R32Float, D::D2),
-            pass::lights_entry(),
-        ],
-    })
-}
-
-fn prefilter_layout(device: &wgpu::Device, precision: BasisPrecision) -> wgpu::BindGroupLayout {
-    use wgpu::TextureViewDimension as D;
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("prefiltered prefilter"),
-        entries: &[
-            pass::uniform_entry(0),
-            pass::uniform_entry(1),
-            pass::texture_entry(2, D::D2Array),
-            pass::storage_buffer_entry(3, true, None),
-            pass::texture_entry(4, D::D2),
-            storage_entry(5, precision.format(), D::D2Array),
-            storage_entry(6, wgpu::TextureFormat::R32Float, D::D2Array),
-            pass::lights_entry(),
-        ],
-    })
-}
-
 impl Prefiltered {
-    /// Builds the pipelines and buffers.
+    /// Builds the passes and buffers.
     pub fn new(gpu: &GpuContext, settings: PrefilteredSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
-        gpu.scoped("creating the prefiltered pipelines", || {
-            use wgpu::TextureViewDimension as D;
+        gpu.try_scoped("creating the prefiltered pipelines", || {
             let device = &gpu.device;
-            let rectify_layout = rectify_layout(device);
-            let prefilter_layout = prefilter_layout(device, settings.precision);
-            let evaluate_layout = pass::frame_pass_layout_to(
-                device,
-                "prefiltered evaluate",
-                &[
-                    pass::storage_buffer_entry(6, true, None),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 7,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                            view_dimension: D::D2Array,
-                            multisampled: false,
-                        },
-                        count: None,
-                    },
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 8,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                        count: None,
-                    },
-                    pass::texture_entry(9, D::D2Array),
-                ],
-                output,
-            );
-            let pipe = |label: &str, src: &str, entry: &str, layout: &wgpu::BindGroupLayout| {
-                pass::compute_pipeline(device, label, &pass_source(src, settings.precision), entry, layout)
+            let pass = |label: &str, src: &str, entry: &str| {
+                Pass::new(device, &format!("prefiltered/{label}"), &pass_source(src, settings.precision), entry)
             };
-            let rectify_pipeline = pipe("prefiltered/rectify.wgsl", &rectify_wgsl(), "rectify", &rectify_layout);
-            let prefilter_pipeline = pipe("prefiltered/prefilter.wgsl", PREFILTER_WGSL, "prefilter", &prefilter_layout);
             let evaluate_src = pass::with_output(&evaluate_wgsl(), output);
-            let evaluate_pipeline = pipe("prefiltered/evaluate.wgsl", &evaluate_src, "evaluate", &evaluate_layout);
-            let epipole_pipeline = pipe("prefiltered/evaluate.wgsl", &evaluate_src, "epipole", &evaluate_layout);
             let sampler = |mode| {
                 device.create_sampler(&wgpu::SamplerDescriptor {
                     label: Some("prefiltered basis"),
@@ -281,16 +195,13 @@ impl Prefiltered {
                     ..Default::default()
                 })
             };
-            Self {
+            Ok(Self {
                 pipeline_precision: settings.precision,
+                rectify: pass("rectify", &rectify_wgsl(), "rectify")?,
+                prefilter: pass("prefilter", PREFILTER_WGSL, "prefilter")?,
+                evaluate: pass("evaluate", &evaluate_src, "evaluate")?,
+                epipole: pass("epipole", &evaluate_src, "epipole")?,
                 settings,
-                rectify_pipeline,
-                prefilter_pipeline,
-                evaluate_pipeline,
-                epipole_pipeline,
-                rectify_layout,
-                prefilter_layout,
-                evaluate_layout,
                 buffers: pass::FrameBuffers::new(device),
                 params_buffer: pass::uniform_buffer(
                     device,
@@ -305,7 +216,7 @@ impl Prefiltered {
                 last: None,
                 binds: Default::default(),
                 output,
-            }
+            })
         })
     }
 
@@ -413,65 +324,61 @@ impl Prefiltered {
             pass::Bound::Choice(rect.full_circle as u32 + 2 * host.is_some() as u32),
         ]);
         if !self.binds.is_current(&key) {
-            let binds = gpu.scoped("binding the prefiltered inputs", || {
-                let bind = |label, layout, entries: &[wgpu::BindGroupEntry]| {
-                    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries })
+            let binds = gpu.try_scoped("binding the prefiltered inputs", || {
+                let device = &gpu.device;
+                let uniforms = || {
+                    vec![
+                        ("frame", self.buffers.frame.as_entire_binding()),
+                        ("params", self.params_buffer.as_entire_binding()),
+                        ("lights", self.buffers.lights.as_entire_binding()),
+                        ("rows", rows.as_entire_binding()),
+                    ]
                 };
-                let rectify = bind(
-                    "prefiltered rectify",
-                    &self.rectify_layout,
-                    &[
-                        wgpu::BindGroupEntry { binding: 0, resource: self.buffers.frame.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 2, resource: view(frame.shadow_maps) },
-                        wgpu::BindGroupEntry { binding: 3, resource: rows.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 4, resource: view(&maps.depth_view) },
-                        pass::lights_binding(&self.buffers.lights),
+                let rectify = pass::with(
+                    uniforms(),
+                    [("shadow_map", view(frame.shadow_maps)), ("out_depth", view(&maps.depth_view))],
+                );
+                let prefilter = pass::with(
+                    uniforms(),
+                    [
+                        ("spot_tex", view(frame.spot_textures.unwrap_or(&self.white))),
+                        ("depth_map", view(host.unwrap_or(&maps.depth_view))),
+                        ("out_basis", view(&maps.basis_store)),
+                        ("out_cumw", view(&maps.cumw_view)),
                     ],
                 );
-                let prefilter = bind(
-                    "prefiltered prefilter",
-                    &self.prefilter_layout,
-                    &[
-                        wgpu::BindGroupEntry { binding: 0, resource: self.buffers.frame.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: self.params_buffer.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 2, resource: view(frame.spot_textures.unwrap_or(&self.white)) },
-                        wgpu::BindGroupEntry { binding: 3, resource: rows.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 4, resource: view(host.unwrap_or(&maps.depth_view)) },
-                        wgpu::BindGroupEntry { binding: 5, resource: view(&maps.basis_store) },
-                        wgpu::BindGroupEntry { binding: 6, resource: view(&maps.cumw_view) },
-                        pass::lights_binding(&self.buffers.lights),
-                    ],
-                );
-                let mut entries =
-                    pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, output).to_vec();
                 let sampler = if rect.full_circle { &self.wrap_sampler } else { &self.clamp_sampler };
-                entries.extend([
-                    wgpu::BindGroupEntry { binding: 6, resource: rows.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 7, resource: view(&maps.basis_sample) },
-                    wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::Sampler(sampler) },
-                    wgpu::BindGroupEntry { binding: 9, resource: view(&maps.cumw_view) },
-                ]);
-                let evaluate = bind("prefiltered evaluate", &self.evaluate_layout, &entries);
-                [rectify, prefilter, evaluate]
+                let evaluate = pass::with(
+                    pass::frame_resources(&self.buffers, &self.params_buffer, frame, &self.white),
+                    [
+                        ("rows", rows.as_entire_binding()),
+                        ("basis_tex", view(&maps.basis_sample)),
+                        ("basis_sampler", wgpu::BindingResource::Sampler(sampler)),
+                        ("cumw_tex", view(&maps.cumw_view)),
+                        ("out_tex", view(output)),
+                    ],
+                );
+                Ok([
+                    self.rectify.bind(device, &rectify)?,
+                    self.prefilter.bind(device, &prefilter)?,
+                    self.evaluate.bind(device, &evaluate)?,
+                    self.epipole.bind(device, &evaluate)?,
+                ])
             })?;
             self.binds.store(key, binds);
         }
-        let [rectify_bind, prefilter_bind, evaluate_bind] = self.binds.value();
+        let [rectify_bind, prefilter_bind, evaluate_bind, epipole_bind] = self.binds.value();
         if host.is_none() {
-            let groups = [w.div_ceil(8), h.div_ceil(8), 1];
-            rec.dispatch("rectify", "prefiltered rectify", &self.rectify_pipeline, rectify_bind, groups)?;
+            self.rectify.dispatch(rec, "rectify", rectify_bind, self.rectify.groups_2d(w, h))?;
         }
+        // One thread per (row, region, group of bases, set), in as many rows of 65535
+        // workgroups as it takes.
         let threads = h * s.regions * (s.bases / s.bases_per_thread) * sets;
-        let groups = threads.div_ceil(64);
-        let groups = [groups.min(65535), groups.div_ceil(65535), 1];
-        rec.dispatch("prefilter", "prefiltered prefilter", &self.prefilter_pipeline, prefilter_bind, groups)?;
-        let groups = [desc.width.div_ceil(8), desc.height.div_ceil(8), 1];
-        rec.dispatch("evaluate", "prefiltered evaluate", &self.evaluate_pipeline, evaluate_bind, groups)?;
+        let groups = threads.div_ceil(self.prefilter.workgroup_size()[0]);
+        self.prefilter.dispatch(rec, "prefilter", prefilter_bind, [groups.min(65535), groups.div_ceil(65535), 1])?;
+        self.evaluate.dispatch(rec, "evaluate", evaluate_bind, self.evaluate.groups_2d(desc.width, desc.height))?;
         if let Some([x0, y0, x1, y1]) = epipole_box(desc, s.epipole_radius, epipole) {
-            let (bw, bh) = (x1 - x0, y1 - y0);
-            let groups = [bw.div_ceil(8), bh.div_ceil(8), 1];
-            rec.dispatch("epipole", "prefiltered epipole", &self.epipole_pipeline, evaluate_bind, groups)?;
+            self.epipole.dispatch(rec, "epipole", epipole_bind, self.epipole.groups_2d(x1 - x0, y1 - y0))?;
         }
         let extra = stats_extra(&s, &rect, host.is_some());
         self.last = Some(rect);

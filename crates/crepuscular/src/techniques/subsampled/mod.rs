@@ -27,7 +27,7 @@ use crate::frame::GpuFrame;
 use crate::gpu::{GpuContext, Recorder, compute_pass};
 use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
 use crate::stats::TechniqueStats;
-use crate::techniques::pass;
+use crate::techniques::pass::{self, Pass};
 use serde::{Deserialize, Serialize};
 
 /// The `march` pass shader (composed with common.wgsl).
@@ -225,15 +225,13 @@ struct Grid {
     view: wgpu::TextureView,
 }
 
-/// The GPU side of `subsampled`: its two pipelines, uniform buffers, the re-march counter and
+/// The GPU side of `subsampled`: its two passes, uniform buffers, the re-march counter and
 /// the grid texture, built once and reused (the grid is reallocated only when its size changes).
 pub struct Subsampled {
     /// Current settings; changes apply on the next [`Subsampled::encode`].
     pub settings: SubsampledSettings,
-    march_pipeline: wgpu::ComputePipeline,
-    upsample_pipeline: wgpu::ComputePipeline,
-    march_layout: wgpu::BindGroupLayout,
-    upsample_layout: wgpu::BindGroupLayout,
+    march: Pass,
+    upsample: Pass,
     buffers: pass::FrameBuffers,
     params_buffer: wgpu::Buffer,
     counter: wgpu::Buffer,
@@ -244,59 +242,31 @@ pub struct Subsampled {
     binds: pass::BindCache<[wgpu::BindGroup; 2]>,
 }
 
-/// The bind-group layout of the `upsample` pass: the frame-pass bindings 0–5 (output at 5),
-/// then the grid texture (6) and the re-march counter, a storage buffer (7).
-fn upsample_layout(device: &wgpu::Device, output: wgpu::TextureFormat) -> wgpu::BindGroupLayout {
-    pass::frame_pass_layout_to(
-        device,
-        "subsampled upsample",
-        &[pass::texture_entry(6, wgpu::TextureViewDimension::D2), pass::storage_buffer_entry(7, false, Some(4))],
-        output,
-    )
-}
-
 impl Subsampled {
-    /// Builds the pipelines and buffers.
+    /// Builds the passes and buffers.
     pub fn new(gpu: &GpuContext, settings: SubsampledSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
-        gpu.scoped("creating the subsampled pipelines", || {
+        gpu.try_scoped("creating the subsampled pipelines", || {
             let device = &gpu.device;
             let inter = pass::intermediate_format(output);
-            let march_layout = pass::frame_pass_layout_to(device, "subsampled march", &[], inter);
-            let upsample_layout = upsample_layout(device, output);
             let march_src = pass::with_storage_format(MARCH_WGSL, "grid_tex", inter);
-            let march_pipeline =
-                pass::compute_pipeline(device, "subsampled/march.wgsl", &march_src, "march", &march_layout);
-            let upsample_pipeline = pass::compute_pipeline(
-                device,
-                "subsampled/upsample.wgsl",
-                &pass::with_output(UPSAMPLE_WGSL, output),
-                "upsample",
-                &upsample_layout,
-            );
-            let buf = |label, size, usage| {
-                device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(label),
-                    size,
-                    usage,
-                    mapped_at_creation: false,
-                })
-            };
+            let march = Pass::new(device, "subsampled/march", &march_src, "march")?;
+            let upsample =
+                Pass::new(device, "subsampled/upsample", &pass::with_output(UPSAMPLE_WGSL, output), "upsample")?;
             let buffers = pass::FrameBuffers::new(device);
             let params_buffer =
                 pass::uniform_buffer(device, "subsampled params", std::mem::size_of::<SubsampledParams>() as u64);
-            let counter = buf(
-                "re-marched pixels",
-                4,
-                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
-            );
+            let counter = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("re-marched pixels"),
+                size: 4,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
             let white = pass::white_array(gpu);
-            Self {
+            Ok(Self {
                 settings,
-                march_pipeline,
-                upsample_pipeline,
-                march_layout,
-                upsample_layout,
+                march,
+                upsample,
                 buffers,
                 params_buffer,
                 counter,
@@ -304,7 +274,7 @@ impl Subsampled {
                 grid: None,
                 inter,
                 binds: Default::default(),
-            }
+            })
         })
     }
 
@@ -350,37 +320,36 @@ impl Subsampled {
         let mut key = pass::frame_key(frame, output);
         key.push(pass::Bound::View(grid_view.clone()));
         if !self.binds.is_current(&key) {
-            let binds = gpu.scoped("binding the subsampled inputs", || {
-                let common =
-                    |out| pass::frame_pass_bindings(&self.buffers, &self.params_buffer, frame, &self.white, out);
-                let march = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("subsampled march"),
-                    layout: &self.march_layout,
-                    entries: &common(grid_view),
-                });
-                let mut entries = common(output).to_vec();
-                entries
-                    .push(wgpu::BindGroupEntry { binding: 6, resource: wgpu::BindingResource::TextureView(grid_view) });
-                entries.push(wgpu::BindGroupEntry { binding: 7, resource: self.counter.as_entire_binding() });
-                let upsample = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("subsampled upsample"),
-                    layout: &self.upsample_layout,
-                    entries: &entries,
-                });
-                [march, upsample]
+            let binds = gpu.try_scoped("binding the subsampled inputs", || {
+                let view = wgpu::BindingResource::TextureView;
+                let common = || pass::frame_resources(&self.buffers, &self.params_buffer, frame, &self.white);
+                Ok([
+                    self.march.bind(&gpu.device, &pass::with(common(), [("grid_tex", view(grid_view))]))?,
+                    self.upsample.bind(
+                        &gpu.device,
+                        &pass::with(
+                            common(),
+                            [
+                                ("grid_tex", view(grid_view)),
+                                ("remarched", self.counter.as_entire_binding()),
+                                ("out_tex", view(output)),
+                            ],
+                        ),
+                    )?,
+                ])
             })?;
             self.binds.store(key, binds);
         }
         let [march_bind, upsample_bind] = self.binds.value();
-        let groups = [gw.div_ceil(8), gh.div_ceil(8), 1];
-        rec.dispatch("march", "subsampled march", &self.march_pipeline, march_bind, groups)?;
+        self.march.dispatch(rec, "march", march_bind, self.march.groups_2d(gw, gh))?;
         rec.pass("upsample", |enc, ts| {
             enc.clear_buffer(&self.counter, 0, None);
             {
-                let mut pass = compute_pass(enc, "subsampled upsample", ts);
-                pass.set_pipeline(&self.upsample_pipeline);
+                let mut pass = compute_pass(enc, self.upsample.label(), ts);
+                pass.set_pipeline(self.upsample.pipeline());
                 pass.set_bind_group(0, upsample_bind, &[]);
-                pass.dispatch_workgroups(desc.width.div_ceil(8), desc.height.div_ceil(8), 1);
+                let [x, y, z] = self.upsample.groups_2d(desc.width, desc.height);
+                pass.dispatch_workgroups(x, y, z);
             }
         })?;
         // The re-marched pixels are counted on the GPU; until the counter arrives (and with

@@ -538,3 +538,30 @@ fn bad_temporal_settings_are_errors_naming_the_setting() {
         assert!(e.contains("temporal motion") && e.contains(needle), "{e}");
     }
 }
+
+#[test]
+fn gpu_temporal_writes_an_rgba16float_output_as_it_writes_rgba32float() {
+    let Some(gpu) = test_gpu("gpu_temporal_writes_an_rgba16float_output_as_it_writes_rgba32float") else { return };
+    let (desc, depth, _) = posed(&scene(), Vec3::ZERO);
+    let depth_tex = gpu.upload_f32("temporal test depth", W, H, &depth);
+    let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+    let mut outputs = Vec::new();
+    for format in [wgpu::TextureFormat::Rgba32Float, wgpu::TextureFormat::Rgba16Float] {
+        let mut t = Temporal::new(&gpu.device, no_clip()).unwrap();
+        let out = crepuscular::gpu::storage_texture(&gpu.device, "temporal test output", format, W, H);
+        for k in 0..3 {
+            let cur = gpu.upload_image("temporal test current", &noise(k));
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            t.encode(&mut enc, &desc, &view(&depth_tex), &view(&cur), &view(&out), None).unwrap();
+            gpu.queue.submit([enc.finish()]);
+        }
+        outputs.push(gpu.read_texture_f32(&out, 0).unwrap());
+    }
+    // Half floats keep 11 significant bits: one unit in the last place is at most 2^-10 of the
+    // value (a conversion may truncate rather than round; the history itself stays 32-bit).
+    let (full, half) = (&outputs[0], &outputs[1]);
+    assert!(full.iter().any(|&v| v > 0.0), "the stage wrote nothing");
+    for (i, (a, b)) in full.iter().zip(half).enumerate() {
+        assert!((a - b).abs() <= a.abs() / 1024.0 + 1e-7, "value {i}: Rgba32Float {a}, Rgba16Float {b}");
+    }
+}

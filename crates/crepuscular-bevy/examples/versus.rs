@@ -89,7 +89,7 @@ fn run(args: Args) -> Result<(), String> {
         Effect::BevyFog { steps: 1024 },
     ));
     let mut converged = crepuscular::techniques::presets::Preset::ReferenceLike.brute_force();
-    converged.steps = 1024;
+    converged.ray_march.steps = 1024;
     configs.push((
         "crepuscular brute-force 1024 steps (converged)".into(),
         "ours-converged",

@@ -11,6 +11,7 @@
 //!
 //! These time the CPU code on this machine, not the GPU techniques (`crepuscular bench` does).
 
+use crepuscular::march::MarchSettings;
 use crepuscular::techniques::brute_force::{self, BruteForceSettings};
 use crepuscular::techniques::interleaved::{self, InterleavedSettings};
 use crepuscular::techniques::reference::{self, ReferenceSettings};
@@ -47,15 +48,18 @@ fn techniques(c: &mut Criterion) {
         b.iter(|| black_box(reference::render(black_box(&frame), &s, &|_, _| {}).unwrap()))
     });
     g.bench_function("brute-force mirror steps=32", |b| {
-        let s = BruteForceSettings { steps: 32, ..Default::default() };
+        let s =
+            BruteForceSettings { ray_march: MarchSettings { steps: 32, ..Default::default() }, ..Default::default() };
         b.iter(|| black_box(brute_force::cpu::march(black_box(&frame), &s).unwrap()))
     });
     g.bench_function("interleaved mirror steps=32 block=4", |b| {
-        let s = InterleavedSettings { steps: 32, ..Default::default() };
+        let s =
+            InterleavedSettings { ray_march: MarchSettings { steps: 32, ..Default::default() }, ..Default::default() };
         b.iter(|| black_box(interleaved::cpu::render(black_box(&frame), &s).unwrap()))
     });
     g.bench_function("subsampled mirror steps=32 factor=4", |b| {
-        let s = SubsampledSettings { steps: 32, ..Default::default() };
+        let s =
+            SubsampledSettings { ray_march: MarchSettings { steps: 32, ..Default::default() }, ..Default::default() };
         b.iter(|| black_box(subsampled::cpu::render(black_box(&frame), &s).unwrap()))
     });
     g.finish();
@@ -73,7 +77,11 @@ fn metrics_benches(c: &mut Criterion) {
     let frame =
         CpuFrame { desc: &desc, depth: &host.depth, shadow_maps: &host.shadow_maps, surface: Some(&host.surface) };
     let (reference, _) = reference::render(&frame, &ReferenceSettings { steps: 64, seed: 1 }, &|_, _| {}).unwrap();
-    let (test, _) = brute_force::cpu::march(&frame, &BruteForceSettings { steps: 8, ..Default::default() }).unwrap();
+    let (test, _) = brute_force::cpu::march(
+        &frame,
+        &BruteForceSettings { ray_march: MarchSettings { steps: 8, ..Default::default() }, ..Default::default() },
+    )
+    .unwrap();
     let tone = ToneMap::default();
     let mut g = c.benchmark_group("metrics 64x36");
     g.bench_function("compare (RMSE, PSNR, FLIP)", |b| {

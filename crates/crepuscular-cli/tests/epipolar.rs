@@ -8,6 +8,7 @@
 use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::{GpuContext, UploadedFrame, test_gpu};
 use crepuscular::march::{LocalSteps, SpotSteps};
+use crepuscular::march::{MarchSettings, StepPolicy};
 use crepuscular::stats::TechniqueStats;
 use crepuscular::techniques::epipolar::{
     self, EpipolarDebug, EpipolarLine, EpipolarParams, EpipolarSettings, MIN_LINE_LENGTH, SpotPrefilter, Weighting, cpu,
@@ -390,20 +391,22 @@ fn refinement_marks_both_sides_of_every_depth_step_and_nothing_on_a_plane() {
         for settings in [
             // Equiangular steps: a point light's re-march disc then breaks the lines (below).
             EpipolarSettings {
+                ray_march: MarchSettings { ..Default::default() },
+                policy: StepPolicy { local: LocalSteps::Equiangular, ..Default::default() },
                 slices: Some(96),
                 samples: Some(128),
                 initial_samples: 16,
-                local_steps: LocalSteps::Equiangular,
                 ..Default::default()
             },
             EpipolarSettings {
+                ray_march: MarchSettings { ..Default::default() },
+                policy: StepPolicy { local: LocalSteps::Equiangular, ..Default::default() },
                 slices: Some(64),
                 samples: Some(200),
                 initial_samples: 7,
                 length_proportional_initial_samples: false,
                 threshold_growth: 0.0,
                 depth_threshold: 2.0,
-                local_steps: LocalSteps::Equiangular,
                 ..Default::default()
             },
         ] {
@@ -559,10 +562,19 @@ fn mirror_settings(scene: &str) -> Vec<EpipolarSettings> {
             fallback_remarch: false,
             ..d()
         },
-        EpipolarSettings { weighting: Weighting::Threshold, jitter: true, frame_index: 5, steps: 24, ..d() },
+        EpipolarSettings {
+            ray_march: MarchSettings { jitter: true, frame_index: 5, steps: 24, ..Default::default() },
+            weighting: Weighting::Threshold,
+            ..d()
+        },
     ];
     if scene == "stained-glass" {
-        v.push(EpipolarSettings { spot_steps: SpotSteps::Fixed, spot_prefilter: SpotPrefilter::Level(2), ..d() });
+        v.push(EpipolarSettings {
+            ray_march: MarchSettings { ..Default::default() },
+            policy: StepPolicy { spot: SpotSteps::Fixed, ..Default::default() },
+            spot_prefilter: SpotPrefilter::Level(2),
+            ..d()
+        });
     }
     v
 }
@@ -708,7 +720,7 @@ fn check_mirror(label: &str, frame: &CpuFrame, s: &EpipolarSettings, g: &GpuRun)
     assert_eq!(cs.passes.iter().map(|p| p.name.as_str()).collect::<Vec<_>>(), want, "{label}");
     let valid = gd.lines.iter().filter(|l| l.is_valid()).count() as f64;
     assert_eq!(g.stats.extra["valid_lines"], valid, "{label}");
-    assert_eq!(g.stats.raymarched_samples, (gpu_list.len() as u64 + gr) * s.steps as u64, "{label}");
+    assert_eq!(g.stats.raymarched_samples, (gpu_list.len() as u64 + gr) * s.ray_march.steps as u64, "{label}");
     let share = (gpu_list.len() as u64 + gr) as f64 / (desc.width * desc.height) as f64;
     assert!((g.stats.extra["marched_share"] - share).abs() < 1e-12, "{label}");
     assert!(g.stats.gpu_memory_bytes >= p.samples as u64 * p.slices as u64 * 56, "{label}: memory");
@@ -750,7 +762,7 @@ fn epipolar_gpu_matches_its_cpu_mirror_pass_by_pass() {
                 g.params.initial_samples,
                 s.weighting,
                 s.taps,
-                s.spot_steps,
+                s.policy.spot,
                 s.spot_prefilter
             );
             eprintln!("{}", check_mirror(&label, &frame, &s, &g));
@@ -781,7 +793,11 @@ fn spot_step_policies_change_the_marched_samples_and_each_matches_the_mirror() {
     let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
     let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
     let run = |spot_steps| {
-        let s = EpipolarSettings { spot_steps, steps: 32, ..Default::default() };
+        let s = EpipolarSettings {
+            ray_march: MarchSettings { steps: 32, ..Default::default() },
+            policy: StepPolicy { spot: spot_steps, ..Default::default() },
+            ..Default::default()
+        };
         let (img, _, d) = cpu::render_with_debug(&frame, &s).unwrap();
         (s, img, d)
     };
@@ -814,7 +830,7 @@ fn spot_step_policies_change_the_marched_samples_and_each_matches_the_mirror() {
     for s in [fs, cs] {
         set_settings(&mut ep, &s);
         let g = run_gpu(&gpu, &mut ep, &up.frame(&desc));
-        eprintln!("{}", check_mirror(&format!("stained-glass {:?}", s.spot_steps), &frame, &s, &g));
+        eprintln!("{}", check_mirror(&format!("stained-glass {:?}", s.policy.spot), &frame, &s, &g));
     }
 }
 
@@ -1104,10 +1120,17 @@ fn validate_rejects_bad_settings() {
         bad(EpipolarSettings { epipole_radius: v, ..d() }, "epipole_radius");
     }
     bad(EpipolarSettings { spot_prefilter: SpotPrefilter::Level(13), ..d() }, "spot_prefilter");
-    bad(EpipolarSettings { steps: 0, ..d() }, "steps");
-    bad(EpipolarSettings { steps: 4097, ..d() }, "steps");
+    bad(EpipolarSettings { ray_march: MarchSettings { steps: 0, ..Default::default() }, ..d() }, "steps");
+    bad(EpipolarSettings { ray_march: MarchSettings { steps: 4097, ..Default::default() }, ..d() }, "steps");
     for den in [0.0, 1.5, f32::NAN] {
-        bad(EpipolarSettings { spot_denominator: den, ..d() }, "spot_denominator");
+        bad(
+            EpipolarSettings {
+                ray_march: MarchSettings { ..Default::default() },
+                policy: StepPolicy { denominator: den, ..Default::default() },
+                ..d()
+            },
+            "spot_denominator",
+        );
     }
     // The key and the value are named.
     let e = EpipolarSettings { slices: Some(3), ..d() }.validate().unwrap_err().to_string();
@@ -1135,7 +1158,7 @@ fn validate_rejects_bad_settings() {
     )
     .unwrap();
     assert_eq!(
-        (s.slices, s.weighting, s.spot_prefilter, s.spot_steps),
+        (s.slices, s.weighting, s.spot_prefilter, s.policy.spot),
         (Some(128), Weighting::Shepard, SpotPrefilter::Level(2), SpotSteps::Fixed)
     );
     for (text, want) in

@@ -7,6 +7,7 @@
 use crepuscular::frame::{FrameDesc, surface_transmittance};
 use crepuscular::gpu::{GpuContext, UploadedFrame, test_gpu};
 use crepuscular::march::SpotSteps;
+use crepuscular::march::{MarchSettings, StepPolicy};
 use crepuscular::stats::TechniqueStats;
 use crepuscular::techniques::brute_force::{self, BruteForceSettings};
 use crepuscular::techniques::interleaved::{InterleavedSettings, PhaseLut, cpu};
@@ -97,10 +98,18 @@ fn mirror_settings() -> Vec<InterleavedSettings> {
     vec![
         d(),
         InterleavedSettings { depth_aware: false, ..d() },
-        InterleavedSettings { block: 2, steps: 17, ..d() },
-        InterleavedSettings { block: 3, steps: 17, jitter: true, frame_index: 7, ..d() },
+        InterleavedSettings { ray_march: MarchSettings { steps: 17, ..Default::default() }, block: 2, ..d() },
+        InterleavedSettings {
+            ray_march: MarchSettings { steps: 17, jitter: true, frame_index: 7, ..Default::default() },
+            block: 3,
+            ..d()
+        },
         InterleavedSettings { phase_lut: true, ..d() },
-        InterleavedSettings { steps: 32, spot_steps: SpotSteps::ExactCone, ..d() },
+        InterleavedSettings {
+            ray_march: MarchSettings { steps: 32, ..Default::default() },
+            policy: StepPolicy { spot: SpotSteps::ExactCone, ..Default::default() },
+            ..d()
+        },
     ]
 }
 
@@ -125,7 +134,7 @@ fn interleaved_gpu_matches_its_cpu_mirror_pass_by_pass() {
             let g = run_gpu(&gpu, &mut il, &up.frame(&desc));
             let label = format!(
                 "{name} M={} N={} depth_aware={} lut={} jitter={} {:?}",
-                s.block, s.steps, s.depth_aware, s.phase_lut, s.jitter, s.spot_steps
+                s.block, s.ray_march.steps, s.depth_aware, s.phase_lut, s.ray_march.jitter, s.policy.spot
             );
 
             // Stats: the exact count of terms, the same on both backends.
@@ -224,7 +233,7 @@ fn wall_truth(desc: &FrameDesc, s: &InterleavedSettings) -> WallTruth {
     let ss = desc.medium.scattering.as_dvec3();
     let e = color.as_dvec3() * *intensity as f64;
     let inv = desc.camera.view_proj().as_dmat4().inverse();
-    let n = s.steps as usize;
+    let n = s.ray_march.steps as usize;
     // Per pixel: amplitude σs·p·E, the step's ∫T, and the per-step ratio e^(−σt·Δ).
     let per_pixel: Vec<(DVec3, DVec3, DVec3)> = (0..h)
         .flat_map(|y| (0..w).map(move |x| (x, y)))
@@ -281,11 +290,20 @@ fn closed_form_settings() -> Vec<InterleavedSettings> {
     vec![
         d(),
         InterleavedSettings { depth_aware: false, ..d() },
-        InterleavedSettings { block: 2, steps: 17, ..d() },
-        InterleavedSettings { block: 3, steps: 17, jitter: true, frame_index: 3, ..d() },
+        InterleavedSettings { ray_march: MarchSettings { steps: 17, ..Default::default() }, block: 2, ..d() },
+        InterleavedSettings {
+            ray_march: MarchSettings { steps: 17, jitter: true, frame_index: 3, ..Default::default() },
+            block: 3,
+            ..d()
+        },
         // Across 8 pixels near the image edge s = 30/cos φ changes by more than 10 %, so the
         // depth test would drop neighbours (a case `ideal` does not model): off here.
-        InterleavedSettings { block: 8, steps: 128, depth_aware: false, ..d() },
+        InterleavedSettings {
+            ray_march: MarchSettings { steps: 128, ..Default::default() },
+            block: 8,
+            depth_aware: false,
+            ..d()
+        },
         InterleavedSettings { phase_lut: true, ..d() },
     ]
 }
@@ -363,8 +381,10 @@ fn directional_interleaved_matches_the_closed_form() {
             let t = wall_truth(&d, &s);
             let lut_err = if s.phase_lut { PhaseLut::new(&m.phase, s.phase_lut_size).max_rel_error } else { 0.0 };
             let tol = 1e-4 + lut_err;
-            let label =
-                format!("{:?} M={} N={} depth_aware={} lut={}", m.phase, s.block, s.steps, s.depth_aware, s.phase_lut);
+            let label = format!(
+                "{:?} M={} N={} depth_aware={} lut={}",
+                m.phase, s.block, s.ray_march.steps, s.depth_aware, s.phase_lut
+            );
             let (img, _) = cpu::render(&frame, &s).unwrap();
             let (ei, ee) = check_wall(&format!("cpu {label}"), &img, &t, tol, true);
             eprintln!("cpu {label}: vs ideal {ei:.2e}, vs closed form {ee:.3e}");
@@ -402,11 +422,11 @@ fn images_smaller_than_a_block_renormalise_by_the_offsets_covered() {
     let d4 = || InterleavedSettings { depth_aware: false, ..Default::default() };
     for s in [
         d4(),
-        InterleavedSettings { steps: 1, ..d4() },
-        InterleavedSettings { block: 16, steps: 4096, ..d4() },
+        InterleavedSettings { ray_march: MarchSettings { steps: 1, ..Default::default() }, ..d4() },
+        InterleavedSettings { ray_march: MarchSettings { steps: 4096, ..Default::default() }, block: 16, ..d4() },
         InterleavedSettings::default(),
     ] {
-        let label = format!("3×2 M={} N={} depth_aware={}", s.block, s.steps, s.depth_aware);
+        let label = format!("3×2 M={} N={} depth_aware={}", s.block, s.ray_march.steps, s.depth_aware);
         let (img, stats) = cpu::render(&frame, &s).unwrap();
         let positive = |img: &Image| img.pixels.iter().all(|p| p[..3].iter().all(|c| c.is_finite() && *c > 0.0));
         assert!(positive(&img), "{label}: {:?}", img.pixels);
@@ -441,8 +461,17 @@ fn block_one_is_brute_force() {
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
         let up = gpu.as_ref().map(|g| UploadedFrame::new(g, &frame).unwrap());
         for (steps, jitter, spot_steps) in [(64, false, SpotSteps::Fixed), (17, true, SpotSteps::ExactCone)] {
-            let il = InterleavedSettings { block: 1, steps, jitter, frame_index: 7, spot_steps, ..Default::default() };
-            let bf = BruteForceSettings { steps, jitter, frame_index: 7, spot_steps, ..Default::default() };
+            let il = InterleavedSettings {
+                ray_march: MarchSettings { steps: steps, jitter: jitter, frame_index: 7, ..Default::default() },
+                policy: StepPolicy { spot: spot_steps, ..Default::default() },
+                block: 1,
+                ..Default::default()
+            };
+            let bf = BruteForceSettings {
+                ray_march: MarchSettings { steps: steps, jitter: jitter, frame_index: 7, ..Default::default() },
+                policy: StepPolicy { spot: spot_steps, ..Default::default() },
+                ..Default::default()
+            };
             let (a, _) = cpu::render(&frame, &il).unwrap();
             let (b, _) = brute_force::cpu::march(&frame, &bf).unwrap();
             // The same samples in the same order, a window of one pixel, a factor N/N = 1:
@@ -516,8 +545,17 @@ fn interleaved_vs_reference_on_every_builtin_scene_cpu() {
         let (psnr, flip) = metrics(&frame, &h.surface, &rf, &il, scene.render.exposure);
         // For context: brute-force at the same N and at the same per-pixel cost (N/M² = 4
         // steps), and interleaved without depth awareness.
-        let bf =
-            |steps| brute_force::cpu::march(&frame, &BruteForceSettings { steps, ..Default::default() }).unwrap().0;
+        let bf = |steps| {
+            brute_force::cpu::march(
+                &frame,
+                &BruteForceSettings {
+                    ray_march: MarchSettings { steps: steps, ..Default::default() },
+                    ..Default::default()
+                },
+            )
+            .unwrap()
+            .0
+        };
         let (p64, f64_) = metrics(&frame, &h.surface, &rf, &bf(64), scene.render.exposure);
         let (p4, f4) = metrics(&frame, &h.surface, &rf, &bf(4), scene.render.exposure);
         let no_da = cpu::render(&frame, &InterleavedSettings { depth_aware: false, ..Default::default() }).unwrap().0;
@@ -533,10 +571,23 @@ fn interleaved_vs_reference_on_every_builtin_scene_cpu() {
         // PSNR (cage: brute-force 4 57.6 dB / 0.167 against interleaved 48.5 / 0.040, the 4×4
         // sum mixing neighbours' peaks near the lamp).
         let uniform = crepuscular::march::LocalSteps::Uniform;
-        let il_u = cpu::render(&frame, &InterleavedSettings { local_steps: uniform, ..Default::default() }).unwrap().0;
+        let il_u = cpu::render(
+            &frame,
+            &InterleavedSettings {
+                ray_march: MarchSettings { ..Default::default() },
+                policy: StepPolicy { local: uniform, ..Default::default() },
+                ..Default::default()
+            },
+        )
+        .unwrap()
+        .0;
         let bf_u = brute_force::cpu::march(
             &frame,
-            &BruteForceSettings { steps: 4, local_steps: uniform, ..Default::default() },
+            &BruteForceSettings {
+                ray_march: MarchSettings { steps: 4, ..Default::default() },
+                policy: StepPolicy { local: uniform, ..Default::default() },
+                ..Default::default()
+            },
         )
         .unwrap()
         .0;
@@ -641,15 +692,35 @@ fn validate_rejects_bad_settings() {
     let cases = [
         (InterleavedSettings { block: 0, ..d() }, "interleaved.block"),
         (InterleavedSettings { block: 17, ..d() }, "interleaved.block"),
-        (InterleavedSettings { steps: 0, ..d() }, "interleaved.steps"),
-        (InterleavedSettings { steps: 4097, ..d() }, "interleaved.steps"),
+        (
+            InterleavedSettings { ray_march: MarchSettings { steps: 0, ..Default::default() }, ..d() },
+            "interleaved.steps",
+        ),
+        (
+            InterleavedSettings { ray_march: MarchSettings { steps: 4097, ..Default::default() }, ..d() },
+            "interleaved.steps",
+        ),
         (InterleavedSettings { depth_tolerance: -0.1, ..d() }, "interleaved.depth_tolerance"),
         (InterleavedSettings { depth_tolerance: f32::NAN, ..d() }, "interleaved.depth_tolerance"),
         (InterleavedSettings { depth_tolerance: f32::INFINITY, ..d() }, "interleaved.depth_tolerance"),
         (InterleavedSettings { phase_lut_size: 1, ..d() }, "interleaved.phase_lut_size"),
         (InterleavedSettings { phase_lut_size: 65537, ..d() }, "interleaved.phase_lut_size"),
-        (InterleavedSettings { spot_denominator: 0.0, ..d() }, "interleaved.spot_denominator"),
-        (InterleavedSettings { spot_denominator: 1.5, ..d() }, "interleaved.spot_denominator"),
+        (
+            InterleavedSettings {
+                ray_march: MarchSettings { ..Default::default() },
+                policy: StepPolicy { denominator: 0.0, ..Default::default() },
+                ..d()
+            },
+            "interleaved.spot_denominator",
+        ),
+        (
+            InterleavedSettings {
+                ray_march: MarchSettings { ..Default::default() },
+                policy: StepPolicy { denominator: 1.5, ..Default::default() },
+                ..d()
+            },
+            "interleaved.spot_denominator",
+        ),
     ];
     let (desc, depth, sm) = wall_frame(sun(), Medium::default(), 8, 4);
     let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: std::slice::from_ref(&sm), surface: None };
@@ -661,8 +732,20 @@ fn validate_rejects_bad_settings() {
         assert!(cpu::render(&frame, &s).is_err() && cpu::march(&frame, &s).is_err());
     }
     for s in [
-        InterleavedSettings { block: 1, steps: 1, depth_tolerance: 0.0, phase_lut_size: 2, ..d() },
-        InterleavedSettings { block: 16, steps: 4096, phase_lut_size: 65536, spot_denominator: 1.0, ..d() },
+        InterleavedSettings {
+            ray_march: MarchSettings { steps: 1, ..Default::default() },
+            block: 1,
+            depth_tolerance: 0.0,
+            phase_lut_size: 2,
+            ..d()
+        },
+        InterleavedSettings {
+            ray_march: MarchSettings { steps: 4096, ..Default::default() },
+            policy: StepPolicy { denominator: 1.0, ..Default::default() },
+            block: 16,
+            phase_lut_size: 65536,
+            ..d()
+        },
     ] {
         assert!(s.validate().is_ok(), "{s:?}");
     }
@@ -673,7 +756,13 @@ fn validate_rejects_bad_settings() {
         toml::from_str("block = 2\nsteps = 17\nspot_steps = \"exact-cone\"\nphase_lut = true").unwrap();
     assert_eq!(
         s,
-        InterleavedSettings { block: 2, steps: 17, spot_steps: SpotSteps::ExactCone, phase_lut: true, ..d() }
+        InterleavedSettings {
+            ray_march: MarchSettings { steps: 17, ..Default::default() },
+            policy: StepPolicy { spot: SpotSteps::ExactCone, ..Default::default() },
+            block: 2,
+            phase_lut: true,
+            ..d()
+        }
     );
     assert!(toml::from_str::<InterleavedSettings>("blocks = 2").is_err());
 }
@@ -682,14 +771,22 @@ fn validate_rejects_bad_settings() {
 fn raymarched_samples_count_every_pixels_terms() {
     for (w, h) in [(1, 1), (3, 2), (160, 90), (17, 33)] {
         for (block, steps) in [(1, 64), (2, 17), (3, 5), (4, 64), (4, 1), (16, 4096), (5, 100)] {
-            let s = InterleavedSettings { block, steps, ..Default::default() };
+            let s = InterleavedSettings {
+                ray_march: MarchSettings { steps: steps, ..Default::default() },
+                block,
+                ..Default::default()
+            };
             let counted: u64 =
                 (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| cpu::offset_terms(&s, x, y) as u64).sum();
             assert_eq!(s.raymarched_samples(w, h), counted, "{w}×{h} M={block} N={steps}");
         }
     }
     // Each complete M×M window holds all N terms.
-    let s = InterleavedSettings { block: 3, steps: 17, ..Default::default() };
+    let s = InterleavedSettings {
+        ray_march: MarchSettings { steps: 17, ..Default::default() },
+        block: 3,
+        ..Default::default()
+    };
     let sum: u32 = (0..9).map(|k| s.terms_of_offset(k)).sum();
     assert_eq!(sum, 17);
 }

@@ -4,6 +4,7 @@
 
 use crepuscular::gpu::{UploadedFrame, test_gpu};
 use crepuscular::march::SpotSteps;
+use crepuscular::march::{MarchSettings, StepPolicy};
 use crepuscular::techniques::brute_force::{self, BruteForceSettings};
 use crepuscular::testing::gpu_render;
 use crepuscular::{CpuFrame, TechniqueSettings};
@@ -63,10 +64,17 @@ fn brute_force_gpu_matches_its_cpu_mirror() {
         let desc = frame_desc(&scene).unwrap();
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &desc);
         let frame = CpuFrame { desc: &desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
-        let spot = |spot_steps| BruteForceSettings { steps: 32, spot_steps, ..Default::default() };
+        let spot = |spot_steps| BruteForceSettings {
+            ray_march: MarchSettings { steps: 32, ..Default::default() },
+            policy: StepPolicy { spot: spot_steps, ..Default::default() },
+            ..Default::default()
+        };
         for settings in [
             BruteForceSettings::default(),
-            BruteForceSettings { steps: 17, jitter: true, frame_index: 7, ..Default::default() },
+            BruteForceSettings {
+                ray_march: MarchSettings { steps: 17, jitter: true, frame_index: 7, ..Default::default() },
+                ..Default::default()
+            },
             spot(SpotSteps::ExactCone),
             spot(SpotSteps::AppendixBConstant),
             spot(SpotSteps::AppendixBSmoothstep),
@@ -77,7 +85,7 @@ fn brute_force_gpu_matches_its_cpu_mirror() {
             let bf = TechniqueSettings::BruteForce(settings.clone());
             let (_, stats) = gpu_render(&gpu, bf, &up.frame(&desc), &out.create_view(&Default::default())).unwrap();
             let img = gpu.read_image(&out).unwrap();
-            assert_eq!(stats.raymarched_samples, cpu.pixels.len() as u64 * settings.steps as u64);
+            assert_eq!(stats.raymarched_samples, cpu.pixels.len() as u64 * settings.ray_march.steps as u64);
             // Same samples, same shadow map: a sample may land on the other side of a shadow
             // edge through float rounding, so allow a step's worth of difference on rare pixels.
             let peak = cpu.pixels.iter().flat_map(|p| p[..3].iter().copied()).fold(0.0f32, f32::max);

@@ -10,6 +10,7 @@
 
 use crepuscular::frame::surface_transmittance;
 use crepuscular::gpu::{GpuContext, UploadedFrame, test_gpu};
+use crepuscular::march::StepPolicy;
 use crepuscular::stats::TechniqueStats;
 use crepuscular::techniques::prefiltered::{
     self, BasisPrecision, Mode, PrefilteredSettings, Rectification, RectificationChoice, ReferenceRay, cpu,
@@ -1123,7 +1124,10 @@ fn validate_rejects_bad_settings_naming_the_key() {
     bad(PrefilteredSettings { light_steps: 1025, ..d() }, "light_steps");
     bad(PrefilteredSettings { epipole_radius: 4097, ..d() }, "epipole_radius");
     for den in [0.0, 1.5, f32::NAN] {
-        bad(PrefilteredSettings { spot_denominator: den, ..d() }, "spot_denominator");
+        bad(
+            PrefilteredSettings { policy: StepPolicy { denominator: den, ..Default::default() }, ..d() },
+            "spot_denominator",
+        );
     }
     // The value is named too.
     let e = PrefilteredSettings { bases: 6, ..d() }.validate().unwrap_err().to_string();

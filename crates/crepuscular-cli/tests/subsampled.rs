@@ -3,6 +3,7 @@
 //! `reference` on every built-in scene, and settings validation.
 
 use crepuscular::frame::surface_transmittance;
+use crepuscular::march::{MarchSettings, StepPolicy};
 use crepuscular::techniques::reference::ReferenceSettings;
 use crepuscular::techniques::subsampled::{self, SubsampledSettings};
 use crepuscular::testing::{gpu_render, gpu_scattering};
@@ -70,15 +71,22 @@ fn mirror_settings() -> Vec<SubsampledSettings> {
     vec![
         SubsampledSettings::default(),
         SubsampledSettings { factor: 2, ..Default::default() },
-        SubsampledSettings { grid: Some([64, 36]), steps: 24, ..Default::default() },
         SubsampledSettings {
+            ray_march: MarchSettings { steps: 24, ..Default::default() },
+            grid: Some([64, 36]),
+            ..Default::default()
+        },
+        SubsampledSettings {
+            ray_march: MarchSettings { jitter: true, frame_index: 3, ..Default::default() },
             edge_remarch: false,
-            jitter: true,
-            frame_index: 3,
             cone_aware: false,
             ..Default::default()
         },
-        SubsampledSettings { steps: 32, spot_steps: SpotSteps::ExactCone, ..Default::default() },
+        SubsampledSettings {
+            ray_march: MarchSettings { steps: 32, ..Default::default() },
+            policy: StepPolicy { spot: SpotSteps::ExactCone, ..Default::default() },
+            ..Default::default()
+        },
     ]
 }
 
@@ -136,7 +144,10 @@ fn subsampled_gpu_matches_its_cpu_mirror_pass_by_pass() {
             }
             // The stats are measured, not assumed.
             assert_eq!(stats.technique, "subsampled");
-            assert_eq!(stats.raymarched_samples, (gw as u64 * gh as u64 + gpu_remarched) * settings.steps as u64);
+            assert_eq!(
+                stats.raymarched_samples,
+                (gw as u64 * gh as u64 + gpu_remarched) * settings.ray_march.steps as u64
+            );
             assert_eq!(stats.extra["grid_width"], gw as f64);
             assert_eq!(stats.extra["grid_height"], gh as f64);
             assert_eq!(stats.passes.iter().map(|p| p.name.as_str()).collect::<Vec<_>>(), ["march", "upsample"]);
@@ -155,7 +166,8 @@ fn the_grid_is_reallocated_only_when_its_size_changes() {
     let up = crepuscular::gpu::UploadedFrame::new(&gpu, &frame).unwrap();
     let out = gpu.create_output_texture(desc.width, desc.height);
     let view = out.create_view(&Default::default());
-    let eight = SubsampledSettings { steps: 8, ..Default::default() };
+    let eight =
+        SubsampledSettings { ray_march: MarchSettings { steps: 8, ..Default::default() }, ..Default::default() };
     let mut ss = gpu_scattering(&gpu, TechniqueSettings::Subsampled(eight.clone())).unwrap();
     assert!(grid_texture(&ss).is_none());
     let a = ss.render(&up.frame(&desc), &view).unwrap();
@@ -356,8 +368,27 @@ fn factor_one_settings() -> Vec<(SubsampledSettings, crepuscular::techniques::br
         .into_iter()
         .map(|(steps, jitter, frame_index, spot_steps)| {
             (
-                SubsampledSettings { factor: 1, steps, jitter, frame_index, spot_steps, ..Default::default() },
-                BruteForceSettings { steps, jitter, frame_index, spot_steps, ..Default::default() },
+                SubsampledSettings {
+                    ray_march: MarchSettings {
+                        steps: steps,
+                        jitter: jitter,
+                        frame_index: frame_index,
+                        ..Default::default()
+                    },
+                    policy: StepPolicy { spot: spot_steps, ..Default::default() },
+                    factor: 1,
+                    ..Default::default()
+                },
+                BruteForceSettings {
+                    ray_march: MarchSettings {
+                        steps: steps,
+                        jitter: jitter,
+                        frame_index: frame_index,
+                        ..Default::default()
+                    },
+                    policy: StepPolicy { spot: spot_steps, ..Default::default() },
+                    ..Default::default()
+                },
             )
         })
         .collect()
@@ -377,7 +408,7 @@ fn factor_one_is_brute_force_cpu() {
             let (bf, _) = crepuscular::techniques::brute_force::cpu::march(&frame, &b).unwrap();
             assert!(img == bf, "{name} {s:?}: factor 1 differs from brute-force");
             assert_eq!(stats.extra["remarched_pixels"], 0.0);
-            assert_eq!(stats.raymarched_samples, (desc.width * desc.height * s.steps) as u64);
+            assert_eq!(stats.raymarched_samples, (desc.width * desc.height * s.ray_march.steps) as u64);
         }
     }
 }
@@ -409,7 +440,7 @@ fn factor_one_is_brute_force_gpu() {
             eprintln!("{name} {s:?}: worst relative difference to GPU brute-force {worst:.1e}");
             assert!(worst < 1e-5, "{name} {s:?}: factor 1 differs from brute-force by {worst}");
             assert_eq!(stats.extra["remarched_pixels"], 0.0);
-            assert_eq!(stats.raymarched_samples, (desc.width * desc.height * s.steps) as u64);
+            assert_eq!(stats.raymarched_samples, (desc.width * desc.height * s.ray_march.steps) as u64);
         }
     }
 }
@@ -608,7 +639,7 @@ fn sweep_depth_tolerance() {
                         fin.flip_mean,
                         stats.extra["remarched_pixels"],
                         stats.extra["remarched_pixels"] / (desc.width * desc.height) as f64 * 100.0,
-                        stats.raymarched_samples as f64 / (desc.width * desc.height) as f64 / s.steps as f64,
+                        stats.raymarched_samples as f64 / (desc.width * desc.height) as f64 / s.ray_march.steps as f64,
                     );
                 }
             }
@@ -634,18 +665,35 @@ fn validate_rejects_bad_values() {
     bad(SubsampledSettings { factor: 33, ..d() }, "factor");
     bad(SubsampledSettings { grid: Some([0, 10]), ..d() }, "grid");
     bad(SubsampledSettings { grid: Some([10, 16385]), ..d() }, "grid");
-    bad(SubsampledSettings { steps: 0, ..d() }, "steps");
-    bad(SubsampledSettings { steps: 4097, ..d() }, "steps");
+    bad(SubsampledSettings { ray_march: MarchSettings { steps: 0, ..Default::default() }, ..d() }, "steps");
+    bad(SubsampledSettings { ray_march: MarchSettings { steps: 4097, ..Default::default() }, ..d() }, "steps");
     for tol in [0.0, -0.1, f32::NAN, f32::INFINITY] {
         bad(SubsampledSettings { depth_tolerance: tol, ..d() }, "depth_tolerance");
     }
     for den in [0.0, 1.5, f32::NAN] {
-        bad(SubsampledSettings { spot_denominator: den, ..d() }, "spot_denominator");
+        bad(
+            SubsampledSettings {
+                ray_march: MarchSettings { ..Default::default() },
+                policy: StepPolicy { denominator: den, ..Default::default() },
+                ..d()
+            },
+            "spot_denominator",
+        );
     }
     for ok in [
         SubsampledSettings { factor: 1, ..d() },
-        SubsampledSettings { factor: 32, grid: Some([256, 256]), steps: 4096, ..d() },
-        SubsampledSettings { depth_tolerance: 1e-3, spot_denominator: 1.0, ..d() },
+        SubsampledSettings {
+            ray_march: MarchSettings { steps: 4096, ..Default::default() },
+            factor: 32,
+            grid: Some([256, 256]),
+            ..d()
+        },
+        SubsampledSettings {
+            ray_march: MarchSettings { ..Default::default() },
+            policy: StepPolicy { denominator: 1.0, ..Default::default() },
+            depth_tolerance: 1e-3,
+            ..d()
+        },
     ] {
         ok.validate().unwrap();
     }

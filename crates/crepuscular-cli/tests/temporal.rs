@@ -6,6 +6,7 @@
 //! of jittered brute-force accumulated over 8 frames, and settings validation.
 
 use crepuscular::gpu::{GpuContext, test_gpu};
+use crepuscular::march::MarchSettings;
 use crepuscular::techniques::brute_force::BruteForceSettings;
 use crepuscular::techniques::reference::ReferenceSettings;
 use crepuscular::temporal::{CpuTemporal, HistoryFilter, Temporal, TemporalSettings};
@@ -476,7 +477,10 @@ fn jittered_brute_force_accumulated_over_8_frames_is_closer_to_the_reference() {
     let render = |s: TechniqueSettings| s.render_cpu(&frame, &[], &none).unwrap().0;
     let reference = render(TechniqueSettings::Reference(ReferenceSettings { steps: 512, ..Default::default() }));
     let bf = |jitter: bool, frame_index: u32| {
-        TechniqueSettings::BruteForce(BruteForceSettings { steps: 16, jitter, frame_index, ..Default::default() })
+        TechniqueSettings::BruteForce(BruteForceSettings {
+            ray_march: MarchSettings { steps: 16, jitter: jitter, frame_index: frame_index, ..Default::default() },
+            ..Default::default()
+        })
     };
     let tone = ToneMap::new(sc.render.exposure);
     let single = compare(&reference, &render(bf(false, 0)), &tone).unwrap();

@@ -109,19 +109,46 @@ pub const EQUIANGULAR_BIT: u32 = 4;
 /// The bits of [`StepPolicy::code`] that hold the [`SpotSteps`] code (`MARCH_SPOT_MASK`).
 const SPOT_CODE_MASK: u32 = 3;
 
-/// Where a ray-marching technique puts its steps: its `spot_steps`, `spot_denominator` and
-/// `local_steps` settings together.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Where a ray-marching technique puts its steps for local lights: the settings `spot_steps`,
+/// `spot_denominator` and `local_steps` that every technique which marches shares (flattened
+/// into its settings, so a scene file writes them as keys of the technique's own table).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct StepPolicy {
-    /// The spot-light interval ([`SpotSteps`]).
+    /// Where the N steps go for a spot light (Wyman & Ramsey 2008, App. B): `"fixed"` (eye to
+    /// surface), `"exact-cone"` (the ray's chord inside the cone), `"appendix-b-constant"`,
+    /// `"appendix-b-smoothstep"`. Ignored for other lights. The cone policies cost one ray–cone
+    /// intersection per pixel and skip rays that miss the cone. Default `"exact-cone"` (the
+    /// robustness sweep: on a spot aimed across the view, `"fixed"` is off by 108 % NMAE,
+    /// `"exact-cone"` by 0.4 %; docs/ROBUSTNESS.md).
+    #[serde(rename = "spot_steps")]
     pub spot: SpotSteps,
-    /// App. B's denominator (`spot_denominator`).
+    /// The App. B denominator (`spot_denominator`): the constant of `appendix-b-constant`, the
+    /// smoothstep floor of `appendix-b-smoothstep` (a sine, in (0, 1]). Smaller marches longer
+    /// chords. Default 0.3.
+    #[serde(rename = "spot_denominator")]
     pub denominator: f32,
-    /// How a local light's steps are spread ([`LocalSteps`]).
+    /// How a point or spot light's steps are spread over its interval (`local_steps`):
+    /// `"equiangular"` (equal angles seen from the light, so a 1/d² peak narrower than a step
+    /// is resolved; every local light gets its own march) or `"uniform"` (equal lengths, as
+    /// eq. 1). Ignored for a sun. Cost and effect, measured: [`LocalSteps`] and docs/MODEL.md
+    /// §9. Default `"equiangular"`.
+    #[serde(rename = "local_steps")]
     pub local: LocalSteps,
 }
 
+impl Default for StepPolicy {
+    fn default() -> Self {
+        Self { spot: SpotSteps::ExactCone, denominator: DEFAULT_SPOT_DENOMINATOR, local: LocalSteps::Equiangular }
+    }
+}
+
 impl StepPolicy {
+    /// Checks the ranges; `technique` prefixes the key in the error (`epipolar.spot_denominator`).
+    pub fn validate(&self, technique: &str) -> Result<(), Error> {
+        validate_spot_denominator(&format!("{technique}.spot_denominator"), self.denominator)
+    }
+
     /// The code the shaders read (`spot_steps` in the techniques' uniforms): the
     /// [`SpotSteps::code`] in bits 0–1, [`EQUIANGULAR_BIT`] for equiangular steps.
     pub fn code(self) -> u32 {
@@ -700,26 +727,62 @@ pub fn march_lights(
     })
 }
 
-/// How a technique marches one pixel's own ray with all N steps (brute-force; subsampled's grid
-/// samples and re-marched pixels): the settings [`march_pixel`] needs.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PixelMarch {
-    /// N steps.
+/// How a ray-marching technique marches a view ray: the N steps of eq. 1 (Tóth & Umenhoffer
+/// 2009) and their jitter — the settings `steps`, `jitter` and `frame_index` that
+/// `brute-force`, `interleaved`, `subsampled` and `epipolar` share, beside the [`StepPolicy`]
+/// that says where the steps go (both flattened into each technique's settings: a scene file
+/// writes them as keys of the technique's own table, `[render.epipolar] steps = 128`; serde
+/// cannot nest one flattened struct in another under `deny_unknown_fields`, so they are
+/// siblings).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct MarchSettings {
+    /// Ray-marching steps N per view ray (eq. 1): per pixel for `brute-force`, per grid sample
+    /// for `subsampled`, per ray-march sample for `epipolar`, and in total over the M² pixels
+    /// of a window for `interleaved`. More steps resolve thinner shafts and reduce banding;
+    /// cost is linear in N (one shadow-map lookup per step). Must be in 1..=4096. Default 64.
     pub steps: u32,
-    /// Per-pixel jitter instead of step midpoints.
+    /// Offset the samples by a fraction of a step (per pixel; per aligned M×M block for
+    /// `interleaved`) instead of the step midpoint. Trades banding for noise at no extra cost.
+    /// Default false.
     pub jitter: bool,
-    /// Jitter seed.
+    /// Seed of the jitter (change it per frame for temporal accumulation: the offsets then
+    /// follow a low-discrepancy sequence, docs/MODEL.md §7). Default 0.
     pub frame_index: u32,
-    /// Where the steps go.
-    pub policy: StepPolicy,
+}
+
+impl Default for MarchSettings {
+    fn default() -> Self {
+        Self { steps: 64, jitter: false, frame_index: 0 }
+    }
+}
+
+impl MarchSettings {
+    /// Checks the ranges; `technique` prefixes the key in the error (`brute-force.steps`).
+    pub fn validate(&self, technique: &str) -> Result<(), Error> {
+        if !(1..=4096).contains(&self.steps) {
+            return Err(Error::invalid(format!("{technique}.steps"), self.steps, "must be in 1..=4096"));
+        }
+        Ok(())
+    }
 }
 
 /// Eq. 1 of Tóth & Umenhoffer 2009 for pixel (x, y), ray `dir`, surface distance `s`: N steps
 /// over the spot-step policy's interval, sampled at step midpoints or at the pixel's jitter.
 /// Mirrors `march_pixel` in common.wgsl.
-pub fn march_pixel(frame: &CpuFrame, lights: &MarchLights, m: &PixelMarch, x: u32, y: u32, dir: Vec3, s: f32) -> Vec3 {
+#[allow(clippy::too_many_arguments)]
+pub fn march_pixel(
+    frame: &CpuFrame,
+    lights: &MarchLights,
+    m: &MarchSettings,
+    policy: StepPolicy,
+    x: u32,
+    y: u32,
+    dir: Vec3,
+    s: f32,
+) -> Vec3 {
     let j = if m.jitter { crate::shaders::pixel_jitter(x, y, m.frame_index) } else { 0.5 };
-    march_lights(frame, lights, dir, s, m.steps, 0, 1, j, m.policy)
+    march_lights(frame, lights, dir, s, m.steps, 0, 1, j, policy)
 }
 
 #[cfg(test)]

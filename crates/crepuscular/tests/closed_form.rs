@@ -6,6 +6,7 @@ mod common;
 
 use crepuscular::frame::FrameDesc;
 use crepuscular::gpu::test_gpu;
+use crepuscular::march::{MarchSettings, StepPolicy};
 use crepuscular::techniques::brute_force::{self, BruteForceSettings};
 use crepuscular::techniques::reference::{self, ReferenceSettings};
 use crepuscular::testing::{WALL_DISTANCE, wall_closed_form, wall_frame, wall_frame_lights};
@@ -104,7 +105,10 @@ fn directional_brute_force_matches_the_closed_form() {
         let (d, depth, sm) = frame(sun(), m.clone());
         let exact = directional_closed_form(&d);
         for steps in [1, 8, 64] {
-            let s = BruteForceSettings { steps, ..Default::default() };
+            let s = BruteForceSettings {
+                ray_march: MarchSettings { steps: steps, ..Default::default() },
+                ..Default::default()
+            };
             let (img, _) = brute_force::cpu::march(&cpu_frame(&d, &depth, &sm), &s).unwrap();
             let e = common::max_rel(&img, &exact, 1e-9);
             assert!(e < 1e-4, "{m:?}, {steps} steps: brute-force off the closed form by {e}");
@@ -169,7 +173,11 @@ fn point_light_brute_force_is_within_its_step_error() {
         for (local, bounds) in layouts {
             let mut last = f32::MAX;
             for (steps, bound) in bounds {
-                let s = BruteForceSettings { steps, local_steps: local, ..Default::default() };
+                let s = BruteForceSettings {
+                    ray_march: MarchSettings { steps: steps, ..Default::default() },
+                    policy: StepPolicy { local: local, ..Default::default() },
+                    ..Default::default()
+                };
                 let (img, _) = brute_force::cpu::march(&cpu_frame(&d, &depth, &sm), &s).unwrap();
                 let e = common::max_rel(&img, &exact, 1e-9);
                 eprintln!("{local:?}, {steps}: {e}");
@@ -212,7 +220,10 @@ fn two_suns_match_the_sum_of_their_closed_forms() {
         let e = common::max_rel(&img, &exact, 1e-9);
         assert!(e < 1e-3, "{m:?}: reference off the two suns' closed form by {e}");
         for steps in [1, 8, 64] {
-            let s = BruteForceSettings { steps, ..Default::default() };
+            let s = BruteForceSettings {
+                ray_march: MarchSettings { steps: steps, ..Default::default() },
+                ..Default::default()
+            };
             let (img, _) = brute_force::cpu::march(&frame, &s).unwrap();
             let e = common::max_rel(&img, &exact, 1e-9);
             assert!(e < 1e-4, "{m:?}, {steps} steps: brute-force off the two suns' closed form by {e}");
@@ -250,7 +261,8 @@ fn a_sun_and_a_point_light_match_closed_form_plus_quadrature() {
         assert!(e < 5e-3, "{m:?}: reference off closed form + quadrature by {e}");
         // The point light's step error at 256 steps (point_light_brute_force_is_within_its_step_error)
         // bounds the sum's: the sun's share is exact at any step count.
-        let s = BruteForceSettings { steps: 256, ..Default::default() };
+        let s =
+            BruteForceSettings { ray_march: MarchSettings { steps: 256, ..Default::default() }, ..Default::default() };
         let (img, _) = brute_force::cpu::march(&frame, &s).unwrap();
         let e = common::max_rel(&img, &exact, 1e-9);
         assert!(e < 5e-4, "{m:?}: brute-force at 256 steps off closed form + quadrature by {e}");

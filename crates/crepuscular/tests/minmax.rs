@@ -8,6 +8,7 @@ mod common;
 use crepuscular::frame::FrameDesc;
 use crepuscular::gpu::{UploadedFrame, test_gpu};
 use crepuscular::march::LocalSteps;
+use crepuscular::march::StepPolicy;
 use crepuscular::model::segment_transmittance;
 use crepuscular::techniques::AnyGpuTechnique;
 use crepuscular::techniques::minmax::{MinmaxSettings, cpu};
@@ -71,7 +72,11 @@ fn an_unshadowed_point_light_converges_with_its_segments() {
     // light and are coarser far from it, so the worst pixel converges more slowly
     // (docs/MODEL.md §9). Measured at 64 segments: uniform 1.2e-4, equiangular 4.0e-3.
     for (local, bound) in [(LocalSteps::Uniform, 3e-4), (LocalSteps::Equiangular, 1e-2)] {
-        let s = |n: u32| MinmaxSettings { light_steps: n, local_steps: local, ..settings([256, 256], 13) };
+        let s = |n: u32| MinmaxSettings {
+            policy: StepPolicy { local: local, ..Default::default() },
+            light_steps: n,
+            ..settings([256, 256], 13)
+        };
         let (fine, _) = cpu::render_with(&frame, &s(1024), None).unwrap();
         let mut last = f32::MAX;
         for steps in [4, 16, 64] {
@@ -222,7 +227,10 @@ fn bad_settings_name_the_setting() {
         (MinmaxSettings { max_nodes: 0, ..Default::default() }, "minmax.max_nodes"),
         (MinmaxSettings { light_steps: 0, ..Default::default() }, "minmax.light_steps"),
         (MinmaxSettings { max_projective_angle: f32::NAN, ..Default::default() }, "minmax.max_projective_angle"),
-        (MinmaxSettings { spot_denominator: -1.0, ..Default::default() }, "minmax.spot_denominator"),
+        (
+            MinmaxSettings { policy: StepPolicy { denominator: -1.0, ..Default::default() }, ..Default::default() },
+            "minmax.spot_denominator",
+        ),
     ] {
         let e = s.validate().unwrap_err().to_string();
         assert!(e.contains(key), "{e}");

@@ -32,7 +32,7 @@
 //!   looks better banded than noisy.
 
 use crate::error::Error;
-use crate::march::SpotSteps;
+use crate::march::{MarchSettings, SpotSteps, StepPolicy};
 use crate::techniques::TechniqueSettings;
 use crate::techniques::brute_force::BruteForceSettings;
 use crate::techniques::epipolar::EpipolarSettings;
@@ -102,14 +102,23 @@ impl Preset {
 
     /// `brute-force`: 32 / 64 / 256 steps, `exact-cone` for spot lights.
     pub fn brute_force(self) -> BruteForceSettings {
-        BruteForceSettings { steps: self.steps(), spot_steps: SpotSteps::ExactCone, ..Default::default() }
+        BruteForceSettings {
+            ray_march: MarchSettings { steps: self.steps(), ..Default::default() },
+            policy: StepPolicy { spot: SpotSteps::ExactCone, ..Default::default() },
+            ..Default::default()
+        }
     }
 
     /// `interleaved`: M = 4 with 32 / 64 steps, M = 2 with 256 steps for `reference-like` (a
     /// smaller block blurs thin shafts over fewer pixels).
     pub fn interleaved(self) -> InterleavedSettings {
         let block = if self == Preset::ReferenceLike { 2 } else { 4 };
-        InterleavedSettings { block, steps: self.steps(), spot_steps: SpotSteps::ExactCone, ..Default::default() }
+        InterleavedSettings {
+            ray_march: MarchSettings { steps: self.steps(), ..Default::default() },
+            policy: StepPolicy { spot: SpotSteps::ExactCone, ..Default::default() },
+            block,
+            ..Default::default()
+        }
     }
 
     /// `subsampled`: factor 4 with 32 / 64 steps, factor 2 with 256 steps for `reference-like`;
@@ -117,10 +126,10 @@ impl Preset {
     pub fn subsampled(self) -> SubsampledSettings {
         let factor = if self == Preset::ReferenceLike { 2 } else { 4 };
         SubsampledSettings {
+            ray_march: MarchSettings { steps: self.steps(), ..Default::default() },
+            policy: StepPolicy { spot: SpotSteps::ExactCone, ..Default::default() },
             factor,
-            steps: self.steps(),
             edge_remarch: true,
-            spot_steps: SpotSteps::ExactCone,
             ..Default::default()
         }
     }
@@ -136,11 +145,11 @@ impl Preset {
             Preset::ReferenceLike => (64, 0.02, 5),
         };
         EpipolarSettings {
+            ray_march: MarchSettings { steps: self.steps(), ..Default::default() },
+            policy: StepPolicy { spot: SpotSteps::ExactCone, ..Default::default() },
             initial_samples,
             threshold_growth,
             taps,
-            steps: self.steps(),
-            spot_steps: SpotSteps::ExactCone,
             ..d
         }
     }
@@ -156,13 +165,13 @@ impl Preset {
             Preset::ReferenceLike => (2048, 64, 8, 16),
         };
         PrefilteredSettings {
+            policy: StepPolicy { spot: SpotSteps::ExactCone, ..Default::default() },
             map_size: [map, map],
             bases,
             bands,
             bases_per_thread: d.bases_per_thread.min(bases),
             epipole_radius: radius,
             epipole_steps: self.steps(),
-            spot_steps: SpotSteps::ExactCone,
             ..d
         }
     }
@@ -178,11 +187,11 @@ impl Preset {
             Preset::ReferenceLike => (2048, 128, 16),
         };
         MinmaxSettings {
+            policy: StepPolicy { spot: SpotSteps::ExactCone, ..Default::default() },
             map_size: [map, map],
             light_steps,
             epipole_radius: radius,
             epipole_steps: self.steps(),
-            spot_steps: SpotSteps::ExactCone,
             ..d
         }
     }
@@ -206,10 +215,10 @@ mod tests {
     /// Ray-marching steps per ray (per pixel, sample or reference pixel).
     fn march_steps(s: &TechniqueSettings) -> u32 {
         match s {
-            TechniqueSettings::BruteForce(s) => s.steps,
-            TechniqueSettings::Interleaved(s) => s.steps,
-            TechniqueSettings::Subsampled(s) => s.steps,
-            TechniqueSettings::Epipolar(s) => s.steps,
+            TechniqueSettings::BruteForce(s) => s.ray_march.steps,
+            TechniqueSettings::Interleaved(s) => s.ray_march.steps,
+            TechniqueSettings::Subsampled(s) => s.ray_march.steps,
+            TechniqueSettings::Epipolar(s) => s.ray_march.steps,
             TechniqueSettings::Prefiltered(s) => s.epipole_steps,
             TechniqueSettings::Minmax(s) => s.epipole_steps,
             TechniqueSettings::Reference(s) => s.steps,
@@ -256,6 +265,58 @@ mod tests {
             }
             assert_eq!(Preset::parse(Preset::ReferenceLike.name()).unwrap(), Preset::ReferenceLike);
             assert!(Preset::parse("ultra").is_err());
+        }
+    }
+
+    #[test]
+    fn the_shared_march_keys_are_keys_of_every_technique_table() {
+        use crate::march::LocalSteps;
+        let table = |text: &str| toml::Value::Table(toml::from_str(text).unwrap());
+        let march = "steps = 17\njitter = true\nframe_index = 3\n";
+        let policy = "spot_steps = \"fixed\"\nspot_denominator = 0.5\nlocal_steps = \"uniform\"\n";
+        let want_march = MarchSettings { steps: 17, jitter: true, frame_index: 3 };
+        let want_policy = StepPolicy { spot: SpotSteps::Fixed, denominator: 0.5, local: LocalSteps::Uniform };
+        for name in ["brute-force", "interleaved", "subsampled", "epipolar", "prefiltered", "minmax"] {
+            let marches = !matches!(name, "prefiltered" | "minmax");
+            let text = if marches { format!("{march}{policy}") } else { policy.to_string() };
+            let s = TechniqueSettings::deserialize_named(name, table(&text)).unwrap().unwrap();
+            let (m, p) = match &s {
+                TechniqueSettings::BruteForce(s) => (Some(s.ray_march), s.policy),
+                TechniqueSettings::Interleaved(s) => (Some(s.ray_march), s.policy),
+                TechniqueSettings::Subsampled(s) => (Some(s.ray_march), s.policy),
+                TechniqueSettings::Epipolar(s) => (Some(s.ray_march), s.policy),
+                TechniqueSettings::Prefiltered(s) => (None, s.policy),
+                TechniqueSettings::Minmax(s) => (None, s.policy),
+                _ => unreachable!(),
+            };
+            assert_eq!(p, want_policy, "{name}");
+            assert_eq!(m, marches.then_some(want_march), "{name}");
+            // Written back, the keys are the technique table's own (nothing nested).
+            let back = toml::to_string(&s).unwrap();
+            assert!(
+                back.contains("\nspot_denominator = 0.5\n") && !back.contains("ray_march") && !back.contains("policy"),
+                "{name}: {back}"
+            );
+            // An unknown key is still refused, next to the shared ones.
+            let e = TechniqueSettings::deserialize_named(name, table(&format!("{text}stepz = 1\n"))).unwrap_err();
+            assert!(e.to_string().contains("stepz"), "{name}: {e}");
+            if !marches {
+                assert!(TechniqueSettings::deserialize_named(name, table("steps = 4")).is_err(), "{name}");
+            }
+            // A shared setting's range error names the technique's key.
+            let mut bad = s.clone();
+            match &mut bad {
+                TechniqueSettings::BruteForce(s) => s.ray_march.steps = 0,
+                TechniqueSettings::Interleaved(s) => s.ray_march.steps = 0,
+                TechniqueSettings::Subsampled(s) => s.ray_march.steps = 0,
+                TechniqueSettings::Epipolar(s) => s.ray_march.steps = 0,
+                TechniqueSettings::Prefiltered(s) => s.policy.denominator = 0.0,
+                TechniqueSettings::Minmax(s) => s.policy.denominator = 0.0,
+                _ => unreachable!(),
+            }
+            let key = if marches { format!("{name}.steps") } else { format!("{name}.spot_denominator") };
+            let e = bad.validate().unwrap_err().to_string();
+            assert!(e.contains(&key), "{name}: {e}");
         }
     }
 }

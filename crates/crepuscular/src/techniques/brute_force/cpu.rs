@@ -5,7 +5,7 @@ use super::BruteForceSettings;
 use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
-use crate::march::{MarchLights, PixelMarch, march_pixel};
+use crate::march::{MarchLights, march_pixel};
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -20,7 +20,7 @@ pub fn march_ray(
     dir: Vec3,
     s: f32,
 ) -> Vec3 {
-    march_pixel(frame, lights, &PixelMarch::from(settings), x, y, dir, s)
+    march_pixel(frame, lights, &settings.ray_march, settings.policy, x, y, dir, s)
 }
 
 /// Mirrors the `march` entry point over the whole image.
@@ -44,7 +44,7 @@ pub fn march(frame: &CpuFrame, settings: &BruteForceSettings) -> Result<(Image, 
         backend: "cpu".into(),
         timing: "wall-clock".into(),
         passes: vec![PassTime { name: "march".into(), ms: start.elapsed().as_secs_f64() * 1e3 }],
-        raymarched_samples: desc.width as u64 * desc.height as u64 * settings.steps as u64,
+        raymarched_samples: desc.width as u64 * desc.height as u64 * settings.ray_march.steps as u64,
         gpu_memory_bytes: 0,
         extra: Default::default(),
     };

@@ -12,7 +12,7 @@ pub mod cpu;
 use crate::error::Error;
 use crate::frame::GpuFrame;
 use crate::gpu::{GpuContext, Recorder};
-use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
+use crate::march::{MarchSettings, StepPolicy};
 use crate::stats::TechniqueStats;
 use crate::techniques::pass;
 use serde::{Deserialize, Serialize};
@@ -21,65 +21,24 @@ use serde::{Deserialize, Serialize};
 pub const MARCH_WGSL: &str = include_str!("march.wgsl");
 
 /// Settings of `brute-force` (`[render.brute-force]` in a scene file).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct BruteForceSettings {
-    /// Ray-marching steps per pixel, N in eq. 1 of Tóth & Umenhoffer 2009.
-    ///
-    /// More steps resolve thinner shafts and reduce banding; cost is linear in N (one
-    /// shadow-map lookup per step per pixel). Must be in 1..=4096. Default 64.
-    pub steps: u32,
-    /// Offset each pixel's samples by a per-pixel random fraction of a step instead of the step
-    /// midpoint. Trades banding for noise at no extra cost. Default false.
-    pub jitter: bool,
-    /// Seed of the per-pixel jitter (change it per frame for temporal accumulation). Default 0.
-    pub frame_index: u32,
-    /// Where the N steps go for a spot light (Wyman & Ramsey 2008, App. B): `"fixed"` (eye to
-    /// surface), `"exact-cone"` (the ray's chord inside the cone), `"appendix-b-constant"`,
-    /// `"appendix-b-smoothstep"`. Ignored for other lights. The cone policies cost one
-    /// ray–cone intersection per pixel and skip rays that miss the cone. Default `"exact-cone"` (the robustness sweep: on a spot aimed across the view, `"fixed"` is off by 108 % NMAE, `"exact-cone"` by 0.4 %; docs/ROBUSTNESS.md).
-    pub spot_steps: SpotSteps,
-    /// The App. B denominator: the constant of `appendix-b-constant`, the smoothstep floor of
-    /// `appendix-b-smoothstep` (a sine, in (0, 1]). Smaller marches longer chords. Default 0.3.
-    pub spot_denominator: f32,
-    /// How a point or spot light's steps are spread over its interval: `"equiangular"` (equal
-    /// angles seen from the light, so a 1/d² peak narrower than a step is resolved; every local
-    /// light gets its own march) or `"uniform"` (equal lengths, as eq. 1). Ignored for a sun.
-    /// Cost and effect, measured: [`LocalSteps`] and docs/MODEL.md §9. Default `"equiangular"`.
-    pub local_steps: LocalSteps,
-}
-
-impl Default for BruteForceSettings {
-    fn default() -> Self {
-        Self {
-            steps: 64,
-            jitter: false,
-            frame_index: 0,
-            spot_steps: SpotSteps::ExactCone,
-            spot_denominator: DEFAULT_SPOT_DENOMINATOR,
-            local_steps: LocalSteps::Equiangular,
-        }
-    }
+    /// How each pixel marches its own ray ([`MarchSettings`], flattened: the keys `steps`, `jitter`, `frame_index`). `steps` is N
+    /// in eq. 1 of Tóth & Umenhoffer 2009, per pixel: one shadow-map lookup per step per pixel.
+    #[serde(flatten)]
+    pub ray_march: MarchSettings,
+    /// Where the steps go for spot and point lights ([`StepPolicy`], flattened: the keys
+    /// `spot_steps`, `spot_denominator`, `local_steps`).
+    #[serde(flatten)]
+    pub policy: StepPolicy,
 }
 
 impl BruteForceSettings {
-    /// Where its steps go: `spot_steps`, `spot_denominator` and `local_steps` together.
-    pub fn step_policy(&self) -> StepPolicy {
-        StepPolicy { spot: self.spot_steps, denominator: self.spot_denominator, local: self.local_steps }
-    }
-
     /// Checks the ranges.
     pub fn validate(&self) -> Result<(), Error> {
-        if !(1..=4096).contains(&self.steps) {
-            return Err(Error::invalid("brute-force.steps", self.steps, "must be in 1..=4096"));
-        }
-        validate_spot_denominator("brute-force.spot_denominator", self.spot_denominator)
-    }
-}
-
-impl From<&BruteForceSettings> for crate::march::PixelMarch {
-    fn from(s: &BruteForceSettings) -> Self {
-        Self { steps: s.steps, jitter: s.jitter, frame_index: s.frame_index, policy: s.step_policy() }
+        self.ray_march.validate("brute-force")?;
+        self.policy.validate("brute-force")
     }
 }
 
@@ -103,12 +62,13 @@ pub struct MarchParams {
 
 impl From<&BruteForceSettings> for MarchParams {
     fn from(s: &BruteForceSettings) -> Self {
+        let m = &s.ray_march;
         Self {
-            steps: s.steps,
-            jitter: s.jitter as u32,
-            frame_index: s.frame_index,
-            spot_steps: s.step_policy().code(),
-            spot_denominator: s.spot_denominator,
+            steps: m.steps,
+            jitter: m.jitter as u32,
+            frame_index: m.frame_index,
+            spot_steps: s.policy.code(),
+            spot_denominator: s.policy.denominator,
             _pad: [0; 3],
         }
     }
@@ -173,7 +133,7 @@ impl BruteForce {
             backend: "gpu".into(),
             timing: String::new(),
             passes: Vec::new(),
-            raymarched_samples: desc.width as u64 * desc.height as u64 * self.settings.steps as u64,
+            raymarched_samples: desc.width as u64 * desc.height as u64 * self.settings.ray_march.steps as u64,
             gpu_memory_bytes: self.gpu_memory_bytes(),
             extra: Default::default(),
         })

@@ -8,7 +8,7 @@ use super::{EpipolarDebug, EpipolarLine, EpipolarParams, EpipolarSettings, MIN_L
 use crate::error::Error;
 use crate::frame::{CpuFrame, FrameDesc};
 use crate::image::Image;
-use crate::march::{MarchLights, PixelMarch, SpotCone, StepPolicy, cone_interval, march_pixel};
+use crate::march::{MarchLights, MarchSettings, SpotCone, StepPolicy, cone_interval, march_pixel};
 use crate::model::{Light, RgbTexture};
 use crate::stats::{PassTime, TechniqueStats};
 use glam::{Vec2, Vec3, Vec4};
@@ -466,13 +466,9 @@ pub fn march_dispatch(p: &EpipolarParams, count: u32) -> [u32; 3] {
 // ---- pass 3: march ----
 
 /// The march of `p` (what `march_pixel` needs).
-pub fn pixel_march(p: &EpipolarParams) -> PixelMarch {
-    PixelMarch {
-        steps: p.steps,
-        jitter: p.jitter == 1,
-        frame_index: p.frame_index,
-        policy: StepPolicy::from_code(p.spot_steps, p.spot_denominator),
-    }
+pub fn pixel_march(p: &EpipolarParams) -> (MarchSettings, StepPolicy) {
+    let m = MarchSettings { steps: p.steps, jitter: p.jitter == 1, frame_index: p.frame_index };
+    (m, StepPolicy::from_code(p.spot_steps, p.spot_denominator))
 }
 
 /// Mirrors march.wgsl: every pixel of `list` marches its own ray (brute-force's
@@ -482,14 +478,14 @@ pub fn pixel_march(p: &EpipolarParams) -> PixelMarch {
 pub fn march(frame: &CpuFrame, p: &EpipolarParams, list: &[u32]) -> Image {
     let desc = frame.desc;
     let lights = MarchLights::of(desc);
-    let m = pixel_march(p);
+    let (m, policy) = pixel_march(p);
     let values: Vec<(usize, [f32; 4])> = list
         .par_iter()
         .map(|&pixel| {
             let (x, y) = (pixel % desc.width, pixel / desc.width);
             let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(frame.depth[pixel as usize], dir);
-            let l = march_pixel(frame, &lights, &m, x, y, dir, s);
+            let l = march_pixel(frame, &lights, &m, policy, x, y, dir, s);
             (pixel as usize, [l.x, l.y, l.z, s])
         })
         .collect();
@@ -686,7 +682,13 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
     }
     let q = Vec2::new(x as f32, y as f32) + 0.5;
     if near_epipole(p, q) {
-        return (march_pixel(c.frame, &c.lights, &pixel_march(p), x, y, dir, s), true);
+        return (
+            {
+                let (m, policy) = pixel_march(p);
+                march_pixel(c.frame, &c.lights, &m, policy, x, y, dir, s)
+            },
+            true,
+        );
     }
     let k0 = line_position(desc, p, q).floor() as i32;
     let l = if p.degenerate == 1 {
@@ -708,9 +710,13 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
         }
         (Some((_, a)), None) => (a.sum / a.w, false),
         (None, Some((_, b))) => (b.sum / b.w, false),
-        (None, None) if p.fallback_remarch == 1 => {
-            (march_pixel(c.frame, &c.lights, &pixel_march(p), x, y, dir, s), true)
-        }
+        (None, None) if p.fallback_remarch == 1 => (
+            {
+                let (m, policy) = pixel_march(p);
+                march_pixel(c.frame, &c.lights, &m, policy, x, y, dir, s)
+            },
+            true,
+        ),
         (None, None) => (ch.nearest, false),
     }
 }

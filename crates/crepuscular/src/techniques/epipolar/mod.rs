@@ -85,7 +85,7 @@ pub use settings::{EpipolarMarch, EpipolarSettings, SpotPrefilter, Weighting};
 use crate::error::Error;
 use crate::frame::{FrameDesc, GpuFrame};
 use crate::gpu::{GpuContext, Recorder, compute_pass};
-use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
+use crate::march::{LocalSteps, MarchSettings, StepPolicy};
 use crate::model::Light;
 use crate::stats::TechniqueStats;
 use crate::techniques::pass::{self, Bound, Pass};
@@ -228,11 +228,11 @@ impl EpipolarParams {
         let (epipole, degenerate) = cpu::epipole(desc);
         let (slices, samples) = s.sizes(desc.width, desc.height);
         Self {
-            steps: s.steps,
-            jitter: s.jitter as u32,
-            frame_index: s.frame_index,
-            spot_steps: s.step_policy().code(),
-            spot_denominator: s.spot_denominator,
+            steps: s.ray_march.steps,
+            jitter: s.ray_march.jitter as u32,
+            frame_index: s.ray_march.frame_index,
+            spot_steps: s.policy.code(),
+            spot_denominator: s.policy.denominator,
             slices,
             samples,
             initial_samples: s.initial_samples.min(samples),
@@ -249,7 +249,7 @@ impl EpipolarParams {
             max_workgroups,
             prefilter_level: s.prefilter_level(desc),
             epipole_radius: s.epipole_radius,
-            local_light: (s.local_steps == LocalSteps::Equiangular
+            local_light: (s.policy.local == LocalSteps::Equiangular
                 && !matches!(desc.lights[0].light, Light::Directional { .. })) as u32,
             _pad: [0; 2],
             epipole,
@@ -838,7 +838,7 @@ impl Epipolar {
         self.last_params = Some(params);
         // The GPU-classified counts join the stats once the counters are read back (never with
         // StatsMode::Off: reading them at once would stall the frame).
-        let steps = s.steps as u64;
+        let steps = s.ray_march.steps as u64;
         rec.read_counters(&self.counters, move |data, stats| {
             let v: &[u32] = bytemuck::cast_slice(&data[..16]);
             let [marched_n, remarched, valid_lines, sample_texels] = [v[0], v[1], v[2], v[3]].map(u64::from);

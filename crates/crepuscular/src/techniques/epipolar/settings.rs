@@ -224,26 +224,14 @@ pub struct EpipolarSettings {
     /// number of lines, [`SpotPrefilter::level`]), `"off"`, or a level L (box filter by 2^L).
     /// Costs one pass over the texture per frame. Default `"auto"`.
     pub spot_prefilter: SpotPrefilter,
-    /// Ray-marching steps per sample (and per re-marched pixel), N in eq. 1 of Tóth &
-    /// Umenhoffer 2009, as in `brute-force`. Cost is linear in N. In 1..=4096. Default 64.
-    pub steps: u32,
-    /// Offset each sample's steps by the per-pixel jitter of its pixel (as `brute-force` would
-    /// there) instead of the step midpoint. Default false.
-    pub jitter: bool,
-    /// Seed of the jitter. Default 0.
-    pub frame_index: u32,
-    /// Where the N steps go for a spot light (Wyman & Ramsey 2008, App. B), as in
-    /// `brute-force`: `"fixed"`, `"exact-cone"`, `"appendix-b-constant"`,
-    /// `"appendix-b-smoothstep"`. Default `"exact-cone"`, the library-wide default (the
-    /// robustness sweep in docs/ROBUSTNESS.md).
-    pub spot_steps: SpotSteps,
-    /// The App. B denominator of the `appendix-b-*` policies, in (0, 1]. Default 0.3.
-    pub spot_denominator: f32,
-    /// How a point or spot light's steps are spread over its interval: `"equiangular"` (equal
-    /// angles seen from the light, so a 1/d² peak narrower than a step is resolved; every local
-    /// light gets its own march) or `"uniform"` (equal lengths, as eq. 1). Ignored for a sun.
-    /// Cost and effect, measured: [`LocalSteps`] and docs/MODEL.md §9. Default `"equiangular"`.
-    pub local_steps: LocalSteps,
+    /// How the ray-march samples and re-marched pixels march their rays ([`MarchSettings`], flattened: the keys `steps`, `jitter`, `frame_index`). `steps` is N in eq. 1 per sample and per re-marched pixel; a sample's
+    /// jitter is its pixel's, as `brute-force` would use there.
+    #[serde(flatten)]
+    pub ray_march: MarchSettings,
+    /// Where the steps go for spot and point lights ([`StepPolicy`], flattened: the keys
+    /// `spot_steps`, `spot_denominator`, `local_steps`).
+    #[serde(flatten)]
+    pub policy: StepPolicy,
     /// How each ray-march sample integrates its ray: `"steps"` (default: `steps` fixed steps,
     /// as `brute-force`) or `"minmax"` — the walk of `minmax` through a min-max tree on a
     /// rectified shadow map of `minmax_map_size` (Yusov 2013 combines epipolar sampling with
@@ -289,30 +277,15 @@ impl Default for EpipolarSettings {
             fallback_remarch: true,
             epipole_radius: 3.0,
             spot_prefilter: SpotPrefilter::Auto,
-            steps: 64,
-            jitter: false,
-            frame_index: 0,
-            spot_steps: SpotSteps::ExactCone,
-            spot_denominator: DEFAULT_SPOT_DENOMINATOR,
-            local_steps: LocalSteps::Equiangular,
+            ray_march: MarchSettings::default(),
+            policy: StepPolicy::default(),
             march: EpipolarMarch::Steps,
             minmax_map_size: [1024, 1024],
         }
     }
 }
 
-impl From<&EpipolarSettings> for crate::march::PixelMarch {
-    fn from(s: &EpipolarSettings) -> Self {
-        Self { steps: s.steps, jitter: s.jitter, frame_index: s.frame_index, policy: s.step_policy() }
-    }
-}
-
 impl EpipolarSettings {
-    /// Where its steps go: `spot_steps`, `spot_denominator` and `local_steps` together.
-    pub fn step_policy(&self) -> StepPolicy {
-        StepPolicy { spot: self.spot_steps, denominator: self.spot_denominator, local: self.local_steps }
-    }
-
     /// Checks every range (device limits are checked by [`Epipolar::encode`]).
     pub fn validate(&self) -> Result<(), Error> {
         let m = MAX_TEXELS_PER_SIDE;
@@ -373,10 +346,8 @@ impl EpipolarSettings {
                 format!("a level must be in 0..={MAX_PREFILTER_LEVEL}"),
             ));
         }
-        if !(1..=4096).contains(&self.steps) {
-            return Err(Error::invalid("epipolar.steps", self.steps, "must be in 1..=4096"));
-        }
-        validate_spot_denominator("epipolar.spot_denominator", self.spot_denominator)?;
+        self.ray_march.validate("epipolar")?;
+        self.policy.validate("epipolar")?;
         // The tree's settings (checked whatever `march` is, so a bad value is never kept).
         self.minmax().validate().map_err(|e| match e {
             Error::Invalid { key, value, reason } if key == "minmax.map_size" => {
@@ -392,10 +363,8 @@ impl EpipolarSettings {
     pub fn minmax(&self) -> crate::techniques::minmax::MinmaxSettings {
         crate::techniques::minmax::MinmaxSettings {
             map_size: self.minmax_map_size,
-            light_steps: self.steps.min(1024),
-            spot_steps: self.spot_steps,
-            spot_denominator: self.spot_denominator,
-            local_steps: self.local_steps,
+            light_steps: self.ray_march.steps.min(1024),
+            policy: self.policy,
             epipole_radius: 0,
             ..Default::default()
         }

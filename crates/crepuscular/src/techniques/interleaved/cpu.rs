@@ -76,7 +76,7 @@ fn march_lights_lut(
     j: f32,
 ) -> Vec3 {
     let o = frame.desc.camera.position;
-    march_light_groups(o, lights, dir, dist, s.steps, s.step_policy(), |set, steps| {
+    march_light_groups(o, lights, dir, dist, s.ray_march.steps, s.policy, |set, steps| {
         march_steps_lut(frame, lights, set, lut, dir, steps, first, stride, j)
     })
 }
@@ -95,12 +95,12 @@ pub fn march_ray(
     dir: Vec3,
     dist: f32,
 ) -> Vec3 {
-    let j = if s.jitter { pixel_jitter(x / s.block, y / s.block, s.frame_index) } else { 0.5 };
+    let j = if s.ray_march.jitter { pixel_jitter(x / s.block, y / s.block, s.ray_march.frame_index) } else { 0.5 };
     let stride = s.block * s.block;
     let k = block_offset(s, x, y);
     match lut {
         Some(lut) => march_lights_lut(frame, lights, s, lut, dir, dist, k, stride, j),
-        None => march_lights(frame, lights, dir, dist, s.steps, k, stride, j, s.step_policy()),
+        None => march_lights(frame, lights, dir, dist, s.ray_march.steps, k, stride, j, s.policy),
     }
 }
 
@@ -200,7 +200,7 @@ pub fn sum_columns(frame: &CpuFrame, s: &InterleavedSettings, march: &Image, row
                     terms += r[3];
                 }
             }
-            let l = if terms > 0.0 { sum * (s.steps as f32 / terms) } else { Vec3::ZERO };
+            let l = if terms > 0.0 { sum * (s.ray_march.steps as f32 / terms) } else { Vec3::ZERO };
             *px = [l.x, l.y, l.z, 1.0];
         }
     });

@@ -44,7 +44,7 @@ pub mod cpu;
 use crate::error::Error;
 use crate::frame::GpuFrame;
 use crate::gpu::{GpuContext, Recorder};
-use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
+use crate::march::{MarchSettings, StepPolicy};
 use crate::model::Phase;
 use crate::stats::TechniqueStats;
 use crate::techniques::pass::{self, Bound, Pass};
@@ -77,9 +77,16 @@ pub struct InterleavedSettings {
     /// error where the in-scattering changes fast, e.g. near the sun with a strongly forward
     /// phase function). 1 is `brute-force`. Must be in 1..=16. Default 4.
     pub block: u32,
-    /// Total ray-marching steps N per view ray (eq. 1), shared among the M² pixels of a window.
-    /// Cost is linear in N/M². Must be in 1..=4096. Default 64 (4 terms per pixel at M = 4).
-    pub steps: u32,
+    /// How the view rays are marched ([`MarchSettings`], flattened: the keys `steps`, `jitter`, `frame_index`). `steps` is the total N
+    /// per view ray (eq. 1), shared among the M² pixels of a window, so the march costs N/M²
+    /// per pixel (4 terms at the default 64 and M = 4); `jitter` offsets each aligned M×M
+    /// block's samples by one value.
+    #[serde(flatten)]
+    pub ray_march: MarchSettings,
+    /// Where the steps go for spot and point lights ([`StepPolicy`], flattened: the keys
+    /// `spot_steps`, `spot_denominator`, `local_steps`).
+    #[serde(flatten)]
+    pub policy: StepPolicy,
     /// Only add neighbours whose view distance is within `depth_tolerance` of the centre
     /// pixel's, and renormalise (see the module docs). Keeps shafts from leaking across
     /// silhouettes at the cost of fewer terms (more banding) there; costs one comparison per
@@ -99,58 +106,27 @@ pub struct InterleavedSettings {
     /// 1/size² (about 0.2 % for HG g = 0.9 at 256). Memory 16 bytes per entry. Must be in
     /// 2..=65536. Default 256.
     pub phase_lut_size: u32,
-    /// Offset each block's samples by a random fraction of a step (one value per aligned M×M
-    /// block) instead of the step midpoint. Trades banding for noise at no extra cost.
-    /// Default false.
-    pub jitter: bool,
-    /// Seed of the per-block jitter (change it per frame for temporal accumulation). Default 0.
-    pub frame_index: u32,
-    /// Where the N steps go for a spot light (Wyman & Ramsey 2008, App. B): `"fixed"` (eye to
-    /// surface), `"exact-cone"` (the ray's chord inside the cone), `"appendix-b-constant"`,
-    /// `"appendix-b-smoothstep"`. Ignored for other lights. The cone policies cost one
-    /// ray–cone intersection per pixel. Default `"exact-cone"` (the robustness sweep: on a spot aimed across the view, `"fixed"` is off by 108 % NMAE, `"exact-cone"` by 0.4 %; docs/ROBUSTNESS.md).
-    pub spot_steps: SpotSteps,
-    /// The App. B denominator: the constant of `appendix-b-constant`, the smoothstep floor of
-    /// `appendix-b-smoothstep` (a sine, in (0, 1]). Smaller marches longer chords. Default 0.3.
-    pub spot_denominator: f32,
-    /// How a point or spot light's steps are spread over its interval: `"equiangular"` (equal
-    /// angles seen from the light, so a 1/d² peak narrower than a step is resolved; every local
-    /// light gets its own march) or `"uniform"` (equal lengths, as eq. 1). Ignored for a sun.
-    /// Cost and effect, measured: [`LocalSteps`] and docs/MODEL.md §9. Default `"equiangular"`.
-    pub local_steps: LocalSteps,
 }
 
 impl Default for InterleavedSettings {
     fn default() -> Self {
         Self {
             block: 4,
-            steps: 64,
+            ray_march: MarchSettings::default(),
+            policy: StepPolicy::default(),
             depth_aware: true,
             depth_tolerance: 0.1,
             phase_lut: false,
             phase_lut_size: 256,
-            jitter: false,
-            frame_index: 0,
-            spot_steps: SpotSteps::ExactCone,
-            spot_denominator: DEFAULT_SPOT_DENOMINATOR,
-            local_steps: LocalSteps::Equiangular,
         }
     }
 }
 
 impl InterleavedSettings {
-    /// Where its steps go: `spot_steps`, `spot_denominator` and `local_steps` together.
-    pub fn step_policy(&self) -> StepPolicy {
-        StepPolicy { spot: self.spot_steps, denominator: self.spot_denominator, local: self.local_steps }
-    }
-
     /// Checks the ranges.
     pub fn validate(&self) -> Result<(), Error> {
         if !(1..=16).contains(&self.block) {
             return Err(Error::invalid("interleaved.block", self.block, "must be in 1..=16"));
-        }
-        if !(1..=4096).contains(&self.steps) {
-            return Err(Error::invalid("interleaved.steps", self.steps, "must be in 1..=4096"));
         }
         if !(self.depth_tolerance.is_finite() && self.depth_tolerance >= 0.0) {
             return Err(Error::invalid("interleaved.depth_tolerance", self.depth_tolerance, "must be finite and >= 0"));
@@ -158,7 +134,8 @@ impl InterleavedSettings {
         if !(2..=65536).contains(&self.phase_lut_size) {
             return Err(Error::invalid("interleaved.phase_lut_size", self.phase_lut_size, "must be in 2..=65536"));
         }
-        validate_spot_denominator("interleaved.spot_denominator", self.spot_denominator)
+        self.ray_march.validate("interleaved")?;
+        self.policy.validate("interleaved")
     }
 
     /// The block offset k = (y mod M)·M + (x mod M) of pixel (x, y) (§4.1). Mirrors
@@ -171,7 +148,7 @@ impl InterleavedSettings {
     /// Number of eq.-1 terms a pixel of block offset `k` evaluates: i = k, k + M², … < N.
     pub fn terms_of_offset(&self, k: u32) -> u32 {
         let m2 = self.block * self.block;
-        if k < self.steps { (self.steps - k).div_ceil(m2) } else { 0 }
+        if k < self.ray_march.steps { (self.ray_march.steps - k).div_ceil(m2) } else { 0 }
     }
 
     /// Σ over the pixels of a `width`×`height` image of the terms each evaluates: the frame's
@@ -193,7 +170,7 @@ impl InterleavedSettings {
     pub fn extra_stats(&self, lut_error: Option<f64>) -> BTreeMap<String, f64> {
         let mut extra = BTreeMap::new();
         extra.insert("block".into(), self.block as f64);
-        extra.insert("steps".into(), self.steps as f64);
+        extra.insert("steps".into(), self.ray_march.steps as f64);
         if let Some(e) = lut_error {
             extra.insert("phase_lut_max_rel_error".into(), e);
         }
@@ -236,11 +213,11 @@ impl From<&InterleavedSettings> for InterleavedParams {
     fn from(s: &InterleavedSettings) -> Self {
         Self {
             block: s.block,
-            steps: s.steps,
-            spot_steps: s.step_policy().code(),
-            spot_denominator: s.spot_denominator,
-            jitter: s.jitter as u32,
-            frame_index: s.frame_index,
+            steps: s.ray_march.steps,
+            spot_steps: s.policy.code(),
+            spot_denominator: s.policy.denominator,
+            jitter: s.ray_march.jitter as u32,
+            frame_index: s.ray_march.frame_index,
             depth_aware: s.depth_aware as u32,
             depth_tolerance: s.depth_tolerance,
             phase_lut: s.phase_lut as u32,

@@ -357,7 +357,7 @@ impl<'a> Spans<'a> {
             return out;
         }
         let cone = crate::march::SpotCone::of(&fl.light);
-        let (o, policy) = (desc.camera.position, settings.step_policy());
+        let (o, policy) = (desc.camera.position, settings.policy);
         let iv = march_interval(cone.as_ref(), light_reach(fl, &desc.medium), o, dir, s, policy);
         out.segments = Steps::of_light(local_position(&fl.light), iv, settings.light_steps, o, dir, policy);
         out.uni = out.segments.uniform_step(st, 0.5);

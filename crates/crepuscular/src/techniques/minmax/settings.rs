@@ -1,7 +1,7 @@
 //! Settings of `minmax`.
 
 use crate::error::Error;
-use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
+use crate::march::StepPolicy;
 use crate::techniques::prefiltered::{PrefilteredSettings, RectificationChoice, rectify::RectifyOptions};
 use serde::{Deserialize, Serialize};
 
@@ -66,16 +66,10 @@ pub struct MinmaxSettings {
     /// segment's lit part. A directional light needs none (its integral is closed, exact at any
     /// setting). Cost: one light evaluation per segment a lit span touches. Default 32.
     pub light_steps: u32,
-    /// The spot-step policy that bounds a spot's interval (Wyman & Ramsey 2008, App. B).
-    /// Default `"exact-cone"`.
-    pub spot_steps: SpotSteps,
-    /// The App. B denominator of the `appendix-b-*` policies (a sine, in (0, 1]). Default 0.3.
-    pub spot_denominator: f32,
-    /// How a point or spot light's steps are spread over its interval: `"equiangular"` (equal
-    /// angles seen from the light, so a 1/d² peak narrower than a step is resolved; every local
-    /// light gets its own march) or `"uniform"` (equal lengths, as eq. 1). Ignored for a sun.
-    /// Cost and effect, measured: [`LocalSteps`] and docs/MODEL.md §9. Default `"equiangular"`.
-    pub local_steps: LocalSteps,
+    /// Where the epipole march's steps and the local-light quadrature's segments go
+    /// ([`StepPolicy`], flattened: the keys `spot_steps`, `spot_denominator`, `local_steps`).
+    #[serde(flatten)]
+    pub policy: StepPolicy,
 }
 
 impl Default for MinmaxSettings {
@@ -90,19 +84,12 @@ impl Default for MinmaxSettings {
             epipole_radius: 8,
             epipole_steps: 64,
             light_steps: 32,
-            spot_steps: SpotSteps::ExactCone,
-            spot_denominator: DEFAULT_SPOT_DENOMINATOR,
-            local_steps: LocalSteps::Equiangular,
+            policy: StepPolicy::default(),
         }
     }
 }
 
 impl MinmaxSettings {
-    /// Where its steps go: `spot_steps`, `spot_denominator` and `local_steps` together.
-    pub fn step_policy(&self) -> StepPolicy {
-        StepPolicy { spot: self.spot_steps, denominator: self.spot_denominator, local: self.local_steps }
-    }
-
     /// Checks the ranges; the error names the setting and value.
     pub fn validate(&self) -> Result<(), Error> {
         let [w, h] = self.map_size;
@@ -142,7 +129,7 @@ impl MinmaxSettings {
                 "must be > 1",
             ));
         }
-        validate_spot_denominator("minmax.spot_denominator", self.spot_denominator)
+        self.policy.validate("minmax")
     }
 
     /// The settings a frame runs with: these, with no epipole disc for a directional light
@@ -170,9 +157,7 @@ impl MinmaxSettings {
             epipole_radius: self.epipole_radius,
             epipole_steps: self.epipole_steps,
             light_steps: self.light_steps,
-            spot_steps: self.spot_steps,
-            spot_denominator: self.spot_denominator,
-            local_steps: self.local_steps,
+            policy: self.policy,
             ..PrefilteredSettings::default()
         }
     }

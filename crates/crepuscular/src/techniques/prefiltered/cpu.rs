@@ -10,7 +10,7 @@ use crate::frame::{CpuFrame, FrameDesc};
 use crate::image::Image;
 use crate::integrand::{light_incident, light_position};
 use crate::march::{
-    PixelMarch, Steps, light_reach, local_position, march_interval, march_pixel, march_samples, mean_extinction,
+    MarchSettings, Steps, light_reach, local_position, march_interval, march_pixel, march_samples, mean_extinction,
 };
 use crate::model::segment_transmittance;
 use crate::stats::{PassTime, TechniqueStats};
@@ -332,7 +332,7 @@ pub fn unoccluded_inscatter(desc: &FrameDesc, settings: &PrefilteredSettings, di
     let fl = &desc.lights[0];
     let cone = crate::march::SpotCone::of(&fl.light);
     let o = desc.camera.position;
-    let policy = settings.step_policy();
+    let policy = settings.policy;
     let iv = march_interval(cone.as_ref(), light_reach(fl, &desc.medium), o, dir, s, policy);
     let steps = Steps::of_light(local_position(&fl.light), iv, settings.light_steps, o, dir, policy);
     march_samples(desc, &steps, 0, 1, 0.5, |t| {
@@ -388,13 +388,13 @@ pub fn evaluate(frame: &CpuFrame, settings: &PrefilteredSettings, p: &Passes, ep
 pub fn march_epipole(frame: &CpuFrame, settings: &PrefilteredSettings, epipole: Option<[f32; 2]>, image: &mut Image) {
     let desc = frame.desc;
     let lights = crate::march::MarchLights::of(desc);
-    let march = PixelMarch::from(settings);
+    let march = MarchSettings::from(settings);
     for y in 0..desc.height {
         for x in 0..desc.width {
             if in_epipole_disc(epipole, settings.epipole_radius, x, y) {
                 let dir = desc.pixel_ray(x, y);
                 let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
-                let l = march_pixel(frame, &lights, &march, x, y, dir, s);
+                let l = march_pixel(frame, &lights, &march, settings.policy, x, y, dir, s);
                 image.pixels[(y * desc.width + x) as usize] = [l.x, l.y, l.z, 1.0];
             }
         }

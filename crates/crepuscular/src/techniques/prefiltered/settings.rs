@@ -2,7 +2,7 @@
 
 use super::rectify::{MAX_BANDS, MAX_REGIONS, Rectification, RectificationChoice, RectifyOptions, ReferenceRay};
 use crate::error::Error;
-use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
+use crate::march::StepPolicy;
 use serde::{Deserialize, Serialize};
 
 /// Storage of the filtered-basis textures (§3.3, Appendix A).
@@ -150,22 +150,16 @@ pub struct PrefilteredSettings {
     /// view ray (the factor that multiplies the prefiltered visibility; a directional light has
     /// the closed form of eq. 3). Shadow-free, so cheap; 1..=1024. Default 32.
     pub light_steps: u32,
-    /// The spot-step policy of the epipole march and of the local-light quadrature (Wyman &
-    /// Ramsey 2008, App. B). Default `"exact-cone"`.
-    pub spot_steps: SpotSteps,
-    /// The App. B denominator of the `appendix-b-*` policies (a sine, in (0, 1]). Default 0.3.
-    pub spot_denominator: f32,
-    /// How a point or spot light's steps are spread over its interval: `"equiangular"` (equal
-    /// angles seen from the light, so a 1/d² peak narrower than a step is resolved; every local
-    /// light gets its own march) or `"uniform"` (equal lengths, as eq. 1). Ignored for a sun.
-    /// Cost and effect, measured: [`LocalSteps`] and docs/MODEL.md §9. Default `"equiangular"`.
-    pub local_steps: LocalSteps,
+    /// Where the epipole march's steps and the local-light quadrature's segments go
+    /// ([`StepPolicy`], flattened: the keys `spot_steps`, `spot_denominator`, `local_steps`).
+    #[serde(flatten)]
+    pub policy: StepPolicy,
 }
 
 /// How the epipole disc's pixels are ray-marched (§5): `epipole_steps`, step midpoints.
-impl From<&PrefilteredSettings> for crate::march::PixelMarch {
+impl From<&PrefilteredSettings> for crate::march::MarchSettings {
     fn from(s: &PrefilteredSettings) -> Self {
-        Self { steps: s.epipole_steps, jitter: false, frame_index: 0, policy: s.step_policy() }
+        Self { steps: s.epipole_steps, jitter: false, frame_index: 0 }
     }
 }
 
@@ -188,19 +182,12 @@ impl Default for PrefilteredSettings {
             epipole_radius: 8,
             epipole_steps: 64,
             light_steps: 32,
-            spot_steps: SpotSteps::ExactCone,
-            spot_denominator: DEFAULT_SPOT_DENOMINATOR,
-            local_steps: LocalSteps::Equiangular,
+            policy: StepPolicy::default(),
         }
     }
 }
 
 impl PrefilteredSettings {
-    /// Where its steps go: `spot_steps`, `spot_denominator` and `local_steps` together.
-    pub fn step_policy(&self) -> StepPolicy {
-        StepPolicy { spot: self.spot_steps, denominator: self.spot_denominator, local: self.local_steps }
-    }
-
     /// Checks the ranges.
     pub fn validate(&self) -> Result<(), Error> {
         let m = self.bases;
@@ -255,7 +242,7 @@ impl PrefilteredSettings {
         if !(1..=1024).contains(&self.light_steps) {
             return Err(Error::invalid("prefiltered.light_steps", self.light_steps, "must be in 1..=1024"));
         }
-        validate_spot_denominator("prefiltered.spot_denominator", self.spot_denominator)
+        self.policy.validate("prefiltered")
     }
 
     /// What the rectification needs.
@@ -350,13 +337,13 @@ impl PrefilteredParams {
                 if epipole.is_some() { s.epipole_radius } else { 0 },
                 s.epipole_steps,
                 s.light_steps,
-                s.step_policy().code(),
+                s.policy.code(),
             ],
             camera: v(r.camera, sigma_mean),
             light: v(r.light, r.light_distance),
             axes: r.axes.map(|a| v(a, 0.0)),
             ranges: r.ranges.to_array(),
-            epipole: [e[0], e[1], bias, s.spot_denominator],
+            epipole: [e[0], e[1], bias, s.policy.denominator],
             region_x: [[rx[0], rx[1], rx[2], rx[3]], [rx[4], rx[5], rx[6], rx[7]], [rx[8], rx[9], rx[10], rx[11]]],
             ints4: [r.bands, channels, 0, 0],
         }

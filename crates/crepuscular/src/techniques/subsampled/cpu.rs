@@ -5,7 +5,7 @@ use super::{MIN_WEIGHT, SubsampledSettings, stats_extra};
 use crate::error::Error;
 use crate::frame::CpuFrame;
 use crate::image::Image;
-use crate::march::{MarchLights, PixelMarch, cone_interval, march_pixel};
+use crate::march::{MarchLights, cone_interval, march_pixel};
 use crate::stats::{PassTime, TechniqueStats};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -28,7 +28,7 @@ pub fn march_ray(
     dir: Vec3,
     s: f32,
 ) -> Vec3 {
-    march_pixel(frame, lights, &PixelMarch::from(settings), x, y, dir, s)
+    march_pixel(frame, lights, &settings.ray_march, settings.policy, x, y, dir, s)
 }
 
 /// Mirrors `struct Bracket` in upsample.wgsl: the grid samples i0 ≤ i1 whose source pixels
@@ -205,7 +205,7 @@ pub fn render(frame: &CpuFrame, settings: &SubsampledSettings) -> Result<(Image,
             PassTime { name: "march".into(), ms: march_ms },
             PassTime { name: "upsample".into(), ms: upsample_ms },
         ],
-        raymarched_samples: (grid.width as u64 * grid.height as u64 + remarched) * settings.steps as u64,
+        raymarched_samples: (grid.width as u64 * grid.height as u64 + remarched) * settings.ray_march.steps as u64,
         gpu_memory_bytes: 0,
         extra: stats_extra(grid.width, grid.height, remarched),
     };

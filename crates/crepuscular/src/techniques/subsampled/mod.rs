@@ -25,7 +25,7 @@ pub mod cpu;
 use crate::error::Error;
 use crate::frame::GpuFrame;
 use crate::gpu::{GpuContext, Recorder, compute_pass};
-use crate::march::{DEFAULT_SPOT_DENOMINATOR, LocalSteps, SpotSteps, StepPolicy, validate_spot_denominator};
+use crate::march::{MarchSettings, StepPolicy};
 use crate::stats::TechniqueStats;
 use crate::techniques::pass::{self, Pass};
 use serde::{Deserialize, Serialize};
@@ -55,9 +55,14 @@ pub struct SubsampledSettings {
     /// as in Engelhardt & Dachsbacher 2010, Fig. 9; clamped to the image size. Cost is
     /// width·height marches per frame at any resolution. Each side in 1..=16384. Default none.
     pub grid: Option<[u32; 2]>,
-    /// Ray-marching steps per grid sample (and per re-marched pixel), N in eq. 1 of Tóth &
-    /// Umenhoffer 2009. Cost is linear in N. Must be in 1..=4096. Default 64.
-    pub steps: u32,
+    /// How the grid samples and re-marched pixels march their rays ([`MarchSettings`], flattened: the keys `steps`, `jitter`, `frame_index`). `steps` is N in eq. 1 per grid sample and per re-marched pixel; a grid
+    /// sample's jitter is its source pixel's, as `brute-force` would use there.
+    #[serde(flatten)]
+    pub ray_march: MarchSettings,
+    /// Where the steps go for spot and point lights ([`StepPolicy`], flattened: the keys
+    /// `spot_steps`, `spot_denominator`, `local_steps`).
+    #[serde(flatten)]
+    pub policy: StepPolicy,
     /// Depth tolerance of the bilateral upsampling: the relative view-distance difference
     /// |sᵢ − s|/s (dimensionless) at which a grid sample stops counting for a pixel. Samples
     /// within half of it get their full bilinear weight, then the weight falls smoothly to 0.
@@ -85,29 +90,6 @@ pub struct SubsampledSettings {
     /// longer the sum of each light's own upsampling (off, it is; tests/lights.rs). Measured:
     /// docs/ROBUSTNESS.md (the sweep's spot views). Default true.
     pub cone_aware: bool,
-    /// Offset each ray's samples by a per-pixel random fraction of a step (the jitter of the
-    /// grid sample's source pixel, as `brute-force` would use there) instead of the step
-    /// midpoint. Trades banding for noise at no extra cost. Default false.
-    pub jitter: bool,
-    /// Seed of the jitter (change it per frame for temporal accumulation). Default 0.
-    pub frame_index: u32,
-    /// Where the N steps go for a spot light (Wyman & Ramsey 2008, App. B): `"fixed"`,
-    /// `"exact-cone"`, `"appendix-b-constant"`, `"appendix-b-smoothstep"`, as in `brute-force`.
-    /// Ignored for other lights. Default `"exact-cone"` (the robustness sweep: on a spot aimed across the view, `"fixed"` is off by 108 % NMAE, `"exact-cone"` by 0.4 %; docs/ROBUSTNESS.md).
-    pub spot_steps: SpotSteps,
-    /// The App. B denominator of the `appendix-b-*` policies (a sine, in (0, 1]). Default 0.3.
-    pub spot_denominator: f32,
-    /// How a point or spot light's steps are spread over its interval: `"equiangular"` (equal
-    /// angles seen from the light, so a 1/d² peak narrower than a step is resolved; every local
-    /// light gets its own march) or `"uniform"` (equal lengths, as eq. 1). Ignored for a sun.
-    /// Cost and effect, measured: [`LocalSteps`] and docs/MODEL.md §9. Default `"equiangular"`.
-    pub local_steps: LocalSteps,
-}
-
-impl From<&SubsampledSettings> for crate::march::PixelMarch {
-    fn from(s: &SubsampledSettings) -> Self {
-        Self { steps: s.steps, jitter: s.jitter, frame_index: s.frame_index, policy: s.step_policy() }
-    }
 }
 
 impl Default for SubsampledSettings {
@@ -115,25 +97,16 @@ impl Default for SubsampledSettings {
         Self {
             factor: 4,
             grid: None,
-            steps: 64,
+            ray_march: MarchSettings::default(),
+            policy: StepPolicy::default(),
             depth_tolerance: 0.1,
             edge_remarch: true,
             cone_aware: true,
-            jitter: false,
-            frame_index: 0,
-            spot_steps: SpotSteps::ExactCone,
-            spot_denominator: DEFAULT_SPOT_DENOMINATOR,
-            local_steps: LocalSteps::Equiangular,
         }
     }
 }
 
 impl SubsampledSettings {
-    /// Where its steps go: `spot_steps`, `spot_denominator` and `local_steps` together.
-    pub fn step_policy(&self) -> StepPolicy {
-        StepPolicy { spot: self.spot_steps, denominator: self.spot_denominator, local: self.local_steps }
-    }
-
     /// Checks the ranges.
     pub fn validate(&self) -> Result<(), Error> {
         if !(1..=32).contains(&self.factor) {
@@ -148,13 +121,11 @@ impl SubsampledSettings {
                 format!("each side must be in 1..={MAX_GRID}"),
             ));
         }
-        if !(1..=4096).contains(&self.steps) {
-            return Err(Error::invalid("subsampled.steps", self.steps, "must be in 1..=4096"));
-        }
         if !(self.depth_tolerance.is_finite() && self.depth_tolerance > 0.0) {
             return Err(Error::invalid("subsampled.depth_tolerance", self.depth_tolerance, "must be finite and > 0"));
         }
-        validate_spot_denominator("subsampled.spot_denominator", self.spot_denominator)
+        self.ray_march.validate("subsampled")?;
+        self.policy.validate("subsampled")
     }
 
     /// The grid size (w, h) for a `width`×`height` image: `grid` clamped to the image, else
@@ -204,11 +175,11 @@ impl SubsampledParams {
     /// The block for `settings` on a `grid` = (w, h) grid.
     pub fn new(s: &SubsampledSettings, grid: (u32, u32)) -> Self {
         Self {
-            steps: s.steps,
-            jitter: s.jitter as u32,
-            frame_index: s.frame_index,
-            spot_steps: s.step_policy().code(),
-            spot_denominator: s.spot_denominator,
+            steps: s.ray_march.steps,
+            jitter: s.ray_march.jitter as u32,
+            frame_index: s.ray_march.frame_index,
+            spot_steps: s.policy.code(),
+            spot_denominator: s.policy.denominator,
             grid_width: grid.0,
             grid_height: grid.1,
             depth_tolerance: s.depth_tolerance,
@@ -354,7 +325,7 @@ impl Subsampled {
         })?;
         // The re-marched pixels are counted on the GPU; until the counter arrives (and with
         // StatsMode::Off) the samples are the grid's only.
-        let steps = self.settings.steps as u64;
+        let steps = self.settings.ray_march.steps as u64;
         rec.read_counters(&self.counter, move |counter, stats| {
             let remarched = u32::from_le_bytes([counter[0], counter[1], counter[2], counter[3]]) as u64;
             stats.raymarched_samples += remarched * steps;

@@ -184,8 +184,9 @@ impl Scattering {
     /// The same, writing its in-scattering as `format` (builder style): `Rgba32Float` (the
     /// default) or `Rgba16Float` — half the memory and bandwidth of the output texture, at
     /// half-float precision (within one half-float ulp, 2⁻¹⁰ relative, per channel; the README
-    /// has the measured PSNR cost). The technique's intermediates keep their formats. Rebuilds the
-    /// technique's pipelines; an error for another format.
+    /// has the measured PSNR cost). The technique's radiance intermediates follow it
+    /// ([`crate::techniques::pass::intermediate_format`]); positions and depths stay 32-bit.
+    /// Rebuilds the technique's pipelines; an error for another format.
     pub fn with_output_format(mut self, format: wgpu::TextureFormat) -> Result<Self, Error> {
         if !crate::techniques::pass::OUTPUT_FORMATS.contains(&format) {
             return Err(Error::invalid("output format", format!("{format:?}"), "must be Rgba32Float or Rgba16Float"));

@@ -87,7 +87,7 @@ pub struct BruteForce {
 
 impl BruteForce {
     /// Builds the pipeline.
-    pub fn new(gpu: &GpuContext, settings: BruteForceSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub(crate) fn new(gpu: &GpuContext, settings: BruteForceSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.try_scoped("creating the brute-force pipeline", || {
             let device = &gpu.device;
@@ -106,7 +106,7 @@ impl BruteForce {
 
     /// Records the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
     /// the frame's size) through `rec`. Pass list: `march`.
-    pub fn encode(
+    pub(crate) fn encode(
         &mut self,
         gpu: &GpuContext,
         rec: &mut Recorder,

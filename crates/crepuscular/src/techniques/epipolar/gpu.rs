@@ -124,7 +124,7 @@ impl Passes {
 
 impl Epipolar {
     /// Builds the passes and the size-independent buffers.
-    pub fn new(gpu: &GpuContext, settings: EpipolarSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub(crate) fn new(gpu: &GpuContext, settings: EpipolarSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.try_scoped("creating the epipolar pipelines", || {
             let device = &gpu.device;
@@ -288,7 +288,7 @@ impl Epipolar {
     /// `lines`, `refine`, `march`, `interpolate`, `upsample` (see the module documentation).
     /// The stats' counts come from the GPU's counters once they are read back (the fields:
     /// module documentation, Stats).
-    pub fn encode(
+    pub(crate) fn encode(
         &mut self,
         gpu: &GpuContext,
         rec: &mut Recorder,

@@ -335,7 +335,7 @@ pub struct Interleaved {
 
 impl Interleaved {
     /// Builds the three passes.
-    pub fn new(gpu: &GpuContext, settings: InterleavedSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub(crate) fn new(gpu: &GpuContext, settings: InterleavedSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.try_scoped("creating the interleaved pipelines", || {
             let device = &gpu.device;
@@ -441,7 +441,7 @@ impl Interleaved {
 
     /// Records the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
     /// the frame's size) through `rec`. Pass list: `march`, `sum_rows`, `sum_columns`.
-    pub fn encode(
+    pub(crate) fn encode(
         &mut self,
         gpu: &GpuContext,
         rec: &mut Recorder,

@@ -154,7 +154,7 @@ pub struct TreeBuilder {
 
 impl TreeBuilder {
     /// Builds the pass.
-    pub fn new(device: &wgpu::Device) -> Result<Self, Error> {
+    pub(crate) fn new(device: &wgpu::Device) -> Result<Self, Error> {
         let src = pass_source(&build_wgsl(), prefiltered::BasisPrecision::Unorm8);
         let no_raster = crate::gpu::storage_texture(device, "minmax no raster", wgpu::TextureFormat::R32Float, 1, 1)
             .create_view(&Default::default());
@@ -189,7 +189,7 @@ impl TreeBuilder {
     /// Records `build` for `frame` under `s` (from the frame's rectified raster where
     /// `host_raster` and the rectification is projective, else from its standard shadow map);
     /// `buffers` hold the frame's uniforms and lights.
-    pub fn encode(
+    pub(crate) fn encode(
         &mut self,
         gpu: &GpuContext,
         rec: &mut Recorder,
@@ -306,7 +306,7 @@ impl Binds {
 
 impl MinMax {
     /// Builds the pipelines and buffers.
-    pub fn new(gpu: &GpuContext, settings: MinmaxSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub(crate) fn new(gpu: &GpuContext, settings: MinmaxSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.try_scoped("creating the minmax pipelines", || {
             let device = &gpu.device;
@@ -350,7 +350,7 @@ impl MinMax {
     /// the host's rectified raster when the frame carries one and this frame's rectification is
     /// projective, else from the standard shadow map), `traverse`, `epipole` (when the light's
     /// disc is on screen).
-    pub fn encode(
+    pub(crate) fn encode(
         &mut self,
         gpu: &GpuContext,
         rec: &mut Recorder,

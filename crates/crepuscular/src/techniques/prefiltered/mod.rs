@@ -177,7 +177,7 @@ pub struct Prefiltered {
 
 impl Prefiltered {
     /// Builds the passes and buffers.
-    pub fn new(gpu: &GpuContext, settings: PrefilteredSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub(crate) fn new(gpu: &GpuContext, settings: PrefilteredSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.try_scoped("creating the prefiltered pipelines", || {
             let device = &gpu.device;
@@ -266,7 +266,7 @@ impl Prefiltered {
     /// host's rectified raster, [`crate::GpuFrame::rectified_shadow_maps`], and this frame's
     /// rectification is projective), `prefilter`, `evaluate`, `epipole` (when the sun's disc
     /// is on screen).
-    pub fn encode(
+    pub(crate) fn encode(
         &mut self,
         gpu: &GpuContext,
         rec: &mut Recorder,

@@ -215,7 +215,7 @@ pub struct Subsampled {
 
 impl Subsampled {
     /// Builds the passes and buffers.
-    pub fn new(gpu: &GpuContext, settings: SubsampledSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub(crate) fn new(gpu: &GpuContext, settings: SubsampledSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
         settings.validate()?;
         gpu.try_scoped("creating the subsampled pipelines", || {
             let device = &gpu.device;
@@ -266,7 +266,7 @@ impl Subsampled {
     /// the frame's size) through `rec`. Pass list: `march` (the grid), `upsample` (every
     /// pixel). The re-marched pixels are counted on the GPU and join the stats once the
     /// counter has been read back.
-    pub fn encode(
+    pub(crate) fn encode(
         &mut self,
         gpu: &GpuContext,
         rec: &mut Recorder,

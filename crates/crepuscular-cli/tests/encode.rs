@@ -207,6 +207,37 @@ fn inputs_that_do_not_match_the_frame_are_errors_naming_them() {
     point.lights[0].light = builtin::builtin("cage").unwrap().lights[0].light.clone();
     point.lights[0].shadow.layers = 6;
     check(&mut sc, &GpuFrame { desc: &point, ..frame }, &out, "shadow_maps", "lights[0] (point) needs layers 0..6");
+    // NaN or a negative coefficient, a light or shadow projection that cannot be evaluated:
+    // refused before any pass runs, naming the field (never a NaN in the output).
+    let mut bad = |edit: &dyn Fn(&mut crepuscular::FrameDesc), key: &str, why: &str| {
+        let mut d = desc.clone();
+        edit(&mut d);
+        check(&mut sc, &GpuFrame { desc: &d, ..frame }, &out, key, why);
+    };
+    bad(&|d| d.medium.scattering.y = f32::NAN, "medium.scattering", "finite");
+    bad(&|d| d.medium.absorption.x = -0.1, "medium.absorption", "≥ 0");
+    bad(&|d| d.medium.phase = crepuscular::Phase::HenyeyGreenstein { g: 1.0 }, "medium.phase.g", "(−1, 1)");
+    bad(
+        &|d| {
+            if let crepuscular::Light::Directional { direction, .. } = &mut d.lights[0].light {
+                *direction = glam::Vec3::ZERO;
+            }
+        },
+        "lights[0].direction",
+        "non-zero",
+    );
+    bad(
+        &|d| {
+            if let crepuscular::Light::Directional { intensity, .. } = &mut d.lights[0].light {
+                *intensity = f32::INFINITY;
+            }
+        },
+        "lights[0].intensity",
+        "finite",
+    );
+    bad(&|d| d.lights[0].shadow.view_proj[0] = glam::Mat4::ZERO, "lights[0].shadow.view_proj[0]", "invertible");
+    bad(&|d| d.lights[0].shadow.far = d.lights[0].shadow.near, "lights[0].shadow.far", "far > near");
+    bad(&|d| d.lights[0].shadow.texel_world = f32::NAN, "lights[0].shadow.texel_world", "finite");
     // The real thing still renders.
     let mut encoder = gpu.device.create_command_encoder(&Default::default());
     sc.encode(&mut encoder, &frame, &out.create_view(&Default::default())).unwrap();

@@ -375,14 +375,21 @@ impl FrameDesc {
         }
     }
 
-    /// Checks the light list: not empty, every light's shadow projection matching its kind
-    /// (one layer, six for a point light), scattering finite and ≥ 0, bias finite and ≥ 0,
-    /// at most [`MAX_LIGHTS`] reaching the view. The error names the light (`lights[k]`).
+    /// Checks the medium ([`Medium::validate`](crate::Medium::validate)) and the light list:
+    /// not empty, every light's own fields ([`Light::validate`](crate::Light::validate)) and
+    /// shadow projection ([`ShadowProjection::validate`](crate::ShadowProjection::validate))
+    /// sound and matching its kind (one layer, six for a point light), scattering finite and
+    /// ≥ 0, bias finite and ≥ 0, at most [`MAX_LIGHTS`] reaching the view. The error names the
+    /// field (`medium.scattering`, `lights[k].…`). NaN or a negative coefficient never reaches
+    /// the passes.
     pub fn validate_lights(&self) -> Result<(), Error> {
+        self.medium.validate()?;
         if self.lights.is_empty() {
             return Err(Error::invalid("lights", "[]", "a frame needs at least one light"));
         }
         for (k, fl) in self.lights.iter().enumerate() {
+            fl.light.validate(&format!("lights[{k}]"))?;
+            fl.shadow.validate(&format!("lights[{k}].shadow"))?;
             let layers = fl.light.shadow_layers();
             if fl.shadow.layers != layers {
                 return Err(Error::invalid(

@@ -237,7 +237,48 @@ impl Default for Medium {
     }
 }
 
+/// `v` as `[x, y, z]` for an error message.
+fn vec3_text(v: Vec3) -> String {
+    format!("[{}, {}, {}]", v.x, v.y, v.z)
+}
+
+/// Checks a finite RGB value ≥ 0 per channel (`key` names it in the error).
+fn check_rgb(key: &str, v: Vec3) -> Result<(), crate::Error> {
+    if !(v.is_finite() && v.min_element() >= 0.0) {
+        return Err(crate::Error::invalid(key, vec3_text(v), "must be finite and ≥ 0 in every channel"));
+    }
+    Ok(())
+}
+
+/// Checks a finite unit-able direction (`key` names it in the error).
+fn check_direction(key: &str, v: Vec3) -> Result<(), crate::Error> {
+    if !(v.is_finite() && v.length() > 1e-12) {
+        return Err(crate::Error::invalid(key, vec3_text(v), "must be finite and non-zero"));
+    }
+    Ok(())
+}
+
 impl Medium {
+    /// Checks the coefficients (finite, ≥ 0 per channel) and the phase function's parameters
+    /// (asymmetry in (−1, 1), Rayleigh fractions in [0, 1]); the error names the field
+    /// (`medium.scattering`, …) and its value.
+    pub fn validate(&self) -> Result<(), crate::Error> {
+        check_rgb("medium.scattering", self.scattering)?;
+        check_rgb("medium.absorption", self.absorption)?;
+        let g_ok = |g: f32| g.is_finite() && g > -1.0 && g < 1.0;
+        match self.phase {
+            Phase::HenyeyGreenstein { g } | Phase::HoffmanPreetham { g, .. } if !g_ok(g) => {
+                Err(crate::Error::invalid("medium.phase.g", g, "must be in (−1, 1)"))
+            }
+            Phase::HoffmanPreetham { rayleigh_fraction: f, .. }
+                if !(f.is_finite() && f.min_element() >= 0.0 && f.max_element() <= 1.0) =>
+            {
+                Err(crate::Error::invalid("medium.phase.rayleigh_fraction", vec3_text(f), "must be in [0, 1]"))
+            }
+            _ => Ok(()),
+        }
+    }
+
     /// Extinction σt = σs + σa.
     pub fn extinction(&self) -> Vec3 {
         self.scattering + self.absorption
@@ -338,6 +379,46 @@ pub enum Light {
 }
 
 impl Light {
+    /// Checks the light's fields: finite positions, finite non-zero directions, colour and
+    /// intensity finite and ≥ 0, a spot's outer half-angle in (0, 90) degrees and its inner one
+    /// in [0, outer]. `key` (`lights[2]`) prefixes the field in the error.
+    pub fn validate(&self, key: &str) -> Result<(), crate::Error> {
+        let (color, intensity) = match self {
+            Light::Directional { direction, color, intensity } => {
+                check_direction(&format!("{key}.direction"), *direction)?;
+                (color, intensity)
+            }
+            Light::Spot { position, direction, outer_angle_degrees: outer, inner_angle_degrees: inner, color, intensity, .. } => {
+                if !position.is_finite() {
+                    return Err(crate::Error::invalid(format!("{key}.position"), vec3_text(*position), "must be finite"));
+                }
+                check_direction(&format!("{key}.direction"), *direction)?;
+                if !(*outer > 0.0 && *outer < 90.0) {
+                    return Err(crate::Error::invalid(format!("{key}.outer_angle_degrees"), outer, "must be in (0, 90)"));
+                }
+                if !(*inner >= 0.0 && inner <= outer) {
+                    return Err(crate::Error::invalid(
+                        format!("{key}.inner_angle_degrees"),
+                        inner,
+                        format!("must be in [0, outer_angle_degrees = {outer}]"),
+                    ));
+                }
+                (color, intensity)
+            }
+            Light::Point { position, color, intensity } => {
+                if !position.is_finite() {
+                    return Err(crate::Error::invalid(format!("{key}.position"), vec3_text(*position), "must be finite"));
+                }
+                (color, intensity)
+            }
+        };
+        check_rgb(&format!("{key}.color"), *color)?;
+        if !(intensity.is_finite() && *intensity >= 0.0) {
+            return Err(crate::Error::invalid(format!("{key}.intensity"), intensity, "must be finite and ≥ 0"));
+        }
+        Ok(())
+    }
+
     /// Short name of the light kind.
     pub fn kind_name(&self) -> &'static str {
         match self {

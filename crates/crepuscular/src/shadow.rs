@@ -90,6 +90,42 @@ pub struct ShadowProjection {
     pub depth: DepthConvention,
 }
 
+impl ShadowProjection {
+    /// Checks what the lookups need: `layers` 1 or 6, finite `near` < `far` (`near` > 0 for a
+    /// perspective map), `texel_world` finite and > 0, and each used layer's matrix finite and
+    /// invertible. `key` (`lights[0].shadow`) prefixes the field in the error.
+    pub fn validate(&self, key: &str) -> Result<(), crate::Error> {
+        use crate::Error;
+        if !matches!(self.layers, 1 | 6) {
+            return Err(Error::invalid(format!("{key}.layers"), self.layers, "must be 1, or 6 for a cube map"));
+        }
+        if !(self.near.is_finite() && self.far.is_finite() && self.far > self.near) {
+            return Err(Error::invalid(
+                format!("{key}.far"),
+                self.far,
+                format!("near ({}) and far must be finite with far > near", self.near),
+            ));
+        }
+        if !self.orthographic && self.near <= 0.0 {
+            return Err(Error::invalid(format!("{key}.near"), self.near, "must be > 0 for a perspective shadow map"));
+        }
+        if !(self.texel_world.is_finite() && self.texel_world > 0.0) {
+            return Err(Error::invalid(format!("{key}.texel_world"), self.texel_world, "must be finite and > 0"));
+        }
+        for (l, m) in self.view_proj.iter().take(self.layers as usize).enumerate() {
+            let det = m.determinant();
+            if !(m.is_finite() && det.is_finite() && det != 0.0) {
+                return Err(Error::invalid(
+                    format!("{key}.view_proj[{l}]"),
+                    format!("determinant {det}"),
+                    "must be a finite, invertible matrix",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Look-at targets and up vectors of the six cube faces, in layer order.
 pub const CUBE_FACES: [(Vec3, Vec3); 6] = [
     (Vec3::X, Vec3::NEG_Y),

@@ -156,4 +156,47 @@ fn composite_refuses_targets_that_do_not_fit() {
     let no_copy = texture(&gpu, 64, 36, wgpu::TextureFormat::Rgba16Float, wgpu::TextureUsages::RENDER_ATTACHMENT);
     let e = comp.encode(&mut enc, &inputs, CompositeTarget::InPlace(&no_copy), None);
     assert!(e.as_ref().is_err_and(|e| e.to_string().contains("COPY_SRC")), "{e:?}");
+    // A surface of another size, an in-scattering texture that cannot be sampled.
+    let target = composite_target(&gpu, 64, 36);
+    let target_view = target.create_view(&Default::default());
+    let small = texture(&gpu, 32, 36, wgpu::TextureFormat::Rgba16Float, wgpu::TextureUsages::TEXTURE_BINDING);
+    let small_view = small.create_view(&Default::default());
+    let e = comp.encode(
+        &mut enc,
+        &CompositeInputs { surface: &small_view, ..inputs },
+        CompositeTarget::Into(&target_view),
+        None,
+    );
+    assert!(e.as_ref().is_err_and(|e| e.to_string().contains("surface") && e.to_string().contains("64×36")), "{e:?}");
+    let unsampled = texture(&gpu, 64, 36, wgpu::TextureFormat::Rgba32Float, wgpu::TextureUsages::STORAGE_BINDING);
+    let unsampled_view = unsampled.create_view(&Default::default());
+    let e = comp.encode(
+        &mut enc,
+        &CompositeInputs { inscatter: &unsampled_view, ..inputs },
+        CompositeTarget::Into(&target_view),
+        None,
+    );
+    assert!(
+        e.as_ref().is_err_and(|e| e.to_string().contains("inscatter") && e.to_string().contains("TEXTURE_BINDING")),
+        "{e:?}"
+    );
+    // The same views frame after frame: one bind group; new views: one more.
+    let mut comp = Composite::new(&gpu.device).unwrap();
+    for _ in 0..3 {
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        comp.encode(&mut enc, &inputs, CompositeTarget::Into(&target_view), None).unwrap();
+        gpu.queue.submit([enc.finish()]);
+    }
+    assert_eq!(comp.bind_group_builds(), 1);
+    let other_surface = tex.surface.create_view(&Default::default());
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    comp.encode(
+        &mut enc,
+        &CompositeInputs { surface: &other_surface, ..inputs },
+        CompositeTarget::Into(&target_view),
+        None,
+    )
+    .unwrap();
+    gpu.queue.submit([enc.finish()]);
+    assert_eq!(comp.bind_group_builds(), 2);
 }

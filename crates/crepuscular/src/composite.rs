@@ -6,7 +6,7 @@
 
 use crate::error::Error;
 use crate::frame::FrameDesc;
-use crate::techniques::pass::Bindings;
+use crate::techniques::pass::{BindCache, Bindings, Bound};
 use crate::tonemap::ToneMap;
 use std::collections::HashMap;
 use wgpu::util::DeviceExt;
@@ -56,10 +56,21 @@ pub struct Composite {
     bindings: Bindings,
     pipeline_layout: wgpu::PipelineLayout,
     pipelines: HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
-    scratch: Option<wgpu::Texture>,
+    /// The in-place copy of the target, with its view (kept, so the bind group stays valid).
+    scratch: Option<(wgpu::Texture, wgpu::TextureView)>,
+    /// The frame's uniforms and the tone parameters, written through the caller's encoder.
+    frame_buffer: wgpu::Buffer,
+    params_buffer: wgpu::Buffer,
+    /// The bind group, rebuilt only when a view it binds changes.
+    bind: BindCache<wgpu::BindGroup>,
 }
 
 impl Composite {
+    /// How many times the bind group was built (on new views or a resize, not per frame).
+    pub fn bind_group_builds(&self) -> u64 {
+        self.bind.builds()
+    }
+
     /// Builds the shader and layout on the caller's device (the layout read from the
     /// shader's own declarations, [`crate::techniques::pass::Bindings`]).
     pub fn new(device: &wgpu::Device) -> Result<Self, crate::Error> {
@@ -74,7 +85,25 @@ impl Composite {
             bind_group_layouts: &[Some(bindings.layout())],
             immediate_size: 0,
         });
-        Ok(Self { device: device.clone(), module, bindings, pipeline_layout, pipelines: HashMap::new(), scratch: None })
+        let uniform = |label, size: usize| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        Ok(Self {
+            device: device.clone(),
+            module,
+            bindings,
+            pipeline_layout,
+            pipelines: HashMap::new(),
+            scratch: None,
+            frame_buffer: uniform("composite frame uniforms", std::mem::size_of::<crate::FrameUniforms>()),
+            params_buffer: uniform("composite params", std::mem::size_of::<Params>()),
+            bind: BindCache::default(),
+        })
     }
 
     fn pipeline(&mut self, format: wgpu::TextureFormat) -> &wgpu::RenderPipeline {
@@ -118,9 +147,25 @@ impl Composite {
         let d = inputs.desc;
         let (w, h) = (d.width, d.height);
         let size = |t: &wgpu::Texture| (t.width(), t.height());
-        for (key, t) in [("depth", inputs.depth.texture()), ("inscatter", inputs.inscatter.texture())] {
+        let mut read = vec![("depth", inputs.depth.texture()), ("inscatter", inputs.inscatter.texture())];
+        if let CompositeTarget::Into(_) = target {
+            read.push(("surface", inputs.surface.texture()));
+        }
+        for (key, t) in read {
             if size(t) != (w, h) {
                 return Err(Error::invalid(key, format!("{}×{}", t.width(), t.height()), format!("must be {w}×{h}")));
+            }
+            if !t.usage().contains(wgpu::TextureUsages::TEXTURE_BINDING) {
+                return Err(Error::invalid(key, format!("{:?}", t.usage()), "needs TEXTURE_BINDING usage"));
+            }
+            let float = matches!(t.format().sample_type(None, None), Some(wgpu::TextureSampleType::Float { .. }))
+                || matches!(t.format(), wgpu::TextureFormat::Depth32Float);
+            if !float {
+                return Err(Error::invalid(
+                    key,
+                    format!("{:?}", t.format()),
+                    "must be a float (or Depth32Float) format",
+                ));
             }
         }
         let target_texture = match target {
@@ -145,8 +190,8 @@ impl Composite {
                         "in place needs COPY_SRC usage",
                     ));
                 }
-                if self.scratch.as_ref().is_none_or(|s| size(s) != (w, h) || s.format() != format) {
-                    self.scratch = Some(self.device.create_texture(&wgpu::TextureDescriptor {
+                if self.scratch.as_ref().is_none_or(|(s, _)| size(s) != (w, h) || s.format() != format) {
+                    let texture = self.device.create_texture(&wgpu::TextureDescriptor {
                         label: Some("composite scratch"),
                         size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
                         mip_level_count: 1,
@@ -155,43 +200,56 @@ impl Composite {
                         format,
                         usage: wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::TEXTURE_BINDING,
                         view_formats: &[],
-                    }));
+                    });
+                    let view = texture.create_view(&Default::default());
+                    self.scratch = Some((texture, view));
                 }
-                let scratch = self.scratch.as_ref().expect("allocated above");
+                let (scratch, scratch_view) = self.scratch.as_ref().expect("allocated above");
                 encoder.copy_texture_to_texture(
                     t.as_image_copy(),
                     scratch.as_image_copy(),
                     wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
                 );
-                scratch.create_view(&Default::default())
+                scratch_view.clone()
             }
         };
         let tone_params = match tone {
             Some(t) => [t.exposure, 1.0, if format.is_srgb() { 0.0 } else { 1.0 }, 0.0],
             None => [1.0, 0.0, 0.0, 0.0],
         };
-        // This frame's uniforms in buffers of its own (so composites of different frames in one
-        // encoder each read their own values).
-        let uniform = |label, contents: &[u8]| {
-            self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
-        };
-        let frame_buffer = uniform("composite frame uniforms", bytemuck::bytes_of(&d.uniforms()));
-        let params_buffer = uniform("composite params", bytemuck::bytes_of(&Params { tone: tone_params }));
-        let view = wgpu::BindingResource::TextureView;
-        let bind = self.bindings.bind(
-            &self.device,
-            &[
-                ("f", frame_buffer.as_entire_binding()),
-                ("params", params_buffer.as_entire_binding()),
-                ("surface_tex", view(&surface_view)),
-                ("inscatter_tex", view(inputs.inscatter)),
-                ("depth_tex", view(inputs.depth)),
-            ],
-        )?;
+        // This frame's uniforms, copied through the encoder from staging buffers of their own
+        // (so composites of different frames in one encoder each read their own values).
+        for (dst, bytes) in [
+            (&self.frame_buffer, bytemuck::bytes_of(&d.uniforms())),
+            (&self.params_buffer, bytemuck::bytes_of(&Params { tone: tone_params })),
+        ] {
+            let staging = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("composite uniforms upload"),
+                contents: bytes,
+                usage: wgpu::BufferUsages::COPY_SRC,
+            });
+            encoder.copy_buffer_to_buffer(&staging, 0, dst, 0, bytes.len() as u64);
+        }
+        let key = vec![
+            Bound::View(surface_view.clone()),
+            Bound::View(inputs.inscatter.clone()),
+            Bound::View(inputs.depth.clone()),
+        ];
+        if !self.bind.is_current(&key) {
+            let view = wgpu::BindingResource::TextureView;
+            let bind = self.bindings.bind(
+                &self.device,
+                &[
+                    ("f", self.frame_buffer.as_entire_binding()),
+                    ("params", self.params_buffer.as_entire_binding()),
+                    ("surface_tex", view(&surface_view)),
+                    ("inscatter_tex", view(inputs.inscatter)),
+                    ("depth_tex", view(inputs.depth)),
+                ],
+            )?;
+            self.bind.store(key, bind);
+        }
+        let bind = self.bind.value().clone();
         let target_view = match target {
             CompositeTarget::Into(v) => v.clone(),
             CompositeTarget::InPlace(t) => t.create_view(&Default::default()),

@@ -388,13 +388,29 @@ impl Light {
                 check_direction(&format!("{key}.direction"), *direction)?;
                 (color, intensity)
             }
-            Light::Spot { position, direction, outer_angle_degrees: outer, inner_angle_degrees: inner, color, intensity, .. } => {
+            Light::Spot {
+                position,
+                direction,
+                outer_angle_degrees: outer,
+                inner_angle_degrees: inner,
+                color,
+                intensity,
+                ..
+            } => {
                 if !position.is_finite() {
-                    return Err(crate::Error::invalid(format!("{key}.position"), vec3_text(*position), "must be finite"));
+                    return Err(crate::Error::invalid(
+                        format!("{key}.position"),
+                        vec3_text(*position),
+                        "must be finite",
+                    ));
                 }
                 check_direction(&format!("{key}.direction"), *direction)?;
                 if !(*outer > 0.0 && *outer < 90.0) {
-                    return Err(crate::Error::invalid(format!("{key}.outer_angle_degrees"), outer, "must be in (0, 90)"));
+                    return Err(crate::Error::invalid(
+                        format!("{key}.outer_angle_degrees"),
+                        outer,
+                        "must be in (0, 90)",
+                    ));
                 }
                 if !(*inner >= 0.0 && inner <= outer) {
                     return Err(crate::Error::invalid(
@@ -407,7 +423,11 @@ impl Light {
             }
             Light::Point { position, color, intensity } => {
                 if !position.is_finite() {
-                    return Err(crate::Error::invalid(format!("{key}.position"), vec3_text(*position), "must be finite"));
+                    return Err(crate::Error::invalid(
+                        format!("{key}.position"),
+                        vec3_text(*position),
+                        "must be finite",
+                    ));
                 }
                 (color, intensity)
             }

@@ -87,7 +87,11 @@ pub struct BruteForce {
 
 impl BruteForce {
     /// Builds the pipeline.
-    pub(crate) fn new(gpu: &GpuContext, settings: BruteForceSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub(crate) fn new(
+        gpu: &GpuContext,
+        settings: BruteForceSettings,
+        output: wgpu::TextureFormat,
+    ) -> Result<Self, Error> {
         settings.validate()?;
         gpu.try_scoped("creating the brute-force pipeline", || {
             let device = &gpu.device;

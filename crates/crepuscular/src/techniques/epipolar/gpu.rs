@@ -124,7 +124,11 @@ impl Passes {
 
 impl Epipolar {
     /// Builds the passes and the size-independent buffers.
-    pub(crate) fn new(gpu: &GpuContext, settings: EpipolarSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub(crate) fn new(
+        gpu: &GpuContext,
+        settings: EpipolarSettings,
+        output: wgpu::TextureFormat,
+    ) -> Result<Self, Error> {
         settings.validate()?;
         gpu.try_scoped("creating the epipolar pipelines", || {
             let device = &gpu.device;

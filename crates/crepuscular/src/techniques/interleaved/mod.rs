@@ -335,7 +335,11 @@ pub struct Interleaved {
 
 impl Interleaved {
     /// Builds the three passes.
-    pub(crate) fn new(gpu: &GpuContext, settings: InterleavedSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub(crate) fn new(
+        gpu: &GpuContext,
+        settings: InterleavedSettings,
+        output: wgpu::TextureFormat,
+    ) -> Result<Self, Error> {
         settings.validate()?;
         gpu.try_scoped("creating the interleaved pipelines", || {
             let device = &gpu.device;

@@ -177,7 +177,11 @@ pub struct Prefiltered {
 
 impl Prefiltered {
     /// Builds the passes and buffers.
-    pub(crate) fn new(gpu: &GpuContext, settings: PrefilteredSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub(crate) fn new(
+        gpu: &GpuContext,
+        settings: PrefilteredSettings,
+        output: wgpu::TextureFormat,
+    ) -> Result<Self, Error> {
         settings.validate()?;
         gpu.try_scoped("creating the prefiltered pipelines", || {
             let device = &gpu.device;

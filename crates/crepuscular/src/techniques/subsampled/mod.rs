@@ -215,7 +215,11 @@ pub struct Subsampled {
 
 impl Subsampled {
     /// Builds the passes and buffers.
-    pub(crate) fn new(gpu: &GpuContext, settings: SubsampledSettings, output: wgpu::TextureFormat) -> Result<Self, Error> {
+    pub(crate) fn new(
+        gpu: &GpuContext,
+        settings: SubsampledSettings,
+        output: wgpu::TextureFormat,
+    ) -> Result<Self, Error> {
         settings.validate()?;
         gpu.try_scoped("creating the subsampled pipelines", || {
             let device = &gpu.device;

@@ -266,6 +266,12 @@ fn wgsl_light_and_phase_kinds_are_the_rust_constants() {
         ("PHASE_HENYEY_GREENSTEIN", PHASE_HENYEY_GREENSTEIN),
         ("PHASE_RAYLEIGH", PHASE_RAYLEIGH),
         ("PHASE_HOFFMAN_PREETHAM", PHASE_HOFFMAN_PREETHAM),
+        ("CUBE_LAYERS", crepuscular::shadow::CUBE_FACES.len() as u32),
+        ("SPOT_FIXED", crepuscular::march::SpotSteps::Fixed.code()),
+        ("SPOT_EXACT_CONE", crepuscular::march::SpotSteps::ExactCone.code()),
+        ("SPOT_APPENDIX_B_CONSTANT", crepuscular::march::SpotSteps::AppendixBConstant.code()),
+        ("SPOT_APPENDIX_B_SMOOTHSTEP", crepuscular::march::SpotSteps::AppendixBSmoothstep.code()),
+        ("MARCH_EQUIANGULAR", crepuscular::march::EQUIANGULAR_BIT),
     ] {
         let decl = format!("const {name}: u32 = {value}u;");
         assert!(common.contains(&decl), "common.wgsl lacks `{decl}`");
@@ -304,4 +310,51 @@ fn temporal_uniforms_match_their_wgsl_layout() {
         std::mem::size_of::<T>(),
     );
     assert!(TEMPORAL_WGSL.contains(&format!("const MAX_FRAMES: f32 = {MAX_FRAMES:.1};")));
+}
+
+#[test]
+fn prefiltered_params_match_the_wgsl_layout_and_constants() {
+    use crepuscular::techniques::prefiltered::{self as pf, PrefilteredParams as P};
+    let fields: Vec<(&str, usize)> = vec![
+        ("mode", offset_of!(P, mode)),
+        ("local", offset_of!(P, local)),
+        ("width", offset_of!(P, width)),
+        ("height", offset_of!(P, height)),
+        ("regions", offset_of!(P, regions)),
+        ("bases", offset_of!(P, bases)),
+        ("bases_per_thread", offset_of!(P, bases_per_thread)),
+        ("flags", offset_of!(P, flags)),
+        ("epipole_radius", offset_of!(P, epipole_radius)),
+        ("epipole_steps", offset_of!(P, epipole_steps)),
+        ("light_steps", offset_of!(P, light_steps)),
+        ("spot_steps", offset_of!(P, spot_steps)),
+        ("camera", offset_of!(P, camera)),
+        ("light", offset_of!(P, light)),
+        ("axes", offset_of!(P, axes)),
+        ("ranges", offset_of!(P, ranges)),
+        ("epipole", offset_of!(P, epipole)),
+        ("region_x", offset_of!(P, region_x)),
+        ("bands", offset_of!(P, bands)),
+        ("channels", offset_of!(P, channels)),
+        ("tree_levels", offset_of!(P, tree_levels)),
+        ("max_nodes", offset_of!(P, max_nodes)),
+    ];
+    // Every prefiltered and minmax pass shares the block (prefiltered/geometry.wgsl).
+    for (name, src, entry) in
+        pf::shaders().into_iter().chain(crepuscular::techniques::minmax::shaders()).collect::<Vec<_>>()
+    {
+        check_params(name, &src, entry, &fields, std::mem::size_of::<P>());
+    }
+    let geometry = pf::GEOMETRY_WGSL;
+    use pf::rectify::Mode;
+    for (name, value) in [
+        ("RECT_PROJECTIVE", Mode::Projective.code()),
+        ("RECT_EPIPOLAR", Mode::Epipolar.code()),
+        ("FLAG_TRANSMITTANCE_WEIGHTS", pf::FLAG_TRANSMITTANCE_WEIGHTS),
+        ("FLAG_FULL_CIRCLE", pf::FLAG_FULL_CIRCLE),
+        ("FLAG_HOST_RASTER", pf::FLAG_HOST_RASTER),
+    ] {
+        let decl = format!("const {name}: u32 = {value}u;");
+        assert!(geometry.contains(&decl), "prefiltered/geometry.wgsl lacks `{decl}`");
+    }
 }

@@ -64,6 +64,8 @@ struct Lights {
 const LIGHT_DIRECTIONAL: u32 = 0u;
 const LIGHT_SPOT: u32 = 1u;
 const LIGHT_POINT: u32 = 2u;
+// A point light's shadow map: one layer per cube face (shadow.rs CUBE_FACES).
+const CUBE_LAYERS: u32 = 6u;
 const PHASE_ISOTROPIC: u32 = 0u;
 const PHASE_HENYEY_GREENSTEIN: u32 = 1u;
 const PHASE_RAYLEIGH: u32 = 2u;
@@ -207,7 +209,7 @@ fn light_view_proj(l: Light, layer: u32) -> mat4x4<f32> {
 // shadow.rs ShadowMap::coord.
 fn shadow_coord(l: Light, p: vec3<f32>) -> ShadowCoord {
     var layer = 0u;
-    if l.shadow_layers == 6u {
+    if l.shadow_layers == CUBE_LAYERS {
         layer = cube_face(p - l.position.xyz);
     }
     return shadow_coord_clip(l, layer, light_view_proj(l, layer) * vec4<f32>(p, 1.0));
@@ -409,25 +411,29 @@ fn smooth_denominator(den: f32, k: f32) -> f32 {
     return k + (den - k) * w;
 }
 
-// march.rs StepPolicy::code: bits 0-1 the spot policy (0 fixed, 1 exact-cone,
-// 2 appendix-b-constant, 3 appendix-b-smoothstep), MARCH_EQUIANGULAR for equiangular steps.
+// march.rs StepPolicy::code: bits 0-1 the spot policy (SpotSteps::code), MARCH_EQUIANGULAR for
+// equiangular steps.
 const MARCH_SPOT_MASK: u32 = 3u;
 const MARCH_EQUIANGULAR: u32 = 4u;
+const SPOT_FIXED: u32 = 0u;
+const SPOT_EXACT_CONE: u32 = 1u;
+const SPOT_APPENDIX_B_CONSTANT: u32 = 2u;
+const SPOT_APPENDIX_B_SMOOTHSTEP: u32 = 3u;
 
 // march.rs march_interval: the interval of the view ray a technique marches with its N steps.
 fn policy_interval(l: Light, o: vec3<f32>, d: vec3<f32>, s: f32, code: u32, denominator: f32) -> vec2<f32> {
     let policy = code & MARCH_SPOT_MASK;
-    if l.kind != LIGHT_SPOT || policy == 0u {
+    if l.kind != LIGHT_SPOT || policy == SPOT_FIXED {
         return vec2<f32>(0.0, s);
     }
     let c = cone_interval(l, o, d, s);
-    if c.y <= c.x || policy == 1u {
+    if c.y <= c.x || policy == SPOT_EXACT_CONE {
         return c;
     }
     let dist = length(o + d * c.x - l.position.xyz);
     let ab = appendix_b_chord(dist, dot(d, l.direction.xyz), l.direction.w);
     var den = denominator;
-    if policy == 3u {
+    if policy == SPOT_APPENDIX_B_SMOOTHSTEP {
         den = smooth_denominator(ab.y, denominator);
     }
     return vec2<f32>(c.x, min(c.x + ab.x / den, s));

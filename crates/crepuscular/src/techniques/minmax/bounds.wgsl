@@ -30,7 +30,7 @@ fn line_depth(p: Params, l: Light, s: SampleLine, stored: f32) -> f32 {
 fn texel_bounds(p: Params, l: Light, col: u32, row: u32) -> vec2<f32> {
     let centre = texel_line(p, f32(col) + 0.5, f32(row) + 0.5);
     var layer = 0u;
-    if l.shadow_layers == 6u {
+    if l.shadow_layers == CUBE_LAYERS {
         layer = cube_face(centre.dir);
     }
     let m = light_view_proj(l, layer);
@@ -42,7 +42,7 @@ fn texel_bounds(p: Params, l: Light, col: u32, row: u32) -> vec2<f32> {
         let c = f32(col) + 0.5 * f32(k % 3u);
         let li = texel_line(p, c, f32(row) + 0.5 * f32(k / 3u));
         var layer_k = 0u;
-        if l.shadow_layers == 6u {
+        if l.shadow_layers == CUBE_LAYERS {
             layer_k = cube_face(li.dir);
         }
         var pt = li.p;

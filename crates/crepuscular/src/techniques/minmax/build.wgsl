@@ -22,9 +22,9 @@ fn level_offset(width: u32, level: u32) -> u32 {
 @compute @workgroup_size(64)
 fn build(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let row = wg.x;
-    let w = params.ints.z;
+    let w = params.width;
     let base = row * 2u * w;
-    let host = (params.ints2.w & 4u) != 0u && params.ints.x == 0u;
+    let host = (params.flags & FLAG_HOST_RASTER) != 0u && params.mode == RECT_PROJECTIVE;
     let light = lights.items[0];
     for (var c = li; c < w; c += 64u) {
         if host {
@@ -34,7 +34,7 @@ fn build(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
             tree[base + c] = texel_bounds(params, light, c, row);
         }
     }
-    let levels = params.ints4.z;
+    let levels = params.tree_levels;
     for (var l = 1u; l <= levels; l++) {
         storageBarrier();
         workgroupBarrier();

@@ -69,7 +69,7 @@ pub fn shaders() -> [(&'static str, String, &'static str); 3] {
 }
 
 /// The uniform block of every pass: `prefiltered`'s (one band, one region), with the tree's
-/// levels and the node budget in `ints4.z` and `ints4.w`.
+/// levels and the node budget in `tree_levels` and `max_nodes`.
 pub fn params(
     s: &MinmaxSettings,
     rect: &Rectification,
@@ -86,8 +86,8 @@ pub fn params(
         host,
         1,
     );
-    p.ints4[2] = s.tree_levels();
-    p.ints4[3] = s.max_nodes;
+    p.tree_levels = s.tree_levels();
+    p.max_nodes = s.max_nodes;
     p
 }
 

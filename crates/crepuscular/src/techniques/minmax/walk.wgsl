@@ -19,9 +19,9 @@ fn level_offset(width: u32, level: u32) -> u32 {
 
 // cpu.rs ray_row.
 fn ray_row(p: Params, row: f32) -> u32 {
-    let h = i32(p.ints.w);
+    let h = i32(p.height);
     let r = i32(floor(row));
-    if (p.ints2.w & 2u) != 0u {
+    if (p.flags & FLAG_FULL_CIRCLE) != 0u {
         return u32(((r % h) + h) % h);
     }
     return u32(clamp(r, 0, h - 1));
@@ -33,10 +33,10 @@ fn column_distance(p: Params, dir: vec3<f32>, theta: f32, col: f32) -> f32 {
         return 0.0;
     }
     let c = line_of_column(p, col);
-    if p.ints.x == 0u {
+    if p.mode == RECT_PROJECTIVE {
         return c / max(dot(dir, p.axes[0].xyz), 1e-6);
     }
-    if p.ints.y == 0u {
+    if p.local == 0u {
         return c / max(sin(theta), 1e-6);
     }
     if theta + c >= PI - 1e-6 {
@@ -70,8 +70,8 @@ fn spans_new(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> Spans {
         return sp;
     }
     let o = f.camera_pos.xyz;
-    let iv = march_interval(f, light, o, dir, s, p.ints3.w, p.epipole.w);
-    sp.segments = own_steps(light, iv, p.ints3.z, o, dir, p.ints3.w);
+    let iv = march_interval(f, light, o, dir, s, p.spot_steps, p.epipole.w);
+    sp.segments = own_steps(light, iv, p.light_steps, o, dir, p.spot_steps);
     sp.uni = uniform_step(sp.segments, extinction(f), 0.5);
     return sp;
 }
@@ -246,7 +246,7 @@ fn resolve_mixed(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32
         }
         let tm = 0.5 * (a + b);
         var layer = 0u;
-        if l.shadow_layers == 6u {
+        if l.shadow_layers == CUBE_LAYERS {
             layer = cube_face(o + dir * tm - l.position.xyz);
         }
         let m = light_view_proj(l, layer);
@@ -352,16 +352,16 @@ fn flush(f: Frame, p: Params, sp: ptr<function, Spans>, span: vec3<f32>, theta: 
 fn shade(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> Shaded {
     let rp = rectify_point(p, f.camera_pos.xyz + dir * s, dir);
     var theta = 0.0;
-    if p.ints.x == 1u {
+    if p.mode == RECT_EPIPOLAR {
         theta = angle_between(dir, p.axes[2].xyz);
     }
     let c_b = rp.col;
     let z = rp.z;
     var sp = spans_new(f, p, dir, s);
     var w: Walk;
-    let width = p.ints.z;
-    let levels = p.ints4.z;
-    let max_nodes = p.ints4.w;
+    let width = p.width;
+    let levels = p.tree_levels;
+    let max_nodes = p.max_nodes;
     let base = ray_row(p, rp.row) * 2u * width;
     var pending = vec3<f32>(0.0, 0.0, NO_SPAN);
     var level = 0u;

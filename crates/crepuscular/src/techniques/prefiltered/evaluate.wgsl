@@ -28,12 +28,12 @@ fn load_cumw(p: Params, wset: u32, pos: vec2<f32>) -> f32 {
     let x0 = floor(pos.x);
     let y0 = floor(pos.y);
     let fr = pos - vec2<f32>(x0, y0);
-    let h = i32(p.ints.w);
+    let h = i32(p.height);
     let xa = i32(x0);
-    let xb = min(xa + 1, i32(p.ints.z) - 1);
+    let xb = min(xa + 1, i32(p.width) - 1);
     var ya = i32(y0);
     var yb = ya + 1;
-    if (p.ints2.w & 2u) != 0u {
+    if (p.flags & FLAG_FULL_CIRCLE) != 0u {
         ya = ((ya % h) + h) % h;
         yb = ((yb % h) + h) % h;
     } else {
@@ -47,9 +47,9 @@ fn load_cumw(p: Params, wset: u32, pos: vec2<f32>) -> f32 {
 }
 
 fn vis_at(p: Params, wset: u32, pos: vec2<f32>, zs: f32) -> f32 {
-    let uv = (pos + 0.5) / vec2<f32>(f32(p.ints.z), f32(p.ints.w));
+    let uv = (pos + 0.5) / vec2<f32>(f32(p.width), f32(p.height));
     var v = 0.5;
-    let layers = p.ints2.y / 4u;
+    let layers = p.bases / 4u;
     for (var l = 0u; l < layers; l++) {
         let b = textureSampleLevel(basis_tex, basis_sampler, uv, i32(wset * layers + l), 0.0);
         v += dot(coeff4(zs, l), 2.0 * b - 1.0);
@@ -69,7 +69,7 @@ fn prefiltered_visibility(p: Params, wset: u32, row: f32, col: f32, region: u32,
         }
         let pos = lookup_pos(p, at, row, cols.x, cols.y);
         let v = vis_at(p, wset, pos, zs);
-        if p.ints2.x == 1u {
+        if p.regions == 1u {
             return clamp(v, 0.0, 1.0);
         }
         let wt = load_cumw(p, wset, pos);
@@ -86,9 +86,9 @@ fn prefiltered_visibility(p: Params, wset: u32, row: f32, col: f32, region: u32,
 // cpu.rs ray_visibility: the two bands around the ray, blended; per channel with RGB weights.
 fn ray_visibility(p: Params, pt: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
     let rp = rectify_point(p, pt, dir);
-    let row = min(u32(max(rp.row, 0.0)), p.ints.w - 1u);
+    let row = min(u32(max(rp.row, 0.0)), p.height - 1u);
     let br = band_bracket(p, row, dir);
-    let ch = p.ints4.y;
+    let ch = p.channels;
     var out = vec3<f32>(0.0);
     for (var c = 0u; c < ch; c++) {
         var v = prefiltered_visibility(p, br.b0 * ch + c, rp.row, rp.col, rp.region, rp.z);
@@ -112,11 +112,11 @@ fn unoccluded_inscatter(f: Frame, p: Params, dir: vec3<f32>, s: f32) -> vec3<f32
         return f.sigma_s.xyz * phase(f, dot(inc.dir, -dir)) * inc.radiance * segment_transmittance(st, s);
     }
     let o = f.camera_pos.xyz;
-    let iv = march_interval(f, light, o, dir, s, p.ints3.w, p.epipole.w);
+    let iv = march_interval(f, light, o, dir, s, p.spot_steps, p.epipole.w);
     if iv.y <= iv.x {
         return vec3<f32>(0.0);
     }
-    let steps = own_steps(light, iv, p.ints3.z, o, dir, p.ints3.w);
+    let steps = own_steps(light, iv, p.light_steps, o, dir, p.spot_steps);
     let uni = uniform_step(steps, st, 0.5);
     var sum = vec3<f32>(0.0);
     for (var i = 0u; i < steps.n; i++) {

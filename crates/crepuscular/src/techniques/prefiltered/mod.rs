@@ -25,7 +25,10 @@ pub mod rectify;
 pub mod settings;
 
 pub use rectify::{Mode, Rectification, RectificationChoice, ReferenceRay};
-pub use settings::{BasisPrecision, PrefilteredParams, PrefilteredSettings};
+pub use settings::{
+    BasisPrecision, FLAG_FULL_CIRCLE, FLAG_HOST_RASTER, FLAG_TRANSMITTANCE_WEIGHTS, PrefilteredParams,
+    PrefilteredSettings,
+};
 
 use crate::error::Error;
 use crate::frame::{FrameDesc, GpuFrame};

@@ -16,11 +16,11 @@ fn band_value(i: u32) -> f32 {
 }
 
 fn texel_weight(f: Frame, p: Params, row: u32, band: u32, channel: u32, col: u32) -> f32 {
-    if (p.ints2.w & 1u) == 0u {
+    if (p.flags & FLAG_TRANSMITTANCE_WEIGHTS) == 0u {
         return 1.0;
     }
     let sigma = p.camera.w;
-    let rr = rows[row * p.ints4.x + band];
+    let rr = rows[row * p.bands + band];
     var ta = 0.0;
     if col > 0u {
         ta = reference_distance(p, rr, row, f32(col));
@@ -29,7 +29,7 @@ fn texel_weight(f: Frame, p: Params, row: u32, band: u32, channel: u32, col: u32
     if ta >= INF {
         return 0.0;
     }
-    if p.ints.y == 0u {
+    if p.local == 0u {
         return exp(-sigma * ta) * segment_transmittance1(sigma, tb - ta);
     }
     if tb >= INF {
@@ -41,7 +41,7 @@ fn texel_weight(f: Frame, p: Params, row: u32, band: u32, channel: u32, col: u32
     let ph = phase(f, dot(inc.dir, -dir));
     let c = inc.radiance * ph;
     var lum = dot(c, vec3<f32>(1.0 / 3.0));
-    if p.ints4.y == 3u {
+    if p.channels == 3u {
         lum = c[channel];
     }
     return lum * exp(-sigma * tm) * (tb - ta);
@@ -51,12 +51,12 @@ const MAX_GROUP_LAYERS: u32 = 32u;
 
 @compute @workgroup_size(64)
 fn prefilter(@builtin(global_invocation_id) id: vec3<u32>) {
-    let h = params.ints.w;
-    let regions = params.ints2.x;
-    let group_layers = params.ints2.z / 4u;
-    let groups = params.ints2.y / params.ints2.z;
-    let channels = params.ints4.y;
-    let sets = params.ints4.x * channels;
+    let h = params.height;
+    let regions = params.regions;
+    let group_layers = params.bases_per_thread / 4u;
+    let groups = params.bases / params.bases_per_thread;
+    let channels = params.channels;
+    let sets = params.bands * channels;
     let i = id.x + id.y * 65535u * 64u;
     if i >= h * regions * groups * sets {
         return;
@@ -68,7 +68,7 @@ fn prefilter(@builtin(global_invocation_id) id: vec3<u32>) {
     let band = wset / channels;
     let channel = wset % channels;
     let l0 = group * group_layers;
-    let first_layer = wset * (params.ints2.y / 4u);
+    let first_layer = wset * (params.bases / 4u);
     let cols = region_columns(params, region);
     var filt: array<vec4<f32>, MAX_GROUP_LAYERS>;
     for (var l = 0u; l < group_layers; l++) {

@@ -28,7 +28,7 @@ fn line_occluder(l: Light, pt: vec3<f32>, dir: vec3<f32>, bias: f32) -> Occluder
         q = l.position.xyz + dir;
     }
     var layer = 0u;
-    if l.shadow_layers == 6u {
+    if l.shadow_layers == CUBE_LAYERS {
         layer = cube_face(dir);
     }
     let c = light_view_proj(l, layer) * vec4<f32>(q, 1.0);
@@ -60,7 +60,7 @@ fn line_occluder(l: Light, pt: vec3<f32>, dir: vec3<f32>, bias: f32) -> Occluder
 
 @compute @workgroup_size(8, 8)
 fn rectify(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= params.ints.z || id.y >= params.ints.w {
+    if id.x >= params.width || id.y >= params.height {
         return;
     }
     let c = f32(id.x) + 0.5;

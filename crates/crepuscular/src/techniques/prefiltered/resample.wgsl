@@ -10,7 +10,7 @@ struct Line {
 fn texel_line(p: Params, col: f32, row: f32) -> Line {
     var l: Line;
     let c = line_of_column(p, col);
-    if p.ints.x == 0u {
+    if p.mode == RECT_PROJECTIVE {
         let q = row_param(p, row);
         l.p = p.camera.xyz + p.axes[0].xyz * c + p.axes[1].xyz * (q * c);
         l.dir = p.axes[2].xyz;
@@ -18,7 +18,7 @@ fn texel_line(p: Params, col: f32, row: f32) -> Line {
     }
     let w = slice_dir(p, row_param(p, row));
     let a = p.axes[2].xyz;
-    if p.ints.y == 1u {
+    if p.local == 1u {
         l.p = p.light.xyz;
         l.dir = normalize(-a * cos(c) + w * sin(c));
     } else {
@@ -30,7 +30,7 @@ fn texel_line(p: Params, col: f32, row: f32) -> Line {
 
 fn occluder_depth(p: Params, col: f32, o: vec3<f32>) -> f32 {
     let v = o - p.camera.xyz;
-    if p.ints.x == 0u {
+    if p.mode == RECT_PROJECTIVE {
         let x = line_of_column(p, col);
         return clamp((dot(v, p.axes[2].xyz) / x - p.ranges.z) / (p.ranges.w - p.ranges.z), 0.0, 1.0);
     }

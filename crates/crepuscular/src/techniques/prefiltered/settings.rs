@@ -283,17 +283,43 @@ impl PrefilteredSettings {
     }
 }
 
-/// The uniform block of every pass (`struct Params` in common_prefiltered.wgsl).
+/// Bit of [`PrefilteredParams::flags`]: weight the bases by transmittance (`FLAG_TRANSMITTANCE_WEIGHTS`).
+pub const FLAG_TRANSMITTANCE_WEIGHTS: u32 = 1;
+/// Bit of [`PrefilteredParams::flags`]: the epipolar rectification covers the full circle (`FLAG_FULL_CIRCLE`).
+pub const FLAG_FULL_CIRCLE: u32 = 2;
+/// Bit of [`PrefilteredParams::flags`]: the host rasterized the depth map, so the volume bias is
+/// added in the lookups (`FLAG_HOST_RASTER`).
+pub const FLAG_HOST_RASTER: u32 = 4;
+
+/// The uniform block of every prefiltered and minmax pass (`struct Params` in
+/// prefiltered/geometry.wgsl, field for field).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct PrefilteredParams {
-    /// Mode (0 projective, 1 epipolar), 1 for a local light, map width, map height.
-    pub ints: [u32; 4],
-    /// Regions, bases M, bases per thread, flags (1 transmittance weights, 2 full circle,
-    /// 4 the depth map was rasterized by the host: add the bias here).
-    pub ints2: [u32; 4],
-    /// Epipole radius (0 off or not on screen), epipole steps, light steps, spot-step policy.
-    pub ints3: [u32; 4],
+    /// The rectification: [`super::rectify::Mode::code`] (`RECT_PROJECTIVE`, `RECT_EPIPOLAR`).
+    pub mode: u32,
+    /// 1 for a spot or point light.
+    pub local: u32,
+    /// Rectified map width (columns).
+    pub width: u32,
+    /// Rectified map height (rows).
+    pub height: u32,
+    /// Column regions.
+    pub regions: u32,
+    /// Bases M.
+    pub bases: u32,
+    /// Bases per prefilter thread.
+    pub bases_per_thread: u32,
+    /// [`FLAG_TRANSMITTANCE_WEIGHTS`] | [`FLAG_FULL_CIRCLE`] | [`FLAG_HOST_RASTER`].
+    pub flags: u32,
+    /// Epipole disc radius in pixels (0: off, or the light is not on screen).
+    pub epipole_radius: u32,
+    /// Steps of the epipole disc's march.
+    pub epipole_steps: u32,
+    /// Segments of the local light's quadrature.
+    pub light_steps: u32,
+    /// The step policy's code ([`crate::march::StepPolicy::code`]).
+    pub spot_steps: u32,
     /// Camera position, mean extinction σ̄ for the weights.
     pub camera: [f32; 4],
     /// Light position, camera–light distance.
@@ -306,8 +332,14 @@ pub struct PrefilteredParams {
     pub epipole: [f32; 4],
     /// Region boundaries (regions + 1 used), padded to 12.
     pub region_x: [[f32; 4]; 3],
-    /// Bands, channels, 0, 0.
-    pub ints4: [u32; 4],
+    /// Depth bands.
+    pub bands: u32,
+    /// Channels per band: 1, or 3 for an RGB spot texture.
+    pub channels: u32,
+    /// Levels of the min-max tree (minmax only; 0 for prefiltered).
+    pub tree_levels: u32,
+    /// The walk's node budget (minmax only; 0 for prefiltered).
+    pub max_nodes: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<PrefilteredParams>() == 224);
@@ -327,25 +359,35 @@ impl PrefilteredParams {
         for (i, x) in r.region_x.iter().enumerate().take(12) {
             rx[i] = *x;
         }
-        let flags = s.transmittance_weights as u32 | (r.full_circle as u32) << 1 | (host_raster as u32) << 2;
+        let bit = |on: bool, flag: u32| if on { flag } else { 0 };
+        let flags = bit(s.transmittance_weights, FLAG_TRANSMITTANCE_WEIGHTS)
+            | bit(r.full_circle, FLAG_FULL_CIRCLE)
+            | bit(host_raster, FLAG_HOST_RASTER);
         let e = epipole.unwrap_or([0.0; 2]);
         let v = |v: glam::Vec3, w: f32| [v.x, v.y, v.z, w];
         Self {
-            ints: [r.mode.code(), r.local as u32, r.width, r.height],
-            ints2: [r.regions, s.bases, s.bases_per_thread, flags],
-            ints3: [
-                if epipole.is_some() { s.epipole_radius } else { 0 },
-                s.epipole_steps,
-                s.light_steps,
-                s.policy.code(),
-            ],
+            mode: r.mode.code(),
+            local: r.local as u32,
+            width: r.width,
+            height: r.height,
+            regions: r.regions,
+            bases: s.bases,
+            bases_per_thread: s.bases_per_thread,
+            flags,
+            epipole_radius: if epipole.is_some() { s.epipole_radius } else { 0 },
+            epipole_steps: s.epipole_steps,
+            light_steps: s.light_steps,
+            spot_steps: s.policy.code(),
             camera: v(r.camera, sigma_mean),
             light: v(r.light, r.light_distance),
             axes: r.axes.map(|a| v(a, 0.0)),
             ranges: r.ranges.to_array(),
             epipole: [e[0], e[1], bias, s.policy.denominator],
             region_x: [[rx[0], rx[1], rx[2], rx[3]], [rx[4], rx[5], rx[6], rx[7]], [rx[8], rx[9], rx[10], rx[11]]],
-            ints4: [r.bands, channels, 0, 0],
+            bands: r.bands,
+            channels,
+            tree_levels: 0,
+            max_nodes: 0,
         }
     }
 }

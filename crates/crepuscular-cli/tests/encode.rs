@@ -19,20 +19,24 @@ fn small(name: &str) -> Scene {
 
 /// The GPU techniques at settings sized for an 80×45 frame.
 fn techniques(scene: &Scene) -> Vec<TechniqueSettings> {
-    [
+    let list = [
         ("brute-force", &["steps=24"][..]),
         ("interleaved", &["steps=32"]),
         ("subsampled", &["steps=24"]),
         ("epipolar", &["slices=64", "samples=48"]),
         ("prefiltered", &["map_size=[128, 128]"]),
         ("minmax", &["map_size=[128, 128]"]),
-    ]
-    .iter()
-    .map(|(t, set)| {
-        let set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
-        parse_technique(t, scene, &set).unwrap()
-    })
-    .collect()
+    ];
+    // Every registered technique with a GPU side is here: a new one fails this test until it is given settings.
+    for info in crepuscular::techniques::TECHNIQUES.iter().filter(|i| i.gpu) {
+        assert!(list.iter().any(|(t, _)| *t == info.name), "no test settings for `{}`", info.name);
+    }
+    list.iter()
+        .map(|(t, set)| {
+            let set: Vec<String> = set.iter().map(|s| s.to_string()).collect();
+            parse_technique(t, scene, &set).unwrap()
+        })
+        .collect()
 }
 
 fn read(gpu: &GpuContext, t: &wgpu::Texture) -> Vec<u32> {

@@ -37,7 +37,7 @@ fn jittered(desc: &FrameDesc, pixels: f32) -> FrameDesc {
 }
 
 fn techniques(scene: &Scene) -> Vec<TechniqueSettings> {
-    [
+    let list = [
         ("brute-force", &["steps=32"][..]),
         ("interleaved", &["steps=32"]),
         ("subsampled", &["steps=32"]),
@@ -45,10 +45,14 @@ fn techniques(scene: &Scene) -> Vec<TechniqueSettings> {
         ("prefiltered", &["map_size=[128, 128]"]),
         ("minmax", &["map_size=[128, 128]"]),
         ("reference", &["steps=64"]),
-    ]
-    .iter()
-    .map(|(t, set)| parse_technique(t, scene, &set.iter().map(|s| s.to_string()).collect::<Vec<_>>()).unwrap())
-    .collect()
+    ];
+    // Every registered technique is here: a new one fails this test until it is given settings.
+    for info in crepuscular::techniques::TECHNIQUES.iter() {
+        assert!(list.iter().any(|(t, _)| *t == info.name), "no test settings for `{}`", info.name);
+    }
+    list.iter()
+        .map(|(t, set)| parse_technique(t, scene, &set.iter().map(|s| s.to_string()).collect::<Vec<_>>()).unwrap())
+        .collect()
 }
 
 /// The GPU host's frame for `desc`, the technique's in-scattering and the depth buffer.

@@ -103,20 +103,20 @@ pub const DEFAULT_STEP_SWEEP: [u32; 4] = [16, 32, 64, 128];
 pub fn default_plan(scenes: Vec<String>, techniques: &[String]) -> Result<BenchPlan> {
     let mut variants = Vec::new();
     for t in techniques {
-        match t.as_str() {
-            "brute-force" | "interleaved" | "subsampled" | "epipolar" => {
-                for n in DEFAULT_STEP_SWEEP {
-                    let o = format!("steps={n}");
-                    variants.push(Variant::new(t, &[&o], t, Some(("steps", n as f64))));
-                }
+        if t == "reference" {
+            bail!("`reference` is the quality yardstick of every bench row; it is not benchmarked");
+        }
+        let settings = TechniqueSettings::named(t).map_err(|e| anyhow::anyhow!("{e}"))?;
+        // Every technique that marches its rays (the shared `steps` setting) is swept over it;
+        // the others run at their defaults.
+        let marches = serde_json::to_value(&settings).ok().is_some_and(|v| v.get("steps").is_some());
+        if marches {
+            for n in DEFAULT_STEP_SWEEP {
+                let o = format!("steps={n}");
+                variants.push(Variant::new(t, &[&o], t, Some(("steps", n as f64))));
             }
-            "reference" => bail!("`reference` is the quality yardstick of every bench row; it is not benchmarked"),
-            other => {
-                if crepuscular::techniques::find(other).is_none() {
-                    bail!("unknown technique `{other}`");
-                }
-                variants.push(Variant::new(other, &[], other, None));
-            }
+        } else {
+            variants.push(Variant::new(t, &[], t, None));
         }
     }
     Ok(BenchPlan {

@@ -731,9 +731,17 @@ mod tests {
             }
         }
         // The text is the field's documentation, paragraphs kept.
+        let factor = setting_doc("subsampled", "factor").unwrap();
+        assert!(factor.starts_with("Subsampling factor f: the grid is"), "{factor}");
+        assert!(factor.contains("\n\nRay-marching cost falls as 1/f²"), "{factor}");
+        // The shared march settings (flattened) carry their one doc, under every technique.
         let steps = setting_doc("brute-force", "steps").unwrap();
-        assert!(steps.starts_with("Ray-marching steps per pixel, N in eq. 1 of Tóth & Umenhoffer 2009."), "{steps}");
-        assert!(steps.contains("\n\nMore steps resolve thinner shafts"), "{steps}");
+        assert!(steps.starts_with("Ray-marching steps N per view ray (eq. 1)"), "{steps}");
+        assert_eq!(setting_doc("epipolar", "steps"), Some(steps));
+        let spot = setting_doc("minmax", "spot_steps").unwrap();
+        assert!(spot.contains("Wyman & Ramsey 2008"), "{spot}");
+        assert_eq!(setting_doc("brute-force", "spot_steps"), Some(spot));
+        assert!(setting_doc("minmax", "steps").is_none());
         assert!(setting_doc("brute-force", "no-such-key").is_none());
     }
 

@@ -139,17 +139,22 @@ fn reversed_z_infinite_projection_gives_the_standard_in_scattering() {
 }
 
 #[test]
-fn a_projection_jittered_by_one_pixel_shifts_the_image_by_one_pixel() {
-    let gpu = test_gpu("a_projection_jittered_by_one_pixel_shifts_the_image_by_one_pixel");
+fn a_projection_jittered_by_whole_pixels_shifts_the_image_by_them() {
+    let gpu = test_gpu("a_projection_jittered_by_whole_pixels_shifts_the_image_by_them");
     for scene_name in ["colonnade", "stained-glass"] {
         let scene = small(scene_name);
         let desc = frame_desc(&scene).unwrap();
-        let shifted = jittered(&desc, 1.0);
-        // The per-pixel march (the reference's stratified samples are seeded per pixel, so a
-        // shifted pixel draws other samples; the screen-space techniques' patterns are fixed
-        // to the screen, not the scene).
-        for t in ["brute-force"] {
-            let settings = parse_technique(t, &scene, &["steps=32".to_string()]).unwrap();
+        // The per-pixel march by one pixel; the screen-space patterns by their period (the
+        // interleaving block M, the subsampling factor f: their patterns are fixed to the
+        // screen, so only a shift by whole periods moves the same samples onto the same
+        // content). The reference's stratified samples are seeded per pixel, so a shifted
+        // pixel draws other samples; epipolar's lines end on the screen's border and the
+        // rectifications follow the view frustum, so their samples move with a jitter.
+        for (t, set, pixels) in
+            [("brute-force", "steps=32", 1u32), ("interleaved", "block=4", 4), ("subsampled", "factor=4", 4)]
+        {
+            let shifted = jittered(&desc, pixels as f32);
+            let settings = parse_technique(t, &scene, &["steps=32".to_string(), set.to_string()]).unwrap();
             let mut runs =
                 vec![("cpu", cpu_frame(&scene, &desc, &settings).0, cpu_frame(&scene, &shifted, &settings).0)];
             if let Some(gpu) = &gpu {
@@ -160,24 +165,37 @@ fn a_projection_jittered_by_one_pixel_shifts_the_image_by_one_pixel() {
                 ));
             }
             for (backend, a, b) in runs {
-                let (w, h) = (desc.width, desc.height);
-                // b(x + 1, y) = a(x, y).
-                let mut left = Image::new(w - 1, h);
-                let mut right = Image::new(w - 1, h);
+                let (w, h, k) = (desc.width, desc.height, pixels);
+                // b(x + k, y) = a(x, y), away from the side borders by one period, where the
+                // patterns' windows and grids are clamped to the image.
+                let m = if k > 1 { k } else { 0 };
+                let cols = w - k - 2 * m;
+                let mut left = Image::new(cols, h);
+                let mut right = Image::new(cols, h);
                 for y in 0..h {
-                    for x in 0..w - 1 {
-                        left.pixels[(y * (w - 1) + x) as usize] = a.pixels[(y * w + x) as usize];
-                        right.pixels[(y * (w - 1) + x) as usize] = b.pixels[(y * w + x + 1) as usize];
+                    for i in 0..cols {
+                        let x = m + i;
+                        left.pixels[(y * cols + i) as usize] = a.pixels[(y * w + x) as usize];
+                        right.pixels[(y * cols + i) as usize] = b.pixels[(y * w + x + k) as usize];
                     }
                 }
                 let (over, p99, max) = differences(&right, &left);
                 let (unshifted, _, _) = differences(&b, &a);
                 eprintln!(
-                    "{scene_name} {t} {backend}: jittered by one pixel vs shifted back: {:.2} % of pixels off by > 1 %, p99 {p99:.1e}, max {max:.1e} (not shifted back: {:.1} % off)",
+                    "{scene_name} {t} {backend}: jittered by {k} pixel(s) vs shifted back: {:.2} % of pixels off by > 1 %, p99 {p99:.1e}, max {max:.1e} (not shifted back: {:.1} % off)",
                     100.0 * over,
                     100.0 * unshifted
                 );
-                assert!(p99 < 1e-3 && over < 5e-3, "{scene_name} {t} {backend}: p99 {p99}, {over} off by > 1 %");
+                // The CPU host rasterizes the shifted view to the same depths; the GPU's
+                // rasterizer snaps the shifted vertices to its sub-pixel grid, so a silhouette
+                // pixel's depth may differ. Brute-force sees that pixel alone; subsampled's
+                // depth-compatibility test may then blend a different set of grid samples
+                // around it. Bounds: brute-force and interleaved (and every CPU run) 1e-3 at
+                // the 99th percentile and 0.5 % of pixels; subsampled on the GPU, measured on
+                // llvmpipe (colonnade 1.6 % of pixels, p99 2.0e-2), 2.5× that.
+                let (p99_max, over_max) =
+                    if t == "subsampled" && backend == "gpu" { (5e-2, 4e-2) } else { (1e-3, 5e-3) };
+                assert!(p99 < p99_max && over < over_max, "{scene_name} {t} {backend}: p99 {p99}, {over} off by > 1 %");
                 // And the jitter did move the image (so the comparison above can fail).
                 assert!(unshifted > 0.02, "{scene_name} {t} {backend}: the jitter moved nothing ({unshifted})");
             }

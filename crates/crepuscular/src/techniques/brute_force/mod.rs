@@ -76,7 +76,7 @@ impl From<&BruteForceSettings> for MarchParams {
 
 /// The GPU side of `brute-force`: its pass and uniform buffers, built once and reused.
 pub struct BruteForce {
-    /// Current settings; changes apply on the next [`BruteForce::encode`].
+    /// Current settings; changes apply on the next `BruteForce::encode`.
     pub settings: BruteForceSettings,
     march: pass::Pass,
     buffers: pass::FrameBuffers,

@@ -40,7 +40,7 @@ struct Prefiltered {
 /// built once and reused (the line textures are reallocated only when `samples` or `slices`
 /// change, the prefiltered spot texture when its size does).
 pub struct Epipolar {
-    /// Current settings; changes apply on the next [`Epipolar::encode`].
+    /// Current settings; changes apply on the next `Epipolar::encode`.
     pub settings: EpipolarSettings,
     passes: Passes,
     buffers: pass::FrameBuffers,

@@ -286,7 +286,7 @@ impl Default for EpipolarSettings {
 }
 
 impl EpipolarSettings {
-    /// Checks every range (device limits are checked by [`Epipolar::encode`]).
+    /// Checks every range (device limits are checked by `Epipolar::encode`).
     pub fn validate(&self) -> Result<(), Error> {
         let m = MAX_TEXELS_PER_SIDE;
         if let Some(v) = self.slices

@@ -317,7 +317,7 @@ struct GpuLut {
 /// textures (reallocated only when the frame size changes) and the phase table (rebuilt only
 /// when the phase function or table size changes).
 pub struct Interleaved {
-    /// Current settings; changes apply on the next [`Interleaved::encode`].
+    /// Current settings; changes apply on the next `Interleaved::encode`.
     pub settings: InterleavedSettings,
     march: Pass,
     rows: Pass,

@@ -838,7 +838,7 @@ pub fn passes(
     Ok((Passes { rect, tree, image, totals, nodes }, times))
 }
 
-/// Renders `frame` on the CPU (one light); the result matches [`super::MinMax::encode`] up to
+/// Renders `frame` on the CPU (one light); the result matches `super::MinMax::encode` up to
 /// f32 rounding where a ray's depth meets a texel's.
 pub fn render_with(
     frame: &CpuFrame,

@@ -131,7 +131,7 @@ struct TreeBuffer {
     key: [u32; 2],
 }
 
-/// What [`TreeBuilder::encode`] recorded for a frame.
+/// What `TreeBuilder::encode` recorded for a frame.
 pub struct TreeFrame {
     /// The frame's rectification.
     pub rect: Rectification,
@@ -142,7 +142,7 @@ pub struct TreeFrame {
 /// The min-max structure of a one-light frame on the GPU: pass `build`, into a tree buffer and
 /// the uniform block the walk reads. `minmax` walks it per pixel; `epipolar` with
 /// `march = "minmax"` per ray-march sample (Yusov 2013). Its frame uniforms and lights are the
-/// owner's ([`pass::FrameBuffers`], written by the owner before [`TreeBuilder::encode`]).
+/// owner's ([`pass::FrameBuffers`], written by the owner before `TreeBuilder::encode`).
 pub struct TreeBuilder {
     build: Pass,
     params_buffer: wgpu::Buffer,

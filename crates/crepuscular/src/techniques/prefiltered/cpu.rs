@@ -461,7 +461,7 @@ pub fn passes(
     Ok((p, times))
 }
 
-/// Renders `frame` on the CPU; the result matches [`super::Prefiltered::encode`] up to the GPU's
+/// Renders `frame` on the CPU; the result matches `super::Prefiltered::encode` up to the GPU's
 /// filtering precision.
 pub fn render(frame: &CpuFrame, settings: &PrefilteredSettings) -> Result<(Image, TechniqueStats), Error> {
     render_with(frame, settings, None)

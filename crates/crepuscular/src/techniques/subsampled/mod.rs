@@ -199,7 +199,7 @@ struct Grid {
 /// The GPU side of `subsampled`: its two passes, uniform buffers, the re-march counter and
 /// the grid texture, built once and reused (the grid is reallocated only when its size changes).
 pub struct Subsampled {
-    /// Current settings; changes apply on the next [`Subsampled::encode`].
+    /// Current settings; changes apply on the next `Subsampled::encode`.
     pub settings: SubsampledSettings,
     march: Pass,
     upsample: Pass,

@@ -287,6 +287,138 @@ impl Epipolar {
         Ok(())
     }
 
+    /// (Re)allocates the prefiltered spot texture for a `pre_size` of (w, h) texels, or drops it.
+    fn ensure_prefiltered(&mut self, gpu: &GpuContext, pre_size: Option<(u32, u32)>) -> Result<(), Error> {
+        match pre_size {
+            Some((w, h)) => {
+                if self.prefiltered.as_ref().is_none_or(|p| p.texture.width() != w || p.texture.height() != h) {
+                    self.prefiltered = Some(gpu.scoped("allocating the prefiltered spot texture", || {
+                        let texture = crate::gpu::storage_texture(
+                            &gpu.device,
+                            "epipolar prefiltered spot texture",
+                            wgpu::TextureFormat::Rgba32Float,
+                            w,
+                            h,
+                        );
+                        let view = texture.create_view(&Default::default());
+                        let array = texture.create_view(&wgpu::TextureViewDescriptor {
+                            dimension: Some(wgpu::TextureViewDimension::D2Array),
+                            ..Default::default()
+                        });
+                        Prefiltered { texture, view, array }
+                    })?);
+                }
+            }
+            None => self.prefiltered = None,
+        }
+        Ok(())
+    }
+
+    /// The frame's bind groups: what each pass reads and writes, named as its shader names it.
+    /// `spot` is the light's spot texture (when it has one).
+    fn bind(
+        &self,
+        gpu: &GpuContext,
+        frame: &GpuFrame,
+        output: &wgpu::TextureView,
+        spot: Option<&wgpu::TextureView>,
+    ) -> Result<Binds, Error> {
+        let sized = self.sized.as_ref().expect("allocated before binding");
+        let [coords, interp, marched, radiance] = &sized.views;
+        let march_spot = self.march_spot(frame);
+        use wgpu::BindingResource as R;
+        let device = &gpu.device;
+        let p = &self.passes;
+        let prefilter = match (&self.prefiltered, spot) {
+            (Some(pre), Some(src)) => Some(p.prefilter.bind(
+                device,
+                &[
+                    ("params", self.params_buffer.as_entire_binding()),
+                    ("lights", self.buffers.lights.as_entire_binding()),
+                    ("src_tex", R::TextureView(src)),
+                    ("dst_tex", R::TextureView(&pre.view)),
+                ],
+            )?),
+            _ => None,
+        };
+        // Every pass reads the uniforms; each names what else it reads and writes.
+        let frame_res = || pass::frame_resources(&self.buffers, &self.params_buffer, frame, &self.white);
+        let uniforms = || {
+            vec![
+                ("frame", self.buffers.frame.as_entire_binding()),
+                ("params", self.params_buffer.as_entire_binding()),
+                ("lights", self.buffers.lights.as_entire_binding()),
+            ]
+        };
+        let lines = pass::with(
+            uniforms(),
+            [
+                ("depth_tex", R::TextureView(frame.depth)),
+                ("lines_buf", sized.lines.as_entire_binding()),
+                ("coord_tex", R::TextureView(coords)),
+                ("counters", self.counters.as_entire_binding()),
+            ],
+        );
+        let refine = pass::with(
+            uniforms(),
+            [
+                ("coord_tex", R::TextureView(coords)),
+                ("lines_buf", sized.lines.as_entire_binding()),
+                ("interp_tex", R::TextureView(interp)),
+                ("list", sized.list.as_entire_binding()),
+                ("counters", self.counters.as_entire_binding()),
+                ("dispatch", self.indirect.as_entire_binding()),
+                ("claims", sized.claims.as_entire_binding()),
+            ],
+        );
+        // The march reads the prefiltered spot texture through its own lights.
+        let march = pass::with(
+            frame_res(),
+            [
+                ("spot_tex", R::TextureView(march_spot)),
+                ("lights", self.march_lights.as_entire_binding()),
+                ("marched_tex", R::TextureView(marched)),
+                ("list", sized.list.as_entire_binding()),
+                ("counters", self.counters.as_entire_binding()),
+            ],
+        );
+        let interpolate = pass::with(
+            uniforms(),
+            [
+                ("coord_tex", R::TextureView(coords)),
+                ("interp_tex", R::TextureView(interp)),
+                ("marched_tex", R::TextureView(marched)),
+                ("radiance_tex", R::TextureView(radiance)),
+            ],
+        );
+        let upsample = pass::with(
+            frame_res(),
+            [
+                ("radiance_tex", R::TextureView(radiance)),
+                ("lines_buf", sized.lines.as_entire_binding()),
+                ("counters", self.counters.as_entire_binding()),
+                ("out_tex", R::TextureView(output)),
+            ],
+        );
+        Ok(Binds {
+            prefilter,
+            lines: p.lines.bind(device, &lines)?,
+            coordinates: p.coordinates.bind(device, &lines)?,
+            refine: p.refine.bind(device, &refine)?,
+            args: p.args.bind(device, &refine)?,
+            march: p.march.bind(device, &march)?,
+            interpolate: p.interpolate.bind(device, &interpolate)?,
+            upsample: p.upsample.bind(device, &upsample)?,
+        })
+    }
+
+    /// The spot texture the march reads: the prefiltered one when it runs, else the frame's
+    /// (or the white stand-in).
+    fn march_spot<'a>(&'a self, frame: &GpuFrame<'a>) -> &'a wgpu::TextureView {
+        let frame_spot = frame.spot_textures.unwrap_or(&self.white);
+        self.prefiltered.as_ref().map_or(frame_spot, |p| &p.array)
+    }
+
     /// Records the in-scattering of `frame` into `output` (an `Rgba32Float` storage view of
     /// the frame's size) through `rec`. Passes, each timed: `prefilter` (when it runs),
     /// `lines`, `refine`, `march`, `interpolate`, `upsample` (see the module documentation).
@@ -315,28 +447,7 @@ impl Epipolar {
             let n = 1u32 << params.prefilter_level;
             (t.width.div_ceil(n), t.height.div_ceil(n))
         });
-        match pre_size {
-            Some((w, h)) => {
-                if self.prefiltered.as_ref().is_none_or(|p| p.texture.width() != w || p.texture.height() != h) {
-                    self.prefiltered = Some(gpu.scoped("allocating the prefiltered spot texture", || {
-                        let texture = crate::gpu::storage_texture(
-                            &gpu.device,
-                            "epipolar prefiltered spot texture",
-                            wgpu::TextureFormat::Rgba32Float,
-                            w,
-                            h,
-                        );
-                        let view = texture.create_view(&Default::default());
-                        let array = texture.create_view(&wgpu::TextureViewDescriptor {
-                            dimension: Some(wgpu::TextureViewDimension::D2Array),
-                            ..Default::default()
-                        });
-                        Prefiltered { texture, view, array }
-                    })?);
-                }
-            }
-            None => self.prefiltered = None,
-        }
+        self.ensure_prefiltered(gpu, pre_size)?;
         self.buffers.write(rec, desc);
         // The march reads the prefiltered texture: layer 0 of its own array, at its size.
         let mut march_lights = desc.lights_uniforms();
@@ -347,7 +458,8 @@ impl Epipolar {
         rec.write_buffer(&self.march_lights, bytemuck::bytes_of(&march_lights));
         rec.write_buffer(&self.params_buffer, bytemuck::bytes_of(&params));
         let sized = self.sized.as_ref().expect("allocated above");
-        let [coords, interp, marched, radiance] = &sized.views;
+        let [coords, _, marched, _] = &sized.views;
+        // Field by field (not `self.march_spot`), so the borrow leaves `binds` and `minmax` free.
         let frame_spot = frame.spot_textures.unwrap_or(&self.white);
         let march_spot = self.prefiltered.as_ref().map_or(frame_spot, |p| &p.array);
         let mut key = pass::frame_key(frame, output);
@@ -357,92 +469,7 @@ impl Epipolar {
             _ => Bound::Choice(0),
         });
         if !self.binds.is_current(&key) {
-            let binds = gpu.try_scoped("binding the epipolar inputs", || {
-                use wgpu::BindingResource as R;
-                let device = &gpu.device;
-                let p = &self.passes;
-                let prefilter = match (&self.prefiltered, spot) {
-                    (Some(pre), Some(src)) => Some(p.prefilter.bind(
-                        device,
-                        &[
-                            ("params", self.params_buffer.as_entire_binding()),
-                            ("lights", self.buffers.lights.as_entire_binding()),
-                            ("src_tex", R::TextureView(src)),
-                            ("dst_tex", R::TextureView(&pre.view)),
-                        ],
-                    )?),
-                    _ => None,
-                };
-                // Every pass reads the uniforms; each names what else it reads and writes.
-                let frame_res = || pass::frame_resources(&self.buffers, &self.params_buffer, frame, &self.white);
-                let uniforms = || {
-                    vec![
-                        ("frame", self.buffers.frame.as_entire_binding()),
-                        ("params", self.params_buffer.as_entire_binding()),
-                        ("lights", self.buffers.lights.as_entire_binding()),
-                    ]
-                };
-                let lines = pass::with(
-                    uniforms(),
-                    [
-                        ("depth_tex", R::TextureView(frame.depth)),
-                        ("lines_buf", sized.lines.as_entire_binding()),
-                        ("coord_tex", R::TextureView(coords)),
-                        ("counters", self.counters.as_entire_binding()),
-                    ],
-                );
-                let refine = pass::with(
-                    uniforms(),
-                    [
-                        ("coord_tex", R::TextureView(coords)),
-                        ("lines_buf", sized.lines.as_entire_binding()),
-                        ("interp_tex", R::TextureView(interp)),
-                        ("list", sized.list.as_entire_binding()),
-                        ("counters", self.counters.as_entire_binding()),
-                        ("dispatch", self.indirect.as_entire_binding()),
-                        ("claims", sized.claims.as_entire_binding()),
-                    ],
-                );
-                // The march reads the prefiltered spot texture through its own lights.
-                let march = pass::with(
-                    frame_res(),
-                    [
-                        ("spot_tex", R::TextureView(march_spot)),
-                        ("lights", self.march_lights.as_entire_binding()),
-                        ("marched_tex", R::TextureView(marched)),
-                        ("list", sized.list.as_entire_binding()),
-                        ("counters", self.counters.as_entire_binding()),
-                    ],
-                );
-                let interpolate = pass::with(
-                    uniforms(),
-                    [
-                        ("coord_tex", R::TextureView(coords)),
-                        ("interp_tex", R::TextureView(interp)),
-                        ("marched_tex", R::TextureView(marched)),
-                        ("radiance_tex", R::TextureView(radiance)),
-                    ],
-                );
-                let upsample = pass::with(
-                    frame_res(),
-                    [
-                        ("radiance_tex", R::TextureView(radiance)),
-                        ("lines_buf", sized.lines.as_entire_binding()),
-                        ("counters", self.counters.as_entire_binding()),
-                        ("out_tex", R::TextureView(output)),
-                    ],
-                );
-                Ok(Binds {
-                    prefilter,
-                    lines: p.lines.bind(device, &lines)?,
-                    coordinates: p.coordinates.bind(device, &lines)?,
-                    refine: p.refine.bind(device, &refine)?,
-                    args: p.args.bind(device, &refine)?,
-                    march: p.march.bind(device, &march)?,
-                    interpolate: p.interpolate.bind(device, &interpolate)?,
-                    upsample: p.upsample.bind(device, &upsample)?,
-                })
-            })?;
+            let binds = gpu.try_scoped("binding the epipolar inputs", || self.bind(gpu, frame, output, spot))?;
             self.binds.store(key, binds);
         }
         let b = self.binds.value();

@@ -6,10 +6,9 @@
 
 use crate::error::Error;
 use crate::frame::FrameDesc;
-use crate::techniques::pass::{BindCache, Bindings, Bound};
+use crate::techniques::pass::{self, BindCache, Bindings, Bound};
 use crate::tonemap::ToneMap;
 use std::collections::HashMap;
-use wgpu::util::DeviceExt;
 
 /// The composite pass shader (composed with common.wgsl).
 pub const COMPOSITE_WGSL: &str = include_str!("composite.wgsl");
@@ -85,14 +84,7 @@ impl Composite {
             bind_group_layouts: &[Some(bindings.layout())],
             immediate_size: 0,
         });
-        let uniform = |label, size: usize| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        };
+        let uniform = |label, size: usize| pass::uniform_buffer(device, label, size as u64);
         Ok(Self {
             device: device.clone(),
             module,
@@ -223,12 +215,7 @@ impl Composite {
             (&self.frame_buffer, bytemuck::bytes_of(&d.uniforms())),
             (&self.params_buffer, bytemuck::bytes_of(&Params { tone: tone_params })),
         ] {
-            let staging = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("composite uniforms upload"),
-                contents: bytes,
-                usage: wgpu::BufferUsages::COPY_SRC,
-            });
-            encoder.copy_buffer_to_buffer(&staging, 0, dst, 0, bytes.len() as u64);
+            pass::write_in_encoder(&self.device, encoder, dst, bytes);
         }
         let key = vec![
             Bound::View(surface_view.clone()),

@@ -22,7 +22,6 @@ use crate::techniques::pass::{self, BindCache, Bound, Pass};
 use glam::{Mat4, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
 use std::hash::{Hash, Hasher};
-use wgpu::util::DeviceExt;
 
 /// The pass shader (composed with common.wgsl).
 pub const TEMPORAL_WGSL: &str = include_str!("temporal.wgsl");
@@ -627,12 +626,7 @@ impl Temporal {
                 bytemuck::bytes_of(&uniforms(&self.settings, prev.as_ref(), motion.is_some())).to_vec(),
             ),
         ] {
-            let staging = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("temporal uniforms upload"),
-                contents: &bytes,
-                usage: wgpu::BufferUsages::COPY_SRC,
-            });
-            encoder.copy_buffer_to_buffer(&staging, 0, dst, 0, bytes.len() as u64);
+            pass::write_in_encoder(&self.device, encoder, dst, &bytes);
         }
         let read = self.latest;
         let write = 1 - read;

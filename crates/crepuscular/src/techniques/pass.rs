@@ -88,6 +88,21 @@ pub fn white_array(gpu: &crate::GpuContext) -> wgpu::TextureView {
     })
 }
 
+/// Writes `bytes` to the start of `dst` (a `COPY_DST` buffer) in `encoder`, before the passes
+/// recorded after it: copied from a staging buffer of this call's own, so several frames
+/// recorded into one encoder each read their own values. For the stages that record into a
+/// bare encoder (the temporal stage, the composite); techniques write through
+/// [`crate::gpu::Recorder::write_buffer`].
+pub fn write_in_encoder(device: &wgpu::Device, encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]) {
+    use wgpu::util::DeviceExt;
+    let staging = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("uniforms upload"),
+        contents: bytes,
+        usage: wgpu::BufferUsages::COPY_SRC,
+    });
+    encoder.copy_buffer_to_buffer(&staging, 0, dst, 0, bytes.len() as u64);
+}
+
 /// A uniform buffer of `size` bytes, written with `queue.write_buffer`.
 pub fn uniform_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
@@ -183,24 +198,23 @@ pub struct Bindings {
 pub type Resource<'a> = (&'a str, wgpu::BindingResource<'a>);
 
 impl Bindings {
-    /// The layout of `entry` (a `stage` entry point) of the composed WGSL `source`; `label`
-    /// names it in errors and GPU captures.
+    /// The layout of `entry` (a `stage` entry point) of the composed WGSL `source`, and the
+    /// entry point's workgroup size; `label` names it in errors and GPU captures.
     pub fn new(
         device: &wgpu::Device,
         label: &str,
         source: &str,
         entry: &str,
         stage: naga::ShaderStage,
-    ) -> Result<(Self, Reflected), crate::Error> {
+    ) -> Result<(Self, [u32; 3]), crate::Error> {
         let reflected = reflect(source, entry, stage)
             .map_err(|message| crate::Error::Gpu { context: format!("reading the bindings of {label}"), message })?;
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some(label),
             entries: &reflected.entries,
         });
-        let slots = reflected.slots.clone();
-        let unused = reflected.unused.clone();
-        Ok((Self { label: label.to_string(), layout, slots, unused }, reflected))
+        let Reflected { slots, unused, workgroup, .. } = reflected;
+        Ok((Self { label: label.to_string(), layout, slots, unused }, workgroup))
     }
 
     /// The bind group layout.
@@ -254,7 +268,7 @@ impl Pass {
     /// the shader. `label` names it in errors and GPU captures (`technique/pass`).
     pub fn new(device: &wgpu::Device, label: &str, pass_wgsl: &str, entry: &str) -> Result<Self, crate::Error> {
         let source = crate::shaders::compose(pass_wgsl);
-        let (bindings, reflected) = Bindings::new(device, label, &source, entry, naga::ShaderStage::Compute)?;
+        let (bindings, workgroup) = Bindings::new(device, label, &source, entry, naga::ShaderStage::Compute)?;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),
             source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -272,7 +286,7 @@ impl Pass {
             compilation_options: Default::default(),
             cache: None,
         });
-        Ok(Self { bindings, pipeline, workgroup: reflected.workgroup })
+        Ok(Self { bindings, pipeline, workgroup })
     }
 
     /// The pass's name (`technique/pass`).
@@ -452,9 +466,21 @@ fn storage_format(format: naga::StorageFormat) -> Option<wgpu::TextureFormat> {
     })
 }
 
-/// The frame's resources, named as common.wgsl's passes name them: `frame`, `params`,
-/// `depth_tex`, `shadow_map`, `spot_tex` (`white`, a one-layer array, stands in when no light
-/// has a texture) and `lights`. A pass adds what it writes (`out_tex`, …) and its own inputs.
+/// The uniforms every pass may read, named as the passes name them: `frame`, `params` and
+/// `lights` (declared by common.wgsl in every module, so a pass that does not read the lights
+/// skips them).
+pub fn uniform_resources<'a>(buffers: &'a FrameBuffers, params: &'a wgpu::Buffer) -> Vec<Resource<'a>> {
+    vec![
+        ("frame", buffers.frame.as_entire_binding()),
+        ("params", params.as_entire_binding()),
+        ("lights", buffers.lights.as_entire_binding()),
+    ]
+}
+
+/// The frame's resources, named as common.wgsl's passes name them: the uniforms
+/// ([`uniform_resources`]), `depth_tex`, `shadow_map` and `spot_tex` (`white`, a one-layer
+/// array, stands in when no light has a texture). A pass adds what it writes (`out_tex`, …)
+/// and its own inputs.
 pub fn frame_resources<'a>(
     buffers: &'a FrameBuffers,
     params: &'a wgpu::Buffer,
@@ -462,14 +488,14 @@ pub fn frame_resources<'a>(
     white: &'a wgpu::TextureView,
 ) -> Vec<Resource<'a>> {
     let view = wgpu::BindingResource::TextureView;
-    vec![
-        ("frame", buffers.frame.as_entire_binding()),
-        ("params", params.as_entire_binding()),
-        ("depth_tex", view(frame.depth)),
-        ("shadow_map", view(frame.shadow_maps)),
-        ("spot_tex", view(frame.spot_textures.unwrap_or(white))),
-        ("lights", buffers.lights.as_entire_binding()),
-    ]
+    with(
+        uniform_resources(buffers, params),
+        [
+            ("depth_tex", view(frame.depth)),
+            ("shadow_map", view(frame.shadow_maps)),
+            ("spot_tex", view(frame.spot_textures.unwrap_or(white))),
+        ],
+    )
 }
 
 /// `resources` with `more` added; an entry of `more` replaces the one of the same name.

@@ -343,13 +343,7 @@ impl Epipolar {
         };
         // Every pass reads the uniforms; each names what else it reads and writes.
         let frame_res = || pass::frame_resources(&self.buffers, &self.params_buffer, frame, &self.white);
-        let uniforms = || {
-            vec![
-                ("frame", self.buffers.frame.as_entire_binding()),
-                ("params", self.params_buffer.as_entire_binding()),
-                ("lights", self.buffers.lights.as_entire_binding()),
-            ]
-        };
+        let uniforms = || pass::uniform_resources(&self.buffers, &self.params_buffer);
         let lines = pass::with(
             uniforms(),
             [

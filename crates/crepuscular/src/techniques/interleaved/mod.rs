@@ -473,10 +473,7 @@ impl Interleaved {
                     pass::frame_resources(&self.buffers, &self.params_buffer, frame, &self.white),
                     [("lut", lut.as_entire_binding()), ("out_tex", view(&targets.march_view))],
                 );
-                let uniforms = [
-                    ("frame", self.buffers.frame.as_entire_binding()),
-                    ("params", self.params_buffer.as_entire_binding()),
-                ];
+                let uniforms = pass::uniform_resources(&self.buffers, &self.params_buffer);
                 let rows = [("march_tex", view(&targets.march_view)), ("out_tex", view(&targets.rows_view))];
                 let columns = [
                     ("rows_tex", view(&targets.rows_view)),

@@ -242,17 +242,15 @@ impl TreeBuilder {
         if !self.binds.is_current(&key) {
             let bind = gpu.try_scoped("binding the minmax inputs", || {
                 let view = wgpu::BindingResource::TextureView;
-                self.build.bind(
-                    &gpu.device,
-                    &[
-                        ("frame", buffers.frame.as_entire_binding()),
-                        ("params", self.params_buffer.as_entire_binding()),
-                        ("lights", buffers.lights.as_entire_binding()),
+                let resources = pass::with(
+                    pass::uniform_resources(buffers, &self.params_buffer),
+                    [
                         ("depth_map", view(raster)),
                         ("shadow_map", view(frame.shadow_maps)),
                         ("tree", tree.as_entire_binding()),
                     ],
-                )
+                );
+                self.build.bind(&gpu.device, &resources)
             })?;
             self.binds.store(key, bind);
         }

@@ -334,12 +334,10 @@ impl Prefiltered {
             let binds = gpu.try_scoped("binding the prefiltered inputs", || {
                 let device = &gpu.device;
                 let uniforms = || {
-                    vec![
-                        ("frame", self.buffers.frame.as_entire_binding()),
-                        ("params", self.params_buffer.as_entire_binding()),
-                        ("lights", self.buffers.lights.as_entire_binding()),
-                        ("rows", rows.as_entire_binding()),
-                    ]
+                    pass::with(
+                        pass::uniform_resources(&self.buffers, &self.params_buffer),
+                        [("rows", rows.as_entire_binding())],
+                    )
                 };
                 let rectify = pass::with(
                     uniforms(),

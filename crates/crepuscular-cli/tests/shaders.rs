@@ -305,7 +305,7 @@ fn temporal_uniforms_match_their_wgsl_layout() {
             ("clip", offset_of!(T, clip)),
             ("catmull_rom", offset_of!(T, catmull_rom)),
             ("motion", offset_of!(T, motion)),
-            ("_pad", offset_of!(T, _pad)),
+            ("adaptive", offset_of!(T, adaptive)),
         ],
         std::mem::size_of::<T>(),
     );

@@ -29,6 +29,21 @@ pub const TEMPORAL_WGSL: &str = include_str!("temporal.wgsl");
 /// The frame count a pixel's history saturates at (`MAX_FRAMES` in temporal.wgsl).
 pub const MAX_FRAMES: f32 = 1024.0;
 
+/// The weight of the past in the running moments of a pixel's frame-to-frame change that
+/// [`TemporalSettings::adaptive_weight`] reads (`MOMENT_WEIGHT` in temporal.wgsl): about the
+/// last 1/(1 − 0.8) = 5 frames. Shorter than the history's memory, so that the drift it
+/// measures is the current one.
+pub const MOMENT_WEIGHT: f32 = 0.8;
+
+/// The least noise [`adapted_weight`] assumes, as a fraction of the pixel's value (its
+/// standard deviation; `NOISE_FLOOR` in temporal.wgsl): 1/256, a step of an 8-bit display. A
+/// noise-free input whose value drifts by far less than that per frame (reprojection's own
+/// rounding, a slow change of light) keeps its history; without the floor any drift at all,
+/// however small, would set the weight to 0. Measured (docs/RESULTS.md): on a slow camera
+/// move, minmax on terrain 57.75 dB without the floor, 57.62 with it; the mean weight of a
+/// frame 0.20 → 0.45.
+pub const NOISE_FLOOR: f32 = 1.0 / 256.0;
+
 /// How the reprojected history is read between texels ([`TemporalSettings::history_filter`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -47,9 +62,10 @@ pub enum HistoryFilter {
 }
 
 /// The temporal stage's settings. Cost of the stage: one full-screen compute pass reading, per
-/// pixel, 4 history texels and their 4 stored distances (16 with the Catmull-Rom read), and
-/// (where the history is clipped or rejected) 9 current texels and their depths; 44 bytes of
-/// history per pixel (two RGBA32F images, two R32F distances, one R32F weight).
+/// pixel, 4 history texels and their 4 stored statistics (16 with the Catmull-Rom read), and
+/// (where the history is clipped or rejected) 9 current texels and their depths; 68 bytes of
+/// history per pixel (two RGBA32F images, two RGBA32F statistics — view distance and the
+/// moments [`TemporalSettings::adaptive_weight`] reads —, one R32F weight).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TemporalSettings {
@@ -87,6 +103,19 @@ pub struct TemporalSettings {
     /// bounds the history); without the clip it halves the reprojection error of fine surface
     /// detail. Cost: 16 reads of history and distance instead of 4.
     pub history_filter: HistoryFilter,
+    /// Adapt each pixel's history weight to what its input does from frame to frame
+    /// (docs/MODEL.md §7, step 4): the stage keeps, per pixel, running moments of the change
+    /// d of the input's largest channel between consecutive frames (reprojected). Their
+    /// variance is the input's noise (twice its variance), their mean its drift (the signal
+    /// moving under the camera or lights). An exponential average of weight w leaves
+    /// σ²·(1 − w)/(1 + w) of the noise's variance σ² and lags a drift δ per frame by
+    /// δ·w/(1 − w); w is lowered to where the sum of the two squared errors is least
+    /// ([`adapted_weight`]; never raised above `history_weight`). A technique without jitter (no noise) then
+    /// follows the camera with little lag instead of trailing it by ~1/(1 − w) frames; a
+    /// jittered one keeps most of its averaging. Default true, measured (docs/RESULTS.md,
+    /// "Temporal accumulation"). Cost: a few ALU operations per pixel (the moments are read
+    /// with the history).
+    pub adaptive_weight: bool,
 }
 
 impl Default for TemporalSettings {
@@ -98,6 +127,7 @@ impl Default for TemporalSettings {
             depth_tolerance: 0.05,
             light_jump_degrees: 5.0,
             history_filter: HistoryFilter::Bilinear,
+            adaptive_weight: true,
         }
     }
 }
@@ -209,8 +239,9 @@ pub struct TemporalUniforms {
     pub catmull_rom: u32,
     /// 1 when the frame's motion vectors are bound (drawn pixels reprojected by them).
     pub motion: u32,
-    /// Padding.
-    pub _pad: u32,
+    /// 1 to adapt the weight to the pixel's noise and drift
+    /// ([`TemporalSettings::adaptive_weight`]).
+    pub adaptive: u32,
 }
 
 fn uniforms(s: &TemporalSettings, prev: Option<&Previous>, motion: bool) -> TemporalUniforms {
@@ -224,7 +255,7 @@ fn uniforms(s: &TemporalSettings, prev: Option<&Previous>, motion: bool) -> Temp
         clip: s.clip as u32,
         catmull_rom: (s.history_filter == HistoryFilter::CatmullRom) as u32,
         motion: motion as u32,
-        _pad: 0,
+        adaptive: s.adaptive_weight as u32,
     }
 }
 
@@ -272,10 +303,39 @@ pub fn catmull_rom_weights(f: f32) -> [f32; 4] {
     ]
 }
 
-/// One pixel's resolve: (output rgb, history rgba, weight). `distances`: this frame's
-/// ([`view_distances`]); `history` and `history_distances`: the previous frame's (read only
-/// when `u.valid`); `motion`: the frame's motion vectors (read only when `u.motion`).
-/// Mirrors `resolve` in temporal.wgsl.
+/// The history weight w after [`TemporalSettings::adaptive_weight`], from the running moments
+/// (m1, m2) of a pixel's frame-to-frame change held with weight `a` and its input's largest
+/// channel `x`: noise σ² = var/2 + ([`NOISE_FLOOR`]·x)², drift δ²
+/// = m1² less the part of it the noise explains (var·(1 − a)/(1 + a), the variance of a
+/// running mean of weight a). An exponential average of weight w leaves σ²·(1 − w)/(1 + w) of
+/// the noise and trails the drift by δ·w/(1 − w); the sum of the two squared errors is least
+/// where δ²·w·(1 + w)² = σ²·(1 − w)³, found by bisection (16 halvings) below `w`, and `w`
+/// itself where that root lies above it. Mirrors `adapted_weight` in temporal.wgsl.
+pub fn adapted_weight(w: f32, m1: f32, m2: f32, a: f32, x: f32) -> f32 {
+    let var = (m2 - m1 * m1).max(0.0);
+    let noise = 0.5 * var + (NOISE_FLOOR * x) * (NOISE_FLOOR * x);
+    let drift2 = (m1 * m1 - var * (1.0 - a) / (1.0 + a)).max(0.0);
+    let g = |x: f32| drift2 * x * (1.0 + x) * (1.0 + x) - noise * (1.0 - x) * (1.0 - x) * (1.0 - x);
+    if g(w) <= 0.0 {
+        return w;
+    }
+    let (mut lo, mut hi) = (0.0f32, w);
+    for _ in 0..16 {
+        let mid = 0.5 * (lo + hi);
+        if g(mid) <= 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+/// One pixel's resolve: (output rgb, history rgba, weight, statistics). `distances`: this
+/// frame's ([`view_distances`]); `history` and `history_stats`: the previous frame's (read only
+/// when `u.valid`; statistics: view distance, the input's largest channel, and the running
+/// moments of its change, [`TemporalSettings::adaptive_weight`]); `motion`: the frame's motion
+/// vectors (read only when `u.motion`). Mirrors `resolve` in temporal.wgsl.
 #[allow(clippy::too_many_arguments)]
 pub fn resolve_pixel(
     desc: &FrameDesc,
@@ -283,11 +343,11 @@ pub fn resolve_pixel(
     distances: &[f32],
     current: &Image,
     history: &Image,
-    history_distances: &[f32],
+    history_stats: &[[f32; 4]],
     motion: &[[f32; 2]],
     x: u32,
     y: u32,
-) -> ([f32; 3], [f32; 4], f32) {
+) -> ([f32; 3], [f32; 4], f32, [f32; 4]) {
     let (w_px, h_px) = (desc.width as i32, desc.height as i32);
     let rgb = |p: [f32; 4]| Vec3::new(p[0], p[1], p[2]);
     let at = |x: i32, y: i32| (y.clamp(0, h_px - 1) * w_px + x.clamp(0, w_px - 1)) as usize;
@@ -300,6 +360,8 @@ pub fn resolve_pixel(
     let mut w = 0.0f32;
     let mut n = 0.0f32;
     let mut h = c;
+    // The reprojected statistics: the input's largest channel and the moments of its change.
+    let mut hs = Vec3::ZERO;
     if u.valid == 1 {
         let x4 = if sky { dir.extend(0.0) } else { (desc.camera.position + dir * dist).extend(1.0) };
         // Where the previous frame saw it: by the motion vector where one is given for a drawn
@@ -332,20 +394,24 @@ pub fn resolve_pixel(
             let f = q - b;
             let (ix, iy) = (b.x as i32, b.y as i32);
             let mut acc = Vec4::ZERO;
+            let mut acc_s = Vec3::ZERO;
             let mut total = 0.0f32;
             for k in 0..4 {
                 let (ox, oy) = (k & 1, k >> 1);
                 let t = at(ix + ox, iy + oy);
-                let same = same_surface(history_distances[t], expected, u.depth_tolerance);
+                let same = same_surface(history_stats[t][0], expected, u.depth_tolerance);
                 let fw = (if ox == 1 { f.x } else { 1.0 - f.x }) * (if oy == 1 { f.y } else { 1.0 - f.y });
                 if same && fw > 0.0 {
                     acc += fw * Vec4::from_array(history.pixels[t]);
+                    let st = history_stats[t];
+                    acc_s += fw * Vec3::new(st[1], st[2], st[3]);
                     total += fw;
                 }
             }
             if total > 1e-3 {
                 h = acc.truncate() / total;
                 n = acc.w / total;
+                hs = acc_s / total;
                 w = u.history_weight.min(n / (n + 1.0));
                 if u.catmull_rom == 1 {
                     // Catmull-Rom over the 4×4 texels around q, where all show the same
@@ -357,7 +423,7 @@ pub fn resolve_pixel(
                     for k in 0..16 {
                         let (ox, oy) = (k & 3, k >> 2);
                         let t = at(ix + ox - 1, iy + oy - 1);
-                        all &= same_surface(history_distances[t], expected, u.depth_tolerance);
+                        all &= same_surface(history_stats[t][0], expected, u.depth_tolerance);
                         cr += wx[ox as usize] * wy[oy as usize] * rgb(history.pixels[t]);
                     }
                     if all {
@@ -368,6 +434,20 @@ pub fn resolve_pixel(
         }
     }
     let rejected = u.valid == 1 && w == 0.0;
+    // The running moments of the input's frame-to-frame change (its largest channel),
+    // restarted with the history; the weight adapted to them once three frames are held (n is
+    // a bilinear mean of counts: 2.5, not 3, so rounding does not decide).
+    let xs = c.max_element();
+    let (mut m1, mut m2) = (0.0f32, 0.0f32);
+    if w > 0.0 {
+        let d = xs - hs.x;
+        let a = MOMENT_WEIGHT.min((n - 1.0).max(0.0) / n);
+        m1 = d + a * (hs.y - d);
+        m2 = d * d + a * (hs.z - d * d);
+        if u.adaptive == 1 && n > 2.5 {
+            w = adapted_weight(w, m1, m2, a, xs);
+        }
+    }
     if (w > 0.0 && u.clip == 1) || rejected {
         let (mut lo, mut hi) = (c, c);
         let (mut m1, mut m2) = (Vec3::ZERO, Vec3::ZERO);
@@ -397,7 +477,7 @@ pub fn resolve_pixel(
         }
     }
     let res = if rejected { h } else { c + w * (h - c) };
-    (res.to_array(), [res.x, res.y, res.z, (n + 1.0).min(MAX_FRAMES)], w)
+    (res.to_array(), [res.x, res.y, res.z, (n + 1.0).min(MAX_FRAMES)], w, [dist, xs, m1, m2])
 }
 
 /// The temporal stage on the CPU: the mirror of [`Temporal`].
@@ -405,7 +485,9 @@ pub fn resolve_pixel(
 pub struct CpuTemporal {
     /// The settings.
     pub settings: TemporalSettings,
-    history: Option<(Image, Vec<f32>, Previous)>,
+    /// The last frame's resolve, its statistics per pixel (view distance, the input's largest
+    /// channel, the moments of its change) and its camera.
+    history: Option<(Image, Vec<[f32; 4]>, Previous)>,
     weights: Vec<f32>,
 }
 
@@ -453,25 +535,27 @@ impl CpuTemporal {
         let prev = self.history.as_ref().filter(|(_, _, p)| p.serves(desc, jump));
         let u = uniforms(&self.settings, prev.map(|(_, _, p)| p), motion.is_some());
         // Without a history (u.valid = 0) resolve_pixel reads none: empty stand-ins.
-        let (hist, hist_dist): (&Image, &[f32]) = match prev {
+        let (hist, hist_stats): (&Image, &[[f32; 4]]) = match prev {
             Some((i, d, _)) => (i, d),
             None => (current, &[]),
         };
         let distances = view_distances(desc, depth);
         let mut out = Image::new(w, h);
         let mut next = Image::new(w, h);
+        let mut stats = vec![[0.0f32; 4]; n];
         self.weights = vec![0.0; n];
         let mv = motion.unwrap_or(&[]);
         for y in 0..h {
             for x in 0..w {
                 let i = (y * w + x) as usize;
-                let (rgb, hp, wt) = resolve_pixel(desc, &u, &distances, current, hist, hist_dist, mv, x, y);
+                let (rgb, hp, wt, st) = resolve_pixel(desc, &u, &distances, current, hist, hist_stats, mv, x, y);
                 out.pixels[i] = [rgb[0], rgb[1], rgb[2], current.pixels[i][3]];
                 next.pixels[i] = hp;
                 self.weights[i] = wt;
+                stats[i] = st;
             }
         }
-        self.history = Some((next, distances, Previous::of(desc)));
+        self.history = Some((next, stats, Previous::of(desc)));
         Ok(out)
     }
 
@@ -486,7 +570,8 @@ impl CpuTemporal {
 struct Sized {
     size: (u32, u32),
     history: [wgpu::Texture; 2],
-    distance: [wgpu::Texture; 2],
+    /// View distance, the input's largest channel, the moments of its change.
+    stats: [wgpu::Texture; 2],
     weights: wgpu::Texture,
 }
 
@@ -508,7 +593,7 @@ pub struct Temporal {
 
 impl Temporal {
     /// Builds the stage on the caller's device. Needs nothing beyond wgpu's default limits
-    /// (four storage textures in one compute stage, two of them `R32Float`).
+    /// (four storage textures in one compute stage, one of them `R32Float`).
     pub fn new(device: &wgpu::Device, settings: TemporalSettings) -> Result<Self, Error> {
         settings.validate()?;
         let frame_buffer =
@@ -558,7 +643,7 @@ impl Temporal {
 
     /// Bytes of GPU memory the stage holds.
     pub fn gpu_memory_bytes(&self) -> u64 {
-        self.sized.as_ref().map_or(0, |s| s.size.0 as u64 * s.size.1 as u64 * (2 * 16 + 2 * 4 + 4))
+        self.sized.as_ref().map_or(0, |s| s.size.0 as u64 * s.size.1 as u64 * (2 * 16 + 2 * 16 + 4))
     }
 
     /// Records the resolve of `current` (the technique's output for `desc`, a `D2` view of an
@@ -653,9 +738,9 @@ impl Temporal {
                 let tv = wgpu::BindingResource::TextureView;
                 let (hr, dr, hw, dw, wt) = (
                     view(&sized.history[read]),
-                    view(&sized.distance[read]),
+                    view(&sized.stats[read]),
                     view(&sized.history[1 - read]),
-                    view(&sized.distance[1 - read]),
+                    view(&sized.stats[1 - read]),
                     view(&sized.weights),
                 );
                 resolve.bind(
@@ -667,10 +752,10 @@ impl Temporal {
                         ("current_tex", tv(current)),
                         ("motion_tex", tv(motion)),
                         ("history_tex", tv(&hr)),
-                        ("distance_tex", tv(&dr)),
+                        ("stats_tex", tv(&dr)),
                         ("out_tex", tv(output)),
                         ("history_out", tv(&hw)),
-                        ("distance_out", tv(&dw)),
+                        ("stats_out", tv(&dw)),
                         ("weight_out", tv(&wt)),
                     ],
                 )
@@ -696,7 +781,7 @@ impl Temporal {
         Sized {
             size: (w, h),
             history: [texture("temporal history a", Rgba32Float), texture("temporal history b", Rgba32Float)],
-            distance: [texture("temporal distance a", R32Float), texture("temporal distance b", R32Float)],
+            stats: [texture("temporal stats a", Rgba32Float), texture("temporal stats b", Rgba32Float)],
             weights: texture("temporal weights", R32Float),
         }
     }
@@ -704,7 +789,35 @@ impl Temporal {
 
 #[cfg(test)]
 mod tests {
-    use super::catmull_rom_weights;
+    use super::{adapted_weight, catmull_rom_weights};
+
+    /// The adapted weight is the minimum of the squared error it balances,
+    /// σ²·(1 − w)/(1 + w) + (δ·w/(1 − w))², over [0, w_max] (checked on a grid of 10⁴ weights,
+    /// to the bisection's 0.9/2¹⁶), with σ² and δ² read off the moments as documented; no drift
+    /// keeps w_max, no noise (and x = 0: no floor) gives 0.
+    #[test]
+    fn the_adapted_weight_minimises_noise_plus_lag() {
+        let cost =
+            |w: f32, noise: f32, drift2: f32| noise * (1.0 - w) / (1.0 + w) + drift2 * w * w / ((1.0 - w) * (1.0 - w));
+        for (m1, m2, a, x) in
+            [(0.05f32, 0.01f32, 0.8f32, 1.0f32), (0.02, 0.02, 0.8, 1.0), (-0.1, 0.05, 0.5, 2.0), (0.3, 0.1, 0.8, 0.5)]
+        {
+            let var = (m2 - m1 * m1).max(0.0);
+            let noise = 0.5 * var + (x / 256.0) * (x / 256.0);
+            let drift2 = (m1 * m1 - var * (1.0 - a) / (1.0 + a)).max(0.0);
+            let w = adapted_weight(0.9, m1, m2, a, x);
+            let best = (0..=10_000)
+                .map(|k| 0.9 * k as f32 / 10_000.0)
+                .map(|v| cost(v, noise, drift2))
+                .fold(f32::MAX, f32::min);
+            assert!(cost(w, noise, drift2) <= best * (1.0 + 1e-4) + 1e-12, "m1 {m1} m2 {m2}: w {w} is not the minimum");
+            assert!((0.0..=0.9).contains(&w));
+        }
+        // Pure noise whose mean change is what the noise explains: no drift, w kept.
+        assert_eq!(adapted_weight(0.9, 0.0, 0.04, 0.8, 1.0), 0.9);
+        // A drift with no noise at all (and no floor): the history is not used.
+        assert_eq!(adapted_weight(0.9, 0.1, 0.01, 0.8, 0.0), 0.0);
+    }
 
     /// Catmull-Rom weights interpolate (f = 0 is texel 0 alone), sum to 1 and reproduce a
     /// linear and a quadratic function exactly: Σ wᵢ·xᵢ = f, Σ wᵢ·xᵢ² = f² at x = −1, 0, 1, 2

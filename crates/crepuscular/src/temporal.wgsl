@@ -9,7 +9,8 @@
 // the current frame's 3×3 neighbourhood on the same surface (mean ± clip_sigma standard
 // deviations, inside its min and max); and the blend out = c + w·(h − c) with
 // w = min(history_weight, n / (n + 1)), n the frames the history holds: the plain mean of the
-// first frames, then an exponential average. Where a history exists but was rejected, the
+// first frames, then an exponential average, its weight lowered where the pixel's input drifts
+// more than its noise explains (adapted_weight). Where a history exists but was rejected, the
 // neighbourhood's mean.
 
 struct Temporal {
@@ -26,7 +27,9 @@ struct Temporal {
     catmull_rom: u32,
     // 1 when motion_tex holds the frame's motion vectors (temporal.rs MOTION_VECTORS).
     motion: u32,
-    _pad: u32,
+    // 1 to adapt the weight to the pixel's noise and drift (temporal.rs
+    // TemporalSettings::adaptive_weight).
+    adaptive: u32,
 }
 
 // temporal.rs catmull_rom_weights: the weights of the texels at -1, 0, 1, 2 at fraction f.
@@ -41,16 +44,49 @@ fn catmull_rom_weights(f: f32) -> vec4<f32> {
 
 // temporal.rs MAX_FRAMES: the frame count the history saturates at.
 const MAX_FRAMES: f32 = 1024.0;
+// temporal.rs MOMENT_WEIGHT: the past's weight in the moments of a pixel's frame-to-frame change.
+const MOMENT_WEIGHT: f32 = 0.8;
+// temporal.rs NOISE_FLOOR: the least noise assumed, relative to the pixel's value.
+const NOISE_FLOOR: f32 = 0.00390625;
+
+// temporal.rs adapted_weight: the weight where the squared error of the noise the average
+// leaves, σ²·(1 − w)/(1 + w) (σ² at least (NOISE_FLOOR·x)²), plus that of its lag behind the drift, (δ·w/(1 − w))², is least:
+// δ²·w·(1 + w)² = σ²·(1 − w)³, by 16 halvings below w (w itself where the root is above it).
+fn balance(drift2: f32, noise: f32, x: f32) -> f32 {
+    return drift2 * x * (1.0 + x) * (1.0 + x) - noise * (1.0 - x) * (1.0 - x) * (1.0 - x);
+}
+
+fn adapted_weight(w: f32, m1: f32, m2: f32, a: f32, x: f32) -> f32 {
+    let v = max(m2 - m1 * m1, 0.0);
+    let noise = 0.5 * v + (NOISE_FLOOR * x) * (NOISE_FLOOR * x);
+    let drift2 = max(m1 * m1 - v * (1.0 - a) / (1.0 + a), 0.0);
+    if balance(drift2, noise, w) <= 0.0 {
+        return w;
+    }
+    var lo = 0.0;
+    var hi = w;
+    for (var i = 0; i < 16; i++) {
+        let mid = 0.5 * (lo + hi);
+        if balance(drift2, noise, mid) <= 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<uniform> params: Temporal;
 @group(0) @binding(2) var depth_tex: texture_2d<f32>;
 @group(0) @binding(3) var current_tex: texture_2d<f32>;
 @group(0) @binding(4) var history_tex: texture_2d<f32>;
-@group(0) @binding(5) var distance_tex: texture_2d<f32>;
+// Per pixel of the previous frame: its view distance, its input's largest channel, and the
+// running moments (mean, mean square) of that channel's frame-to-frame change.
+@group(0) @binding(5) var stats_tex: texture_2d<f32>;
 @group(0) @binding(6) var out_tex: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(7) var history_out: texture_storage_2d<rgba32float, write>;
-@group(0) @binding(8) var distance_out: texture_storage_2d<r32float, write>;
+@group(0) @binding(8) var stats_out: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(9) var weight_out: texture_storage_2d<r32float, write>;
 // Current minus previous screen position, UV units (x right, y down); read only when
 // params.motion is 1, and then only for drawn pixels.
@@ -88,11 +124,12 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
     let dir = pixel_ray(frame, gid.xy);
     let dist = current_distance(gid.xy);
     let sky = dist < 0.0;
-    textureStore(distance_out, px, vec4<f32>(dist, 0.0, 0.0, 0.0));
 
     var w = 0.0;
     var n = 0.0;
     var h = c;
+    // The reprojected statistics: the input's largest channel and the moments of its change.
+    var hs = vec3<f32>(0.0);
     if params.valid == 1u {
         // The point (or direction) in the previous frame.
         var x4 = vec4<f32>(dir, 0.0);
@@ -128,20 +165,24 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
             let f = q - b;
             let i = vec2<i32>(b);
             var acc = vec4<f32>(0.0);
+            var acc_s = vec3<f32>(0.0);
             var total = 0.0;
             for (var k = 0; k < 4; k++) {
                 let o = vec2<i32>(k & 1, k >> 1u);
                 let t = clamp(i + o, vec2<i32>(0), size - 1);
-                let same = same_surface(textureLoad(distance_tex, t, 0).r, expected);
+                let st = textureLoad(stats_tex, t, 0);
+                let same = same_surface(st.r, expected);
                 let fw = select(1.0 - f.x, f.x, o.x == 1) * select(1.0 - f.y, f.y, o.y == 1);
                 if same && fw > 0.0 {
                     acc += fw * textureLoad(history_tex, t, 0);
+                    acc_s += fw * st.gba;
                     total += fw;
                 }
             }
             if total > 1e-3 {
                 h = acc.rgb / total;
                 n = acc.a / total;
+                hs = acc_s / total;
                 w = min(params.history_weight, n / (n + 1.0));
                 if params.catmull_rom == 1u {
                     // Catmull-Rom over the 4×4 texels around q, where all show the same
@@ -154,7 +195,7 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
                     for (var k = 0; k < 16; k++) {
                         let o = vec2<i32>(k & 3, k >> 2u);
                         let t = clamp(i + o - vec2<i32>(1), vec2<i32>(0), size - 1);
-                        all = all && same_surface(textureLoad(distance_tex, t, 0).r, expected);
+                        all = all && same_surface(textureLoad(stats_tex, t, 0).r, expected);
                         cr += wx[o.x] * wy[o.y] * textureLoad(history_tex, t, 0).rgb;
                     }
                     if all {
@@ -170,6 +211,22 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
     // single current sample (a disoccluded strip would otherwise keep one frame's noise
     // beside accumulated pixels).
     let rejected = params.valid == 1u && w == 0.0;
+    // The running moments of the input's frame-to-frame change (its largest channel),
+    // restarted with the history; the weight adapted to them once three frames are held (n is
+    // a bilinear mean of counts: 2.5, not 3, so rounding does not decide).
+    let xs = max(c.r, max(c.g, c.b));
+    var m1 = 0.0;
+    var m2 = 0.0;
+    if w > 0.0 {
+        let d = xs - hs.x;
+        let a = min(MOMENT_WEIGHT, max(n - 1.0, 0.0) / n);
+        m1 = d + a * (hs.y - d);
+        m2 = d * d + a * (hs.z - d * d);
+        if params.adaptive == 1u && n > 2.5 {
+            w = adapted_weight(w, m1, m2, a, xs);
+        }
+    }
+    textureStore(stats_out, px, vec4<f32>(dist, xs, m1, m2));
     if (w > 0.0 && params.clip == 1u) || rejected {
         var lo = c;
         var hi = c;

@@ -403,18 +403,27 @@ fn animate_temporal_beats_the_technique_alone_on_a_slow_camera_move() {
     let frames = t["frames"].as_array().unwrap();
     assert_eq!(frames.len(), 96);
     let f = |k: usize, key: &str| frames[k][key].as_f64().unwrap_or(f64::INFINITY);
-    assert_eq!(f(0, "psnr_db"), f(0, "psnr_db_without"), "frame 0 has no history: it is the technique's");
+    // Frame 0 has no history: it shows its 3×3 same-surface mean (`young_frames`; the blend is
+    // tested exactly in tests/temporal.rs), which for a jittered march averages nine
+    // independent samples and is closer to the reference than the frame itself.
     assert_eq!(f(0, "mean_history_weight"), 0.0);
+    let first = f(0, "psnr_db") - f(0, "psnr_db_without");
+    eprintln!("frame 0: {:.2} dB with the stage, {:.2} without", f(0, "psnr_db"), f(0, "psnr_db_without"));
+    assert!(first > MEASURED_FIRST_FRAME_GAIN_DB - 2.0, "frame 0 gained {first:.2} dB from the young history's mean");
     // Frames 4–11 (the 5th to the 12th): the gain in dB and the flicker ratio, measured.
     let gain: f64 = (4..12).map(|k| f(k, "psnr_db") - f(k, "psnr_db_without")).sum::<f64>() / 8.0;
     let flicker = r["flicker"]["relative"].as_f64().unwrap();
     let without = t["flicker_without"]["relative"].as_f64().unwrap();
     eprintln!("mean PSNR gain over frames 4-11: {gain:.2} dB; flicker {flicker:.4} vs {without:.4} without the stage");
     assert!(gain > MEASURED_TEMPORAL_GAIN_DB - 2.0, "the temporal stage gained {gain:.2} dB");
-    assert!(flicker < 0.75 * without, "the temporal stage did not reduce flicker: {flicker} vs {without}");
+    assert!(flicker < 0.6 * without, "the temporal stage did not reduce flicker: {flicker} vs {without}");
 }
 
-/// Measured 2026-12-02 on llvmpipe by the test above: a mean gain of 5.15 dB over frames 4–11,
-/// flicker 0.0291 against 0.0506 without the stage (0.58×; at 320×180 the same path gains
-/// about 10 dB and halves the flicker: docs/RESULTS.md).
-const MEASURED_TEMPORAL_GAIN_DB: f64 = 5.15;
+/// Measured 2026-12-03 on llvmpipe by the test above (adaptive weight, young_frames 8): a mean
+/// gain of 6.42 dB over frames 4–11, flicker 0.0296 against 0.0575 without the stage (0.51×).
+/// (2026-12-02, before both: 5.15 dB, 0.58×.)
+const MEASURED_TEMPORAL_GAIN_DB: f64 = 6.42;
+
+/// Measured by the test above: frame 0 PSNR with the stage minus without (its 3×3 mean).
+/// 41.63 against 35.92 dB on 2026-12-03.
+const MEASURED_FIRST_FRAME_GAIN_DB: f64 = 5.71;

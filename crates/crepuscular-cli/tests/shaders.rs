@@ -306,6 +306,10 @@ fn temporal_uniforms_match_their_wgsl_layout() {
             ("catmull_rom", offset_of!(T, catmull_rom)),
             ("motion", offset_of!(T, motion)),
             ("adaptive", offset_of!(T, adaptive)),
+            ("young_frames", offset_of!(T, young_frames)),
+            ("_pad0", offset_of!(T, _pad0)),
+            ("_pad1", offset_of!(T, _pad1)),
+            ("_pad2", offset_of!(T, _pad2)),
         ],
         std::mem::size_of::<T>(),
     );

@@ -9,7 +9,7 @@ use crepuscular::gpu::{GpuContext, test_gpu};
 use crepuscular::march::MarchSettings;
 use crepuscular::techniques::brute_force::BruteForceSettings;
 use crepuscular::techniques::reference::ReferenceSettings;
-use crepuscular::temporal::{CpuTemporal, HistoryFilter, Temporal, TemporalSettings};
+use crepuscular::temporal::{CpuTemporal, HistoryFilter, Temporal, TemporalSettings, same_surface, view_distances};
 use crepuscular::tonemap::ToneMap;
 use crepuscular::{CpuFrame, FrameDesc, Image, TechniqueSettings};
 use crepuscular_cli::metrics::compare;
@@ -50,9 +50,9 @@ fn noise(seed: u32) -> Image {
     img
 }
 
-/// The blend alone: no clip, no adaptive weight.
+/// The blend alone: no clip, no adaptive weight, no spatial stand-in for young histories.
 fn no_clip() -> TemporalSettings {
-    TemporalSettings { clip: false, adaptive_weight: false, ..Default::default() }
+    TemporalSettings { clip: false, adaptive_weight: false, young_frames: 0, ..Default::default() }
 }
 
 #[test]
@@ -84,10 +84,71 @@ fn a_still_camera_gives_the_running_mean_then_the_exponential_average() {
 }
 
 #[test]
+fn a_young_history_leans_on_the_same_surface_mean_of_the_frame() {
+    // A still camera, no clip, no adaptation, young_frames N = 4: frame k (k = 1 on the first)
+    // shows M + (k − 1)/(N − 1)·(T − M), T the running mean of the frames so far (what the
+    // history keeps), M the mean of the current frame over the 3×3 pixels (clamped at the
+    // border) on the same surface; from the fourth frame on, T. After a reset, M again.
+    let (desc, depth, _) = posed(&scene(), Vec3::ZERO);
+    let settings = TemporalSettings { young_frames: 4, ..no_clip() };
+    let mut t = CpuTemporal::new(settings).unwrap();
+    let dist = view_distances(&desc, &depth);
+    let (w, h) = (W as i32, H as i32);
+    let n = (W * H) as usize;
+    let neighbourhood_mean = |f: &Image, i: usize| {
+        let (x, y) = (i as i32 % w, i as i32 / w);
+        let (mut sum, mut count) = ([0.0f64; 3], 0.0f64);
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let p = ((y + dy).clamp(0, h - 1) * w + (x + dx).clamp(0, w - 1)) as usize;
+                if same_surface(dist[p], dist[i], settings.depth_tolerance) {
+                    for c in 0..3 {
+                        sum[c] += f.pixels[p][c] as f64;
+                    }
+                    count += 1.0;
+                }
+            }
+        }
+        sum.map(|v| v / count)
+    };
+    let mut running = vec![[0.0f64; 3]; n];
+    let mut worst = 0.0f64;
+    for k in 0..6usize {
+        let f = noise(40 + k as u32);
+        let got = t.resolve(&desc, &depth, &f, None).unwrap();
+        let wk = (k as f64 / (k as f64 + 1.0)).min(0.9);
+        let youth = (k + 1) as f64;
+        for i in 0..n {
+            let m = neighbourhood_mean(&f, i);
+            for c in 0..3 {
+                let cur = f.pixels[i][c] as f64;
+                running[i][c] = cur + wk * (running[i][c] - cur);
+                let want =
+                    if youth < 4.0 { m[c] + (youth - 1.0) / 3.0 * (running[i][c] - m[c]) } else { running[i][c] };
+                worst = worst.max((got.pixels[i][c] as f64 - want).abs() / want);
+            }
+        }
+    }
+    t.reset();
+    let f = noise(99);
+    let got = t.resolve(&desc, &depth, &f, None).unwrap();
+    for i in 0..n {
+        let m = neighbourhood_mean(&f, i);
+        for c in 0..3 {
+            worst = worst.max((got.pixels[i][c] as f64 - m[c]).abs() / m[c]);
+        }
+    }
+    eprintln!("young history, 6 frames and a reset: worst relative difference {worst:.2e}");
+    assert!(worst < 1e-4, "the young history's output is not the documented blend: {worst}");
+}
+
+#[test]
 fn a_reset_or_a_change_of_light_medium_or_size_gives_the_current_frame_exactly() {
     let sc = scene();
     let (desc, depth, _) = posed(&sc, Vec3::ZERO);
-    let mut t = CpuTemporal::new(TemporalSettings::default()).unwrap();
+    // Without the spatial stand-in for young histories (tested below), a history that starts
+    // again shows the current frame.
+    let mut t = CpuTemporal::new(TemporalSettings { young_frames: 0, ..Default::default() }).unwrap();
     for k in 0..4 {
         t.resolve(&desc, &depth, &noise(k), None).unwrap();
     }
@@ -161,7 +222,9 @@ fn a_camera_move_reprojects_the_history_and_rejects_what_it_uncovers() {
     let sc = scene();
     let (d0, z0, _) = posed(&sc, Vec3::ZERO);
     let (d1, z1, _) = posed(&sc, Vec3::new(0.6, 0.0, 0.3));
-    let mut t = CpuTemporal::new(no_clip()).unwrap();
+    // young_frames 2: a rejected pixel (a history that starts again) shows the neighbourhood's
+    // mean, a kept one (two frames) the blend.
+    let mut t = CpuTemporal::new(TemporalSettings { young_frames: 2, ..no_clip() }).unwrap();
     t.resolve(&d0, &z0, &world_anchored(&d0, &z0), None).unwrap();
     let cur = world_anchored(&d1, &z1);
     let got = t.resolve(&d1, &z1, &cur, None).unwrap();

@@ -35,6 +35,14 @@ pub const MAX_FRAMES: f32 = 1024.0;
 /// measures is the current one.
 pub const MOMENT_WEIGHT: f32 = 0.8;
 
+/// The frames a pixel's history must hold before its moments steer the weight
+/// ([`TemporalSettings::adaptive_weight`]; `ADAPT_AFTER` in temporal.wgsl): more than 4.5, so
+/// at least four frame-to-frame changes (a count is a bilinear mean of counts: the half keeps
+/// rounding from deciding). Measured (docs/RESULTS.md): from the third frame on, the moments
+/// of two changes lowered the weight of jittered inputs on many pixels (colonnade, frame 3 of
+/// a slow move: 44.75 dB against 45.55).
+pub const ADAPT_AFTER: f32 = 4.5;
+
 /// The least noise [`adapted_weight`] assumes, as a fraction of the pixel's value (its
 /// standard deviation; `NOISE_FLOOR` in temporal.wgsl): 1/256, a step of an 8-bit display. A
 /// noise-free input whose value drifts by far less than that per frame (reprojection's own
@@ -63,7 +71,7 @@ pub enum HistoryFilter {
 
 /// The temporal stage's settings. Cost of the stage: one full-screen compute pass reading, per
 /// pixel, 4 history texels and their 4 stored statistics (16 with the Catmull-Rom read), and
-/// (where the history is clipped or rejected) 9 current texels and their depths; 68 bytes of
+/// (where the history is clipped or young) 9 current texels and their depths; 68 bytes of
 /// history per pixel (two RGBA32F images, two RGBA32F statistics — view distance and the
 /// moments [`TemporalSettings::adaptive_weight`] reads —, one R32F weight).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -116,6 +124,17 @@ pub struct TemporalSettings {
     /// "Temporal accumulation"). Cost: a few ALU operations per pixel (the moments are read
     /// with the history).
     pub adaptive_weight: bool,
+    /// While a pixel's history holds fewer than this many frames (k, counting this one: 1 on
+    /// the first frame, after a reset or a light jump, and where the history was rejected),
+    /// its output leans on the current frame's 3×3 same-surface mean M: out = M + (k − 1)/(N − 1)
+    /// ·(T − M), T the running mean (which is what the history keeps). A jittered input's
+    /// first frames are then a spatial average instead of one noisy sample (colonnade,
+    /// brute-force: the frame of a reset 35.3 → 43.9 dB), at the cost of a 3×3 blur of those
+    /// frames (an exact technique's first frame: minmax on terrain 64.9 → 57.1 dB). 0 or 1:
+    /// off (a new or rejected history shows the current frame). Default 8, measured
+    /// (docs/RESULTS.md, "Temporal accumulation"). Cost: the neighbourhood's 9 reads on those
+    /// frames (the clip reads them anyway).
+    pub young_frames: u32,
 }
 
 impl Default for TemporalSettings {
@@ -128,6 +147,7 @@ impl Default for TemporalSettings {
             light_jump_degrees: 5.0,
             history_filter: HistoryFilter::Bilinear,
             adaptive_weight: true,
+            young_frames: 8,
         }
     }
 }
@@ -144,6 +164,9 @@ impl TemporalSettings {
         }
         if !(self.depth_tolerance >= 0.0 && self.depth_tolerance.is_finite()) {
             return Err(Error::invalid("temporal.depth_tolerance", self.depth_tolerance, "must be finite and ≥ 0"));
+        }
+        if self.young_frames > MAX_FRAMES as u32 {
+            return Err(Error::invalid("temporal.young_frames", self.young_frames, "must be at most 1024"));
         }
         if !(self.light_jump_degrees >= 0.0 && self.light_jump_degrees <= 180.0) {
             return Err(Error::invalid("temporal.light_jump_degrees", self.light_jump_degrees, "must be in [0, 180]"));
@@ -242,6 +265,14 @@ pub struct TemporalUniforms {
     /// 1 to adapt the weight to the pixel's noise and drift
     /// ([`TemporalSettings::adaptive_weight`]).
     pub adaptive: u32,
+    /// [`TemporalSettings::young_frames`], as a float.
+    pub young_frames: f32,
+    /// Padding to the uniform block's 16-byte size.
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+    /// Padding.
+    pub _pad2: u32,
 }
 
 fn uniforms(s: &TemporalSettings, prev: Option<&Previous>, motion: bool) -> TemporalUniforms {
@@ -256,6 +287,10 @@ fn uniforms(s: &TemporalSettings, prev: Option<&Previous>, motion: bool) -> Temp
         catmull_rom: (s.history_filter == HistoryFilter::CatmullRom) as u32,
         motion: motion as u32,
         adaptive: s.adaptive_weight as u32,
+        young_frames: s.young_frames as f32,
+        _pad0: 0,
+        _pad1: 0,
+        _pad2: 0,
     }
 }
 
@@ -433,10 +468,11 @@ pub fn resolve_pixel(
             }
         }
     }
-    let rejected = u.valid == 1 && w == 0.0;
+    // The frames this pixel's history holds with this one: 1 where it starts (the first frame,
+    // a reset, a rejection).
+    let youth = if w > 0.0 { n + 1.0 } else { 1.0 };
     // The running moments of the input's frame-to-frame change (its largest channel),
-    // restarted with the history; the weight adapted to them once three frames are held (n is
-    // a bilinear mean of counts: 2.5, not 3, so rounding does not decide).
+    // restarted with the history; they steer the weight once ADAPT_AFTER frames are held.
     let xs = c.max_element();
     let (mut m1, mut m2) = (0.0f32, 0.0f32);
     if w > 0.0 {
@@ -444,13 +480,17 @@ pub fn resolve_pixel(
         let a = MOMENT_WEIGHT.min((n - 1.0).max(0.0) / n);
         m1 = d + a * (hs.y - d);
         m2 = d * d + a * (hs.z - d * d);
-        if u.adaptive == 1 && n > 2.5 {
+        if u.adaptive == 1 && n > ADAPT_AFTER {
             w = adapted_weight(w, m1, m2, a, xs);
         }
     }
-    if (w > 0.0 && u.clip == 1) || rejected {
+    // The current frame's 3×3 neighbourhood on the same surface: its spread clips the history,
+    // its mean stands in for a young history.
+    let young = youth < u.young_frames;
+    let mut mean = c;
+    if (w > 0.0 && u.clip == 1) || young {
         let (mut lo, mut hi) = (c, c);
-        let (mut m1, mut m2) = (Vec3::ZERO, Vec3::ZERO);
+        let (mut s1, mut s2) = (Vec3::ZERO, Vec3::ZERO);
         let mut count = 0.0f32;
         for dy in -1..=1 {
             for dx in -1..=1 {
@@ -459,25 +499,25 @@ pub fn resolve_pixel(
                     let s = rgb(current.pixels[p]);
                     lo = lo.min(s);
                     hi = hi.max(s);
-                    m1 += s;
-                    m2 += s * s;
+                    s1 += s;
+                    s2 += s * s;
                     count += 1.0;
                 }
             }
         }
-        let mean = m1 / count;
-        if rejected {
-            h = mean;
-        } else {
-            let var = (m2 / count - mean * mean).max(Vec3::ZERO);
+        mean = s1 / count;
+        if w > 0.0 && u.clip == 1 {
+            let var = (s2 / count - mean * mean).max(Vec3::ZERO);
             let sigma = Vec3::new(var.x.sqrt(), var.y.sqrt(), var.z.sqrt());
             let box_lo = lo.max(mean - u.clip_sigma * sigma);
             let box_hi = hi.min(mean + u.clip_sigma * sigma);
             h = h.clamp(box_lo, box_hi);
         }
     }
-    let res = if rejected { h } else { c + w * (h - c) };
-    (res.to_array(), [res.x, res.y, res.z, (n + 1.0).min(MAX_FRAMES)], w, [dist, xs, m1, m2])
+    // The running mean, kept as the history; shown through the neighbourhood's mean while young.
+    let res = c + w * (h - c);
+    let out = if young { mean + (youth - 1.0) / (u.young_frames - 1.0) * (res - mean) } else { res };
+    (out.to_array(), [res.x, res.y, res.z, (n + 1.0).min(MAX_FRAMES)], w, [dist, xs, m1, m2])
 }
 
 /// The temporal stage on the CPU: the mirror of [`Temporal`].

@@ -10,8 +10,8 @@
 // deviations, inside its min and max); and the blend out = c + w·(h − c) with
 // w = min(history_weight, n / (n + 1)), n the frames the history holds: the plain mean of the
 // first frames, then an exponential average, its weight lowered where the pixel's input drifts
-// more than its noise explains (adapted_weight). Where a history exists but was rejected, the
-// neighbourhood's mean.
+// more than its noise explains (adapted_weight). While a history holds fewer than young_frames
+// frames (1 where it starts: a reset, a rejection), the output leans on the neighbourhood's mean.
 
 struct Temporal {
     prev_view_proj: mat4x4<f32>,
@@ -30,6 +30,11 @@ struct Temporal {
     // 1 to adapt the weight to the pixel's noise and drift (temporal.rs
     // TemporalSettings::adaptive_weight).
     adaptive: u32,
+    // temporal.rs TemporalSettings::young_frames, as a float (0 or 1: off).
+    young_frames: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 // temporal.rs catmull_rom_weights: the weights of the texels at -1, 0, 1, 2 at fraction f.
@@ -46,6 +51,8 @@ fn catmull_rom_weights(f: f32) -> vec4<f32> {
 const MAX_FRAMES: f32 = 1024.0;
 // temporal.rs MOMENT_WEIGHT: the past's weight in the moments of a pixel's frame-to-frame change.
 const MOMENT_WEIGHT: f32 = 0.8;
+// temporal.rs ADAPT_AFTER: the frames a history must hold before its moments steer the weight.
+const ADAPT_AFTER: f32 = 4.5;
 // temporal.rs NOISE_FLOOR: the least noise assumed, relative to the pixel's value.
 const NOISE_FLOOR: f32 = 0.00390625;
 
@@ -210,10 +217,11 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
     // and spread clip the history; where the history was rejected, its mean replaces the
     // single current sample (a disoccluded strip would otherwise keep one frame's noise
     // beside accumulated pixels).
-    let rejected = params.valid == 1u && w == 0.0;
+    // The frames this pixel's history holds with this one: 1 where it starts (the first frame,
+    // a reset, a rejection).
+    let youth = select(1.0, n + 1.0, w > 0.0);
     // The running moments of the input's frame-to-frame change (its largest channel),
-    // restarted with the history; the weight adapted to them once three frames are held (n is
-    // a bilinear mean of counts: 2.5, not 3, so rounding does not decide).
+    // restarted with the history; they steer the weight once ADAPT_AFTER frames are held.
     let xs = max(c.r, max(c.g, c.b));
     var m1 = 0.0;
     var m2 = 0.0;
@@ -222,16 +230,21 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
         let a = min(MOMENT_WEIGHT, max(n - 1.0, 0.0) / n);
         m1 = d + a * (hs.y - d);
         m2 = d * d + a * (hs.z - d * d);
-        if params.adaptive == 1u && n > 2.5 {
+        if params.adaptive == 1u && n > ADAPT_AFTER {
             w = adapted_weight(w, m1, m2, a, xs);
         }
     }
     textureStore(stats_out, px, vec4<f32>(dist, xs, m1, m2));
-    if (w > 0.0 && params.clip == 1u) || rejected {
+    // The current frame's 3×3 neighbourhood on the same surface (the pixels whose view distance
+    // is within the tolerance of this one's, or sky with sky): its spread clips the history,
+    // its mean stands in for a young history (temporal.rs TemporalSettings::young_frames).
+    let young = youth < params.young_frames;
+    var mean = c;
+    if (w > 0.0 && params.clip == 1u) || young {
         var lo = c;
         var hi = c;
-        var m1 = vec3<f32>(0.0);
-        var m2 = vec3<f32>(0.0);
+        var s1 = vec3<f32>(0.0);
+        var s2 = vec3<f32>(0.0);
         var count = 0.0;
         for (var dy = -1; dy <= 1; dy++) {
             for (var dx = -1; dx <= 1; dx++) {
@@ -240,28 +253,28 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
                     let s = textureLoad(current_tex, p, 0).rgb;
                     lo = min(lo, s);
                     hi = max(hi, s);
-                    m1 += s;
-                    m2 += s * s;
+                    s1 += s;
+                    s2 += s * s;
                     count += 1.0;
                 }
             }
         }
-        let mean = m1 / count;
-        if rejected {
-            h = mean;
-        } else {
+        mean = s1 / count;
+        if w > 0.0 && params.clip == 1u {
             // Variance clip (mean ± clip_sigma·σ), inside the neighbourhood's range.
-            let sigma = sqrt(max(m2 / count - mean * mean, vec3<f32>(0.0)));
+            let sigma = sqrt(max(s2 / count - mean * mean, vec3<f32>(0.0)));
             let box_lo = max(lo, mean - params.clip_sigma * sigma);
             let box_hi = min(hi, mean + params.clip_sigma * sigma);
             h = clamp(h, box_lo, box_hi);
         }
     }
-    var res = c + w * (h - c);
-    if rejected {
-        res = h;
+    // The running mean, kept as the history; shown through the neighbourhood's mean while young.
+    let res = c + w * (h - c);
+    var out = res;
+    if young {
+        out = mean + (youth - 1.0) / (params.young_frames - 1.0) * (res - mean);
     }
-    textureStore(out_tex, px, vec4<f32>(res, cur.a));
+    textureStore(out_tex, px, vec4<f32>(out, cur.a));
     textureStore(history_out, px, vec4<f32>(res, min(n + 1.0, MAX_FRAMES)));
     textureStore(weight_out, px, vec4<f32>(w, 0.0, 0.0, 0.0));
 }

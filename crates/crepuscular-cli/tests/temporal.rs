@@ -463,7 +463,7 @@ fn gpu_temporal_matches_its_cpu_mirror_frame_by_frame() {
         let mut cpu = CpuTemporal::new(settings).unwrap();
         let mut gt = Temporal::new(&gpu.device, settings).unwrap();
         let mut prev: Option<FrameDesc> = None;
-        for k in 0..6u32 {
+        for k in 0..8u32 {
             let (desc, depth, _) = posed(&sc, Vec3::new(0.15 * k as f32, 0.0, 0.05 * k as f32));
             let cur = noise(k);
             let mv = by_motion.then(|| motion_vectors(prev.as_ref().unwrap_or(&desc), &desc, &depth));
@@ -483,7 +483,7 @@ fn gpu_temporal_matches_its_cpu_mirror_frame_by_frame() {
                     continue;
                 }
                 // The weight follows the bilinear mean of the texels' frame counts (f32
-                // rounding) and, adapted (from frame 3), the root of a cubic whose inputs
+                // rounding) and, adapted (from frame 5), the root of a cubic whose inputs
                 // (moments of the frame-to-frame change: m2 − m1² cancels) differ by rounding,
                 // found to 0.9/2¹⁶ = 1.4e-5. Where that root is steep it may move further.
                 let dw = (gw[i] - cw[i]).abs();
@@ -579,6 +579,7 @@ const MEASURED_GAIN_DB: f64 = 10.35;
 fn bad_temporal_settings_are_errors_naming_the_setting() {
     let bad = [
         (TemporalSettings { history_weight: 1.0, ..Default::default() }, "history_weight"),
+        (TemporalSettings { young_frames: 1025, ..Default::default() }, "young_frames"),
         (TemporalSettings { history_weight: -0.1, ..Default::default() }, "history_weight"),
         (TemporalSettings { history_weight: f32::NAN, ..Default::default() }, "history_weight"),
         (TemporalSettings { clip_sigma: -1.0, ..Default::default() }, "clip_sigma"),

@@ -37,10 +37,10 @@ pub const MOMENT_WEIGHT: f32 = 0.8;
 
 /// The frames a pixel's history must hold before its moments steer the weight
 /// ([`TemporalSettings::adaptive_weight`]; `ADAPT_AFTER` in temporal.wgsl): more than 4.5, so
-/// at least four frame-to-frame changes (a count is a bilinear mean of counts: the half keeps
-/// rounding from deciding). Measured (docs/RESULTS.md): from the third frame on, the moments
-/// of two changes lowered the weight of jittered inputs on many pixels (colonnade, frame 3 of
-/// a slow move: 44.75 dB against 45.55).
+/// at least five frame-to-frame changes, this frame's included (a count is a bilinear mean of
+/// counts: the half keeps rounding from deciding). Measured (docs/RESULTS.md): steering from
+/// 2.5 frames (three changes), the moments lowered the weight of jittered inputs on many
+/// pixels (colonnade, frame 3 of a slow move: 44.75 dB against 45.55).
 pub const ADAPT_AFTER: f32 = 4.5;
 
 /// The least noise [`adapted_weight`] assumes, as a fraction of the pixel's value (its
@@ -112,15 +112,15 @@ pub struct TemporalSettings {
     /// detail. Cost: 16 reads of history and distance instead of 4.
     pub history_filter: HistoryFilter,
     /// Adapt each pixel's history weight to what its input does from frame to frame
-    /// (docs/MODEL.md §7, step 4): the stage keeps, per pixel, running moments of the change
+    /// (docs/MODEL.md §7, step 5): the stage keeps, per pixel, running moments of the change
     /// d of the input's largest channel between consecutive frames (reprojected). Their
     /// variance is the input's noise (twice its variance), their mean its drift (the signal
     /// moving under the camera or lights). An exponential average of weight w leaves
     /// σ²·(1 − w)/(1 + w) of the noise's variance σ² and lags a drift δ per frame by
     /// δ·w/(1 − w); w is lowered to where the sum of the two squared errors is least
-    /// ([`adapted_weight`]; never raised above `history_weight`). A technique without jitter (no noise) then
-    /// follows the camera with little lag instead of trailing it by ~1/(1 − w) frames; a
-    /// jittered one keeps most of its averaging. Default true, measured (docs/RESULTS.md,
+    /// ([`adapted_weight`]; never raised above `history_weight`). A technique without jitter
+    /// (no noise) then follows the camera with little lag instead of trailing it by
+    /// w/(1 − w) ≈ 9 frames of its drift; a jittered one keeps most of its averaging. Default true, measured (docs/RESULTS.md,
     /// "Temporal accumulation"). Cost: a few ALU operations per pixel (the moments are read
     /// with the history).
     pub adaptive_weight: bool,
@@ -129,7 +129,7 @@ pub struct TemporalSettings {
     /// its output leans on the current frame's 3×3 same-surface mean M: out = M + (k − 1)/(N − 1)
     /// ·(T − M), T the running mean (which is what the history keeps). A jittered input's
     /// first frames are then a spatial average instead of one noisy sample (colonnade,
-    /// brute-force: the frame of a reset 35.3 → 43.9 dB), at the cost of a 3×3 blur of those
+    /// brute-force: the frame of a light jump 35.3 → 43.9 dB), at the cost of a 3×3 blur of those
     /// frames (an exact technique's first frame: minmax on terrain 64.9 → 57.1 dB). 0 or 1:
     /// off (a new or rejected history shows the current frame). Default 8, measured
     /// (docs/RESULTS.md, "Temporal accumulation"). Cost: the neighbourhood's 9 reads on those
@@ -350,7 +350,7 @@ pub fn adapted_weight(w: f32, m1: f32, m2: f32, a: f32, x: f32) -> f32 {
     let var = (m2 - m1 * m1).max(0.0);
     let noise = 0.5 * var + (NOISE_FLOOR * x) * (NOISE_FLOOR * x);
     let drift2 = (m1 * m1 - var * (1.0 - a) / (1.0 + a)).max(0.0);
-    let g = |x: f32| drift2 * x * (1.0 + x) * (1.0 + x) - noise * (1.0 - x) * (1.0 - x) * (1.0 - x);
+    let g = |v: f32| drift2 * v * (1.0 + v) * (1.0 + v) - noise * (1.0 - v) * (1.0 - v) * (1.0 - v);
     if g(w) <= 0.0 {
         return w;
     }

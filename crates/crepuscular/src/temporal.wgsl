@@ -57,10 +57,11 @@ const ADAPT_AFTER: f32 = 4.5;
 const NOISE_FLOOR: f32 = 0.00390625;
 
 // temporal.rs adapted_weight: the weight where the squared error of the noise the average
-// leaves, σ²·(1 − w)/(1 + w) (σ² at least (NOISE_FLOOR·x)²), plus that of its lag behind the drift, (δ·w/(1 − w))², is least:
-// δ²·w·(1 + w)² = σ²·(1 − w)³, by 16 halvings below w (w itself where the root is above it).
-fn balance(drift2: f32, noise: f32, x: f32) -> f32 {
-    return drift2 * x * (1.0 + x) * (1.0 + x) - noise * (1.0 - x) * (1.0 - x) * (1.0 - x);
+// leaves, σ²·(1 − w)/(1 + w) (σ² at least (NOISE_FLOOR·x)²), plus that of its lag behind the
+// drift, (δ·w/(1 − w))², is least: δ²·w·(1 + w)² = σ²·(1 − w)³, by 16 halvings below w (w
+// itself where the root is above it).
+fn balance(drift2: f32, noise: f32, v: f32) -> f32 {
+    return drift2 * v * (1.0 + v) * (1.0 + v) - noise * (1.0 - v) * (1.0 - v) * (1.0 - v);
 }
 
 fn adapted_weight(w: f32, m1: f32, m2: f32, a: f32, x: f32) -> f32 {
@@ -212,11 +213,6 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
-    // The current frame's neighbourhood on the same surface as this pixel (the 3×3 pixels
-    // whose view distance is within the tolerance of this one's, or sky with sky): its mean
-    // and spread clip the history; where the history was rejected, its mean replaces the
-    // single current sample (a disoccluded strip would otherwise keep one frame's noise
-    // beside accumulated pixels).
     // The frames this pixel's history holds with this one: 1 where it starts (the first frame,
     // a reset, a rejection).
     let youth = select(1.0, n + 1.0, w > 0.0);

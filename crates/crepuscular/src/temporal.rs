@@ -120,9 +120,9 @@ pub struct TemporalSettings {
     /// δ·w/(1 − w); w is lowered to where the sum of the two squared errors is least
     /// ([`adapted_weight`]; never raised above `history_weight`). A technique without jitter
     /// (no noise) then follows the camera with little lag instead of trailing it by
-    /// w/(1 − w) ≈ 9 frames of its drift; a jittered one keeps most of its averaging. Default true, measured (docs/RESULTS.md,
-    /// "Temporal accumulation"). Cost: a few ALU operations per pixel (the moments are read
-    /// with the history).
+    /// w/(1 − w) ≈ 9 frames of its drift; a jittered one keeps most of its averaging. Default
+    /// true, measured (docs/RESULTS.md, "Temporal accumulation"). Cost: a few ALU operations
+    /// per pixel (the moments are read with the history).
     pub adaptive_weight: bool,
     /// While a pixel's history holds fewer than this many frames (k, counting this one: 1 on
     /// the first frame, after a reset or a light jump, and where the history was rejected),
@@ -776,7 +776,7 @@ impl Temporal {
             let view = |t: &wgpu::Texture| t.create_view(&Default::default());
             let bind = |read: usize| {
                 let tv = wgpu::BindingResource::TextureView;
-                let (hr, dr, hw, dw, wt) = (
+                let (hr, sr, hw, sw, wt) = (
                     view(&sized.history[read]),
                     view(&sized.stats[read]),
                     view(&sized.history[1 - read]),
@@ -792,10 +792,10 @@ impl Temporal {
                         ("current_tex", tv(current)),
                         ("motion_tex", tv(motion)),
                         ("history_tex", tv(&hr)),
-                        ("stats_tex", tv(&dr)),
+                        ("stats_tex", tv(&sr)),
                         ("out_tex", tv(output)),
                         ("history_out", tv(&hw)),
-                        ("stats_out", tv(&dw)),
+                        ("stats_out", tv(&sw)),
                         ("weight_out", tv(&wt)),
                     ],
                 )

@@ -173,6 +173,12 @@ pub struct HostFrame {
     pub surface: Image,
     /// Transmittance to the visible surface, per pixel (for compositing).
     pub transmittance: Vec<[f32; 3]>,
+    /// The frame's motion vectors, as an engine's prepass writes them
+    /// ([`crepuscular_scene::raster::motion_vectors`]; zero on the first frame), when the
+    /// renderer makes them ([`PathRenderer::motion_vectors`]).
+    pub motion: Option<Vec<[f32; 2]>>,
+    /// The same on the GPU (`Rgba32Float`, x and y in R and G), when the frame came from it.
+    motion_texture: Option<wgpu::Texture>,
     shadow_maps: Option<Vec<ShadowMap>>,
     textures: Option<HostTextures>,
 }
@@ -205,6 +211,83 @@ pub struct PathRenderer<'g> {
     /// Lights turned by this angle (degrees) about the vertical axis through the camera's
     /// `look_at`, on top of the path: a light jump ([`LIGHT_JUMP_DEGREES`]).
     pub light_turn_degrees: f32,
+    /// Make each frame's motion vectors ([`HostFrame::motion`]), as an engine's prepass does,
+    /// for the temporal stage. Costs one CPU rasterization of the frame. Default false.
+    pub motion_vectors: bool,
+    /// The scene's own triangles (without the occluder).
+    base: Geometry,
+    /// A box that moves across a shaft ([`PathRenderer::add_occluder`]), and whether it has
+    /// jumped.
+    occluder: Option<(Occluder, bool)>,
+    /// What the GPU host holds: the occluder's state when it was uploaded.
+    uploaded: Option<bool>,
+    /// The previous frame's world → clip matrix and vertex positions (for motion vectors).
+    previous: Option<(glam::Mat4, Vec<[f32; 3]>)>,
+}
+
+/// A box that `animate --occluder-jump` adds to the scene and moves sideways in one frame (an
+/// occluder crossing a shaft): the temporal stage's ghosting behind a moving object. Its own
+/// surface moves with the motion vectors; the shaft it casts moves where no surface does.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Occluder {
+    /// Centre before the jump, world space (metres).
+    pub centre: Vec3,
+    /// Half the side of the cube, metres.
+    pub half_size: f32,
+    /// Where the jump takes the centre: `centre + jump` (metres).
+    pub jump: Vec3,
+}
+
+/// Where [`Occluder::for_scene`] may put the box: fractions of the way from the camera to its
+/// `look_at` point.
+const OCCLUDER_PLACES: [f32; 5] = [0.5, 0.4, 0.6, 0.3, 0.7];
+
+impl Occluder {
+    /// The box for `scene` (at t = 0 of its path): on the camera's line of sight to its
+    /// `look_at` point, at the place of [`OCCLUDER_PLACES`] where the scene's lights (with their
+    /// shadows, without the box) shine brightest, so the box casts a shaft into the view; its
+    /// side a tenth of its distance to the eye, and the jump 1.5 sides to the camera's right,
+    /// so the old and new shafts do not overlap. Errors on a scene whose frame is invalid.
+    pub fn for_scene(scene: &Scene) -> Result<Self> {
+        let desc = frame_desc(scene)?;
+        let maps: Vec<ShadowMap> = desc
+            .lights
+            .iter()
+            .map(|l| crepuscular_scene::raster::render_shadow_map(&scene.geometry, &l.shadow))
+            .collect();
+        let cam = &scene.camera;
+        let lit = |p: Vec3| -> f32 {
+            desc.lights
+                .iter()
+                .zip(&maps)
+                .map(|(fl, m)| {
+                    let (l, _) = crepuscular::integrand::lit_incident(fl, &desc.medium, m, p);
+                    l.x * 0.2126 + l.y * 0.7152 + l.z * 0.0722
+                })
+                .sum()
+        };
+        let mut best = (f32::NEG_INFINITY, OCCLUDER_PLACES[0]);
+        for f in OCCLUDER_PLACES {
+            let v = lit(cam.position + (cam.look_at - cam.position) * f);
+            if v > best.0 {
+                best = (v, f);
+            }
+        }
+        let centre = cam.position + (cam.look_at - cam.position) * best.1;
+        let half_size = 0.05 * centre.distance(cam.position);
+        let forward = (cam.look_at - cam.position).normalize();
+        let right = forward.cross(cam.up).normalize();
+        Ok(Occluder { centre, half_size, jump: right * 3.0 * half_size })
+    }
+
+    /// The box's triangles (12, flat normals, albedo 0.5), before or after the jump.
+    pub fn geometry(&self, jumped: bool) -> Geometry {
+        let at = self.centre + if jumped { self.jump } else { Vec3::ZERO };
+        crepuscular_scene::mesh::cuboid(
+            &crepuscular_scene::mesh::Transform::at_scaled(at, Vec3::splat(2.0 * self.half_size)),
+            Vec3::splat(0.5),
+        )
+    }
 }
 
 /// How far `animate --light-jump` turns the lights, degrees about the vertical axis through
@@ -241,10 +324,28 @@ impl<'g> PathRenderer<'g> {
             host,
             camera: scene.camera.clone(),
             lights: scene.lights.clone(),
+            base: scene.geometry.clone(),
             scene,
             path,
             light_turn_degrees: 0.0,
+            motion_vectors: false,
+            occluder: None,
+            uploaded: None,
+            previous: None,
         })
+    }
+
+    /// Adds `occluder` to the scene from the next frame on (before its jump).
+    pub fn add_occluder(&mut self, occluder: Occluder) {
+        self.occluder = Some((occluder, false));
+    }
+
+    /// Moves the occluder to its place after the jump from the next frame on (nothing without
+    /// one).
+    pub fn jump_occluder(&mut self) {
+        if let Some((_, jumped)) = &mut self.occluder {
+            *jumped = true;
+        }
     }
 
     /// The scene (at t = 0).
@@ -261,6 +362,17 @@ impl<'g> PathRenderer<'g> {
             }
         }
         self.scene.camera = self.path.pose(&self.camera, &self.lights[0].light, t).0;
+        if let Some((occluder, jumped)) = &self.occluder
+            && self.uploaded != Some(*jumped)
+        {
+            let mut g = self.base.clone();
+            g.append(&occluder.geometry(*jumped));
+            if let (Some(gpu), Some(h)) = (self.gpu, &mut self.host) {
+                h.set_geometry(gpu, &g);
+            }
+            self.scene.geometry = g;
+            self.uploaded = Some(*jumped);
+        }
         let desc = frame_desc(&self.scene)?;
         let (depth, surface, shadow_map, textures) = match (self.gpu, &self.host) {
             (Some(g), Some(h)) => {
@@ -275,7 +387,27 @@ impl<'g> PathRenderer<'g> {
             }
         };
         let transmittance = surface_transmittance(&desc, &depth);
-        Ok(HostFrame { t, desc, depth, surface, transmittance, shadow_maps: shadow_map, textures })
+        let (motion, motion_texture) = if self.motion_vectors {
+            let g = &self.scene.geometry;
+            let vp = desc.camera.view_proj();
+            let positions: Vec<[f32; 3]> = g.vertices.iter().map(|v| v.position).collect();
+            let buffer = crepuscular_scene::raster::rasterize_with(g, vp, desc.width, desc.height, desc.camera.depth);
+            let (prev_vp, prev) = self.previous.take().unwrap_or((vp, positions.clone()));
+            let mv = crepuscular_scene::raster::motion_vectors(&buffer, g, &prev, prev_vp);
+            self.previous = Some((vp, positions));
+            let texture = self.gpu.map(|gpu| {
+                let img = Image {
+                    width: desc.width,
+                    height: desc.height,
+                    pixels: mv.iter().map(|m| [m[0], m[1], 0.0, 0.0]).collect(),
+                };
+                gpu.upload_image("motion vectors", &img)
+            });
+            (Some(mv), texture)
+        } else {
+            (None, None)
+        };
+        Ok(HostFrame { t, desc, depth, surface, transmittance, motion, motion_texture, shadow_maps: shadow_map, textures })
     }
 }
 
@@ -553,6 +685,11 @@ pub struct AnimateOptions {
     /// Turn every light by [`LIGHT_JUMP_DEGREES`] from this frame on (a light jump); with
     /// `--temporal --flicker` the report gives the frames the stage takes to recover.
     pub light_jump: Option<u32>,
+    /// Add a box on the camera's line of sight ([`Occluder::for_scene`]) and move it sideways
+    /// by 1.5 of its sides at this frame (an occluder crossing a shaft); with `--temporal
+    /// --flicker` the report gives the frames the stage takes to recover. Not with
+    /// `light_jump`.
+    pub occluder_jump: Option<u32>,
     /// The GIF.
     pub output: PathBuf,
 }
@@ -598,6 +735,14 @@ impl AnimateOptions {
             && (k == 0 || k >= self.rendered())
         {
             bail!("--light-jump {k}: must be a frame after the first and before the last ({})", self.rendered());
+        }
+        if let Some(k) = self.occluder_jump
+            && (k == 0 || k >= self.rendered())
+        {
+            bail!("--occluder-jump {k}: must be a frame after the first and before the last ({})", self.rendered());
+        }
+        if self.light_jump.is_some() && self.occluder_jump.is_some() {
+            bail!("--light-jump and --occluder-jump: give one at a time (each recovery is measured alone)");
         }
         let parent = match self.output.parent() {
             Some(p) if !p.as_os_str().is_empty() => p,
@@ -662,6 +807,48 @@ pub struct FrameQuality {
     pub flip: f64,
     /// Mean history weight over the frame's pixels (0 where the history was rejected).
     pub mean_history_weight: f64,
+    /// From a jump's frame on: PSNR of the technique's own in-scattering over the jump's
+    /// region ([`JumpRegion`]), dB.
+    pub region_psnr_db_without: Option<f64>,
+    /// The same after the temporal stage (JSON `null` for identical pixels, as for `psnr_db`).
+    pub region_psnr_db: Option<f64>,
+}
+
+/// Where a jump (of the lights or of the occluder) changed the picture: the pixels whose
+/// reference in-scattering luminance changed between the frame before the jump and the jump's
+/// frame by more than [`REGION_CHANGE`] of the larger of the two and by more than 2 % of the
+/// jump frame's mean (so the slow camera move's own change stays out). The old and the new
+/// shaft: where a ghost would be. Its PSNR uses the whole reference's peak, so it reads on the
+/// same scale as the frame's.
+#[derive(Clone, Debug, Serialize)]
+pub struct JumpRegion {
+    /// Pixels in the region.
+    pub pixels: u32,
+    /// Their fraction of the frame.
+    pub fraction: f64,
+    /// Frames from the jump until the stage's region PSNR is within 1 dB of its steady state
+    /// (the mean of the last 4 frames rendered; at least 8 must follow the jump); None when
+    /// never.
+    pub recovery_frames: Option<u32>,
+}
+
+/// A pixel's change that counts it into a [`JumpRegion`]: this fraction of its larger value.
+pub const REGION_CHANGE: f64 = 0.1;
+
+/// The [`JumpRegion`] mask of `before` → `after` (reference in-scattering of the frames either
+/// side of a jump).
+pub fn jump_region(before: &Image, after: &Image) -> Vec<bool> {
+    let mean = after.pixels.iter().map(luminance).sum::<f64>() / after.pixels.len().max(1) as f64;
+    before
+        .pixels
+        .iter()
+        .zip(&after.pixels)
+        .map(|(b, a)| {
+            let (yb, ya) = (luminance(b), luminance(a));
+            let d = (ya - yb).abs();
+            d > REGION_CHANGE * yb.max(ya) && d > 0.02 * mean
+        })
+        .collect()
 }
 
 /// What `animate --temporal` measured.
@@ -681,11 +868,15 @@ pub struct TemporalReport {
     pub flicker_without: Option<Flicker>,
     /// The frame the lights jumped at (`--light-jump`).
     pub light_jump: Option<u32>,
-    /// Ghosting after that jump (with `--flicker`): frames from the jump until the stage's PSNR
+    /// The frame the occluder jumped at (`--occluder-jump`), and the occluder.
+    pub occluder_jump: Option<(u32, Occluder)>,
+    /// Ghosting after the jump (with `--flicker`): frames from the jump until the stage's PSNR
     /// is within 1 dB of its new steady state (the mean of the last 4 frames rendered, which
     /// must be at least 8 frames after the jump); 0 when the jump frame itself is; None when
     /// it is not within the frames rendered or too few follow the jump.
     pub recovery_frames: Option<u32>,
+    /// The same over the pixels the jump changed (with `--flicker`).
+    pub region: Option<JumpRegion>,
 }
 
 /// Frames from `jump` until `psnr` is within 1 dB of its mean over the last 4 frames (at least
@@ -752,14 +943,15 @@ impl Stage {
                 let out = g.create_output_texture(w, h);
                 let view = |t: &wgpu::Texture| t.create_view(&Default::default());
                 let mut enc = g.device.create_command_encoder(&Default::default());
-                t.encode(&mut enc, &frame.desc, &host.depth_view(), &view(current), &view(&out), None)?;
+                let motion = frame.motion_texture.as_ref().map(view);
+                t.encode(&mut enc, &frame.desc, &host.depth_view(), &view(current), &view(&out), motion.as_ref())?;
                 g.queue.submit([enc.finish()]);
                 let img = g.read_image(&out)?;
                 let w = g.read_texture_f32(t.weights().context("temporal weights")?, 0)?;
                 Ok((img, mean(&w)))
             }
             (Stage::Cpu(t), ..) => {
-                let img = t.resolve(&frame.desc, &frame.depth, img, None)?;
+                let img = t.resolve(&frame.desc, &frame.depth, img, frame.motion.as_deref())?;
                 Ok((img, mean(t.weights())))
             }
             (Stage::Gpu(_), ..) => {
@@ -838,6 +1030,18 @@ pub fn run(
     let tone = ToneMap::new(scene.render.exposure);
     let scene_name = scene.name.clone();
     let mut renderer = PathRenderer::new(scene, path.clone(), gpu)?;
+    // The stage reads the frame's motion vectors, as it would an engine's.
+    renderer.motion_vectors = stage.is_some();
+    let occluder = match opts.occluder_jump {
+        Some(_) => Some(Occluder::for_scene(renderer.scene())?),
+        None => None,
+    };
+    if let Some(o) = &occluder {
+        renderer.add_occluder(o.clone());
+    }
+    let jump = opts.light_jump.or(opts.occluder_jump);
+    let mut previous_reference: Option<Image> = None;
+    let mut region: Option<Vec<bool>> = None;
     let (w, h) = opts.size;
     let delay = image::Delay::from_numer_denom_ms(1000, opts.fps);
     let mut meter = FlickerMeter::new();
@@ -855,6 +1059,9 @@ pub fn run(
                 if opts.light_jump == Some(i) {
                     renderer.light_turn_degrees = LIGHT_JUMP_DEGREES;
                 }
+                if opts.occluder_jump == Some(i) {
+                    renderer.jump_occluder();
+                }
                 let mut frame = renderer.frame(t)?;
                 let (raw, stats) = technique.render(gpu, &mut frame, i, rows)?;
                 technique_ms.push(stats.total_ms());
@@ -871,6 +1078,23 @@ pub fn run(
                     progress(i, rendered, &format!("frame {}/{}: reference", i + 1, rendered));
                     let (ri, _) = r.render(gpu, &mut frame, 0, rows)?;
                     meter.push(&img, &ri)?;
+                    if jump == Some(i)
+                        && let Some(before) = &previous_reference
+                    {
+                        let m = jump_region(before, &ri);
+                        region = m.iter().any(|&b| b).then_some(m);
+                    }
+                    let region_psnr = |img: &Image| -> Result<Option<f64>> {
+                        match &region {
+                            Some(m) => Ok(Some(crate::metrics::region_psnr(&ri, img, m)?)),
+                            None => Ok(None),
+                        }
+                    };
+                    let (region_psnr_db_without, region_psnr_db) = (region_psnr(&raw)?, region_psnr(&img)?);
+                    // The frame before the jump's reference, to find the jump's region.
+                    if jump == Some(i + 1) {
+                        previous_reference = Some(ri.clone());
+                    }
                     if stage.is_some() {
                         meter_without.push(&raw, &ri)?;
                         let q = Quality {
@@ -887,6 +1111,8 @@ pub fn run(
                             psnr_db,
                             flip,
                             mean_history_weight: weight,
+                            region_psnr_db_without,
+                            region_psnr_db,
                         });
                     }
                 }
@@ -907,6 +1133,18 @@ pub fn run(
     })?;
     let flicker = if opts.flicker { Some(meter.finish()?) } else { None };
     let psnr: Vec<f64> = qualities.iter().map(|q| q.psnr_db).collect();
+    let region_report = match (&region, jump) {
+        (Some(m), Some(k)) => {
+            let after: Vec<f64> = qualities.iter().skip(k as usize).filter_map(|q| q.region_psnr_db).collect();
+            let pixels = m.iter().filter(|&&b| b).count() as u32;
+            Some(JumpRegion {
+                pixels,
+                fraction: pixels as f64 / m.len().max(1) as f64,
+                recovery_frames: recovery_frames(&after, 0),
+            })
+        }
+        _ => None,
+    };
     let temporal = match (opts.temporal, &stage) {
         (Some(settings), Some(st)) => Some(TemporalReport {
             settings,
@@ -916,9 +1154,10 @@ pub fn run(
             frames: qualities,
             flicker_without: if opts.flicker { Some(meter_without.finish()?) } else { None },
             light_jump: opts.light_jump,
-            recovery_frames: opts
-                .light_jump
+            occluder_jump: opts.occluder_jump.zip(occluder),
+            recovery_frames: jump
                 .and_then(|k| if psnr.len() > k as usize { recovery_frames(&psnr, k as usize) } else { None }),
+            region: region_report,
         }),
         _ => None,
     };

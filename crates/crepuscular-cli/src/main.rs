@@ -147,6 +147,12 @@ struct AnimateArgs {
     /// temporal stage takes to recover (its ghosting).
     #[arg(long, value_name = "K")]
     light_jump: Option<u32>,
+    /// Add a box on the camera's line of sight, where the lights shine brightest, and move it
+    /// sideways by 1.5 of its sides at frame K (an occluder crossing a shaft). With --temporal
+    /// --flicker, prints how many frames the temporal stage takes to recover, over the frame
+    /// and over the pixels the jump changed (its ghosting). Not with --light-jump.
+    #[arg(long, value_name = "K")]
+    occluder_jump: Option<u32>,
     /// A temporal-stage setting, `key=value` (with --temporal), e.g. `--temporal-set
     /// history_weight=0.8`; repeatable. Keys: history_weight, clip, clip_sigma,
     /// depth_tolerance, light_jump_degrees, history_filter ("bilinear" or "catmull-rom"),
@@ -601,6 +607,7 @@ fn cmd_animate(a: AnimateArgs) -> Result<()> {
         still_lights: a.still_lights,
         stop_after: a.stop_after,
         light_jump: a.light_jump,
+        occluder_jump: a.occluder_jump,
         output: a.output.clone(),
     };
     animate::check(&opts)?;
@@ -663,22 +670,46 @@ fn cmd_animate(a: AnimateArgs) -> Result<()> {
         if let Some(f) = t.flicker_without {
             println!("           flicker without the stage {:.4} %", 100.0 * f.relative);
         }
-        if let (Some(k), true) = (t.light_jump, a.flicker) {
+        let jump = match (t.light_jump, &t.occluder_jump) {
+            (Some(k), _) => Some((k, "light jump")),
+            (_, Some((k, _))) => Some((*k, "occluder jump")),
+            _ => None,
+        };
+        if let (Some((k, what)), true) = (jump, a.flicker) {
             match t.recovery_frames {
                 Some(r) => {
-                    println!("           light jump at frame {k}: within 1 dB of the new steady state after {r} frames")
+                    println!("           {what} at frame {k}: within 1 dB of the new steady state after {r} frames")
                 }
                 None => println!(
-                    "           light jump at frame {k}: not within 1 dB of the new steady state (the mean of the last 4 \
+                    "           {what} at frame {k}: not within 1 dB of the new steady state (the mean of the last 4 \
                      frames; at least 8 frames must follow the jump)"
                 ),
             }
+            if let Some(r) = &t.region {
+                let after = match r.recovery_frames {
+                    Some(n) => format!("within 1 dB of its steady state after {n} frames"),
+                    None => "not within 1 dB of its steady state".into(),
+                };
+                println!(
+                    "           over the {} pixels it changed ({:.1} % of the frame): {after}",
+                    r.pixels,
+                    100.0 * r.fraction
+                );
+            }
         }
         if !t.frames.is_empty() {
-            println!("frame  PSNR dB without → with   FLIP without → with   mean history weight");
+            let regions = t.region.is_some();
+            println!(
+                "frame  PSNR dB without → with   FLIP without → with   mean history weight{}",
+                if regions { "   jump region PSNR without → with" } else { "" }
+            );
             for (i, q) in t.frames.iter().enumerate() {
+                let region = match (q.region_psnr_db_without, q.region_psnr_db) {
+                    (Some(a), Some(b)) => format!("        {a:>7.2} → {b:>7.2}"),
+                    _ => String::new(),
+                };
                 println!(
-                    "{:>5}  {:>7.2} → {:>7.2}      {:.4} → {:.4}        {:.3}",
+                    "{:>5}  {:>7.2} → {:>7.2}      {:.4} → {:.4}        {:.3}{region}",
                     i, q.psnr_db_without, q.psnr_db, q.flip_without, q.flip, q.mean_history_weight
                 );
             }

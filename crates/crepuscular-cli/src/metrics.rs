@@ -114,6 +114,30 @@ pub fn compare(reference: &Image, test: &Image, tone: &ToneMap) -> Result<Metric
     Ok(Metrics { rmse, psnr_db, flip_mean, max_abs })
 }
 
+/// PSNR of `test` against `reference` over the pixels where `mask` is true (R, G and B), with
+/// the whole reference's peak (as [`compare`]), so a region's PSNR reads on the frame's scale.
+/// Errors when the sizes differ, the mask is not one entry per pixel, or it selects no pixel.
+pub fn region_psnr(reference: &Image, test: &Image, mask: &[bool]) -> Result<f64> {
+    check_sizes(reference, test)?;
+    if mask.len() != reference.pixels.len() {
+        bail!("region mask holds {} entries for {} pixels", mask.len(), reference.pixels.len());
+    }
+    let mut sum = 0.0f64;
+    let mut n = 0usize;
+    for ((r, t), _) in reference.pixels.iter().zip(&test.pixels).zip(mask).filter(|(_, m)| **m) {
+        for c in 0..3 {
+            let d = r[c] as f64 - t[c] as f64;
+            sum += d * d;
+        }
+        n += 3;
+    }
+    if n == 0 {
+        bail!("region mask selects no pixel");
+    }
+    let rmse = (sum / n as f64).sqrt();
+    Ok(if rmse == 0.0 { f64::INFINITY } else { 20.0 * (reference_peak(reference) / rmse).log10() })
+}
+
 /// A frame's reference, for the quality figures `bench` and `animate` report: PSNR of the
 /// linear in-scattering, FLIP of the tone-mapped final image.
 pub struct Quality {
@@ -227,6 +251,20 @@ mod tests {
         }
         let m = compare(&reference, &test, &ToneMap::default()).unwrap();
         assert!((m.rmse - (0.09f64 / 3.0).sqrt()).abs() < 1e-6, "{}", m.rmse);
+    }
+
+    #[test]
+    fn region_psnr_counts_only_the_masked_pixels_with_the_frames_peak() {
+        let mut r = Image::new(2, 1);
+        r.pixels = vec![[0.5, 0.5, 0.5, 1.0], [0.1, 0.1, 0.1, 1.0]];
+        let mut t = r.clone();
+        t.pixels[1] = [0.2, 0.2, 0.2, 1.0];
+        // Only pixel 1 differs, by 0.1 on each channel; the peak is the frame's, 0.5.
+        let p = region_psnr(&r, &t, &[false, true]).unwrap();
+        assert!((p - 20.0 * 5f64.log10()).abs() < 1e-9, "{p}");
+        assert_eq!(region_psnr(&r, &t, &[true, false]).unwrap(), f64::INFINITY);
+        assert!(region_psnr(&r, &t, &[false, false]).is_err());
+        assert!(region_psnr(&r, &t, &[true]).is_err());
     }
 
     #[test]

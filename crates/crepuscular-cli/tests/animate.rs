@@ -345,6 +345,9 @@ fn bad_animate_input_fails_with_one_line_and_leaves_the_output_alone() {
         (vec!["--size", "32x18", "--temporal", "--temporal-set", "history_weight=1"], "history_weight"),
         (vec!["--size", "32x18", "--temporal", "--temporal-set", "bogus=1"], "bogus"),
         (vec!["--size", "32x18", "--temporal-set", "clip=false"], "--temporal"),
+        (vec!["--size", "32x18", "--frames", "4", "--occluder-jump", "0"], "--occluder-jump"),
+        (vec!["--size", "32x18", "--frames", "4", "--occluder-jump", "4"], "--occluder-jump"),
+        (vec!["--size", "32x18", "--frames", "9", "--light-jump", "2", "--occluder-jump", "3"], "one at a time"),
     ] {
         let out = bin()
             .args(["animate", "cage", "--backend", "cpu"])

@@ -111,6 +111,27 @@ fn shadow_array_view(shadow_map: &wgpu::Texture) -> wgpu::TextureView {
 const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
     wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x3];
 
+/// The vertex and index buffers of `geometry` and its index count; wgpu refuses zero-sized
+/// buffers, so an empty scene gets one degenerate triangle.
+fn upload_geometry(device: &wgpu::Device, geometry: &Geometry) -> (wgpu::Buffer, wgpu::Buffer, u32) {
+    let (verts, idx): (Vec<Vertex>, Vec<u32>) = if geometry.indices.is_empty() {
+        (vec![Vertex { position: [0.0; 3], normal: [0.0, 1.0, 0.0], albedo: [0.0; 3] }; 3], vec![0, 0, 0])
+    } else {
+        (geometry.vertices.clone(), geometry.indices.clone())
+    };
+    let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("scene vertices"),
+        contents: bytemuck::cast_slice(&verts),
+        usage: wgpu::BufferUsages::VERTEX,
+    });
+    let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("scene indices"),
+        contents: bytemuck::cast_slice(&idx),
+        usage: wgpu::BufferUsages::INDEX,
+    });
+    (vertices, indices, idx.len() as u32)
+}
+
 impl GpuHost {
     /// [`GpuHost::new`] for `scene`'s geometry, shading its surfaces as the scene says.
     pub fn for_scene(gpu: &GpuContext, scene: &crate::Scene) -> Result<Self, Error> {
@@ -243,22 +264,7 @@ impl GpuHost {
                     cache: None,
                 })
             };
-            // wgpu refuses zero-sized buffers: keep one degenerate triangle for empty scenes.
-            let (verts, idx): (Vec<Vertex>, Vec<u32>) = if geometry.indices.is_empty() {
-                (vec![Vertex { position: [0.0; 3], normal: [0.0, 1.0, 0.0], albedo: [0.0; 3] }; 3], vec![0, 0, 0])
-            } else {
-                (geometry.vertices.clone(), geometry.indices.clone())
-            };
-            let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("scene vertices"),
-                contents: bytemuck::cast_slice(&verts),
-                usage: wgpu::BufferUsages::VERTEX,
-            });
-            let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("scene indices"),
-                contents: bytemuck::cast_slice(&idx),
-                usage: wgpu::BufferUsages::INDEX,
-            });
+            let (vertices, indices, index_count) = upload_geometry(device, geometry);
             let surface_pipelines = [
                 surface_pipeline(DepthConvention::Standard.compare()),
                 surface_pipeline(DepthConvention::Reversed.compare()),
@@ -274,11 +280,17 @@ impl GpuHost {
                 shading: SurfaceShading::default(),
                 vertices,
                 indices,
-                index_count: idx.len() as u32,
+                index_count,
                 rectified_unclipped: OnceLock::new(),
                 rectified_shader_clamp: OnceLock::new(),
             }
         })
+    }
+
+    /// Replaces the scene's triangles (a moving object: `animate --occluder-jump`) with
+    /// `geometry`, uploaded anew; the pipelines are kept.
+    pub fn set_geometry(&mut self, gpu: &GpuContext, geometry: &Geometry) {
+        (self.vertices, self.indices, self.index_count) = upload_geometry(&gpu.device, geometry);
     }
 
     /// Rasterizes the rectified shadow map that `prefiltered` asks for (conventions: see

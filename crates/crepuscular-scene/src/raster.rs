@@ -556,6 +556,49 @@ pub fn rasterize_with(
     out
 }
 
+/// The motion vectors an engine's prepass writes, for the surfaces `buffer` shows
+/// ([`rasterize_with`] of `geometry` through the current camera): per pixel, its UV now minus
+/// the UV of the same surface point in the previous frame (x right, y down, 1 = the image's
+/// width or height), the convention of `crepuscular::temporal::motion_source`. The point is
+/// the visible triangle's previous vertices, `previous[i]` for vertex i of `geometry` (the
+/// same triangles, moved), weighted by the pixel's barycentrics, seen through the previous
+/// frame's world → clip matrix `previous_view_proj`. Pixels where nothing was drawn get zero
+/// (the temporal stage reprojects them through the camera); a point behind the previous
+/// camera gets a vector that leaves the image.
+///
+/// Panics if `previous` does not hold one position per vertex of `geometry` (a caller's bug:
+/// the previous frame is the same geometry, moved).
+pub fn motion_vectors(
+    buffer: &DepthBuffer,
+    geometry: &Geometry,
+    previous: &[[f32; 3]],
+    previous_view_proj: Mat4,
+) -> Vec<[f32; 2]> {
+    assert_eq!(previous.len(), geometry.vertices.len(), "one previous position per vertex");
+    let (w, h) = (buffer.width as f32, buffer.height as f32);
+    (0..buffer.depth.len())
+        .into_par_iter()
+        .map(|i| {
+            let tri = buffer.triangle[i];
+            if tri == u32::MAX {
+                return [0.0, 0.0];
+            }
+            let b = buffer.bary[i];
+            let idx = &geometry.indices[tri as usize * 3..tri as usize * 3 + 3];
+            let p = (0..3)
+                .map(|k| glam::Vec3::from(previous[idx[k] as usize]) * b[k])
+                .fold(glam::Vec3::ZERO, |a, v| a + v);
+            let clip = previous_view_proj * p.extend(1.0);
+            if clip.w <= 0.0 {
+                return [10.0, 10.0];
+            }
+            let (x, y) = ((i % buffer.width as usize) as f32, (i / buffer.width as usize) as f32);
+            let then = [clip.x / clip.w * 0.5 + 0.5, 0.5 - clip.y / clip.w * 0.5];
+            [(x + 0.5) / w - then[0], (y + 0.5) / h - then[1]]
+        })
+        .collect()
+}
+
 /// Depth only: like [`rasterize`] without triangle ids and barycentrics (faster). Returns
 /// `size_w × size_h` [0, 1] depths, row-major from the top-left pixel, 1.0 where nothing was
 /// drawn.

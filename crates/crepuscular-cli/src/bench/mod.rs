@@ -660,6 +660,8 @@ pub fn measure_temporal(
         let name = scene.name.clone();
         let tone = ToneMap::new(scene.render.exposure);
         let mut renderer = PathRenderer::new(scene, path, gpu)?;
+        // The stage reads the frame's motion vectors, as it would an engine's (as `animate`).
+        renderer.motion_vectors = true;
         for f in 0..frames {
             progress(&format!(
                 "{name} {}×{}: temporal frame {}/{frames} (reference + {} rows with and without the stage)",

@@ -261,7 +261,7 @@ mod tests {
         t.pixels[1] = [0.2, 0.2, 0.2, 1.0];
         // Only pixel 1 differs, by 0.1 on each channel; the peak is the frame's, 0.5.
         let p = region_psnr(&r, &t, &[false, true]).unwrap();
-        assert!((p - 20.0 * 5f64.log10()).abs() < 1e-9, "{p}");
+        assert!((p - 20.0 * 5f64.log10()).abs() < 1e-5, "{p}");
         assert_eq!(region_psnr(&r, &t, &[true, false]).unwrap(), f64::INFINITY);
         assert!(region_psnr(&r, &t, &[false, false]).is_err());
         assert!(region_psnr(&r, &t, &[true]).is_err());

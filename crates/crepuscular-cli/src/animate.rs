@@ -407,7 +407,17 @@ impl<'g> PathRenderer<'g> {
         } else {
             (None, None)
         };
-        Ok(HostFrame { t, desc, depth, surface, transmittance, motion, motion_texture, shadow_maps: shadow_map, textures })
+        Ok(HostFrame {
+            t,
+            desc,
+            depth,
+            surface,
+            transmittance,
+            motion,
+            motion_texture,
+            shadow_maps: shadow_map,
+            textures,
+        })
     }
 }
 

@@ -307,7 +307,7 @@ fn temporal_uniforms_match_their_wgsl_layout() {
             ("motion", offset_of!(T, motion)),
             ("adaptive", offset_of!(T, adaptive)),
             ("young_frames", offset_of!(T, young_frames)),
-            ("change_sigma", offset_of!(T, change_sigma)),
+            ("_pad0", offset_of!(T, _pad0)),
             ("_pad1", offset_of!(T, _pad1)),
             ("_pad2", offset_of!(T, _pad2)),
         ],

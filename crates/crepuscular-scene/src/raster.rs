@@ -585,9 +585,8 @@ pub fn motion_vectors(
             }
             let b = buffer.bary[i];
             let idx = &geometry.indices[tri as usize * 3..tri as usize * 3 + 3];
-            let p = (0..3)
-                .map(|k| glam::Vec3::from(previous[idx[k] as usize]) * b[k])
-                .fold(glam::Vec3::ZERO, |a, v| a + v);
+            let p =
+                (0..3).map(|k| glam::Vec3::from(previous[idx[k] as usize]) * b[k]).fold(glam::Vec3::ZERO, |a, v| a + v);
             let clip = previous_view_proj * p.extend(1.0);
             if clip.w <= 0.0 {
                 return [10.0, 10.0];

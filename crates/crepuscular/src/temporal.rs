@@ -135,17 +135,6 @@ pub struct TemporalSettings {
     /// (docs/RESULTS.md, "Temporal accumulation"). Cost: the neighbourhood's 9 reads on those
     /// frames (the clip reads them anyway).
     pub young_frames: u32,
-    /// Reject a pixel's history where its input changed from the previous frame (reprojected)
-    /// by more than this many standard deviations of its past frame-to-frame changes — the
-    /// moments [`TemporalSettings::adaptive_weight`] keeps, once they hold more than
-    /// [`ADAPT_AFTER`] frames, with at least [`NOISE_FLOOR`] of the value as noise
-    /// ([`input_changed`]; docs/MODEL.md §7, step 2). It catches what the disocclusion test
-    /// cannot see and a wide clip lets through: a shadow that moved through the medium in
-    /// front of an unchanged surface (an occluder crossing a shaft, a light's shadow
-    /// sweeping); the pixel then starts again as a young history. Lower: more rejected
-    /// (noise that happens to be large counts as a change). 0: off. Default 0 (off), measured
-    /// (docs/RESULTS.md, "Temporal accumulation"). Cost: a few ALU operations per pixel.
-    pub change_sigma: f32,
 }
 
 impl Default for TemporalSettings {
@@ -159,7 +148,6 @@ impl Default for TemporalSettings {
             history_filter: HistoryFilter::Bilinear,
             adaptive_weight: true,
             young_frames: 8,
-            change_sigma: 0.0,
         }
     }
 }
@@ -179,9 +167,6 @@ impl TemporalSettings {
         }
         if self.young_frames > MAX_FRAMES as u32 {
             return Err(Error::invalid("temporal.young_frames", self.young_frames, "must be at most 1024"));
-        }
-        if !(self.change_sigma >= 0.0 && self.change_sigma.is_finite()) {
-            return Err(Error::invalid("temporal.change_sigma", self.change_sigma, "must be finite and ≥ 0"));
         }
         if !(self.light_jump_degrees >= 0.0 && self.light_jump_degrees <= 180.0) {
             return Err(Error::invalid("temporal.light_jump_degrees", self.light_jump_degrees, "must be in [0, 180]"));
@@ -282,8 +267,8 @@ pub struct TemporalUniforms {
     pub adaptive: u32,
     /// [`TemporalSettings::young_frames`], as a float.
     pub young_frames: f32,
-    /// [`TemporalSettings::change_sigma`] (0: off).
-    pub change_sigma: f32,
+    /// Padding to the uniform block's 16-byte size.
+    pub _pad0: u32,
     /// Padding.
     pub _pad1: u32,
     /// Padding.
@@ -303,7 +288,7 @@ fn uniforms(s: &TemporalSettings, prev: Option<&Previous>, motion: bool) -> Temp
         motion: motion as u32,
         adaptive: s.adaptive_weight as u32,
         young_frames: s.young_frames as f32,
-        change_sigma: s.change_sigma,
+        _pad0: 0,
         _pad1: 0,
         _pad2: 0,
     }
@@ -379,19 +364,6 @@ pub fn adapted_weight(w: f32, m1: f32, m2: f32, a: f32, x: f32) -> f32 {
         }
     }
     lo
-}
-
-/// Whether a pixel's input changed between two frames by more than its past changes explain
-/// ([`TemporalSettings::change_sigma`]): `d` is this frame's change of the input's largest
-/// channel from the reprojected previous input, `m1` and `m2` the running mean of the past
-/// changes and of their squares (before this one), `x` this frame's value and `k` the
-/// threshold in standard deviations. True where (d − m1)² > k²·(var + 2·(NOISE_FLOOR·x)²), var
-/// = m2 − m1² the past changes' variance (the floor's noise, as in [`adapted_weight`], enters
-/// a change twice). Mirrors `input_changed` in temporal.wgsl.
-pub fn input_changed(d: f32, m1: f32, m2: f32, x: f32, k: f32) -> bool {
-    let var = (m2 - m1 * m1).max(0.0);
-    let least = NOISE_FLOOR * x;
-    (d - m1) * (d - m1) > k * k * (var + 2.0 * least * least)
 }
 
 /// One pixel's resolve: (output rgb, history rgba, weight, statistics). `distances`: this
@@ -498,25 +470,18 @@ pub fn resolve_pixel(
     }
     // The frames this pixel's history holds with this one: 1 where it starts (the first frame,
     // a reset, a rejection).
-    let mut youth = if w > 0.0 { n + 1.0 } else { 1.0 };
+    let youth = if w > 0.0 { n + 1.0 } else { 1.0 };
     // The running moments of the input's frame-to-frame change (its largest channel),
-    // restarted with the history; they steer the weight once ADAPT_AFTER frames are held, and
-    // a change they do not explain rejects the history (change_sigma).
+    // restarted with the history; they steer the weight once ADAPT_AFTER frames are held.
     let xs = c.max_element();
     let (mut m1, mut m2) = (0.0f32, 0.0f32);
     if w > 0.0 {
         let d = xs - hs.x;
-        if u.change_sigma > 0.0 && n > ADAPT_AFTER && input_changed(d, hs.y, hs.z, xs, u.change_sigma) {
-            w = 0.0;
-            n = 0.0;
-            youth = 1.0;
-        } else {
-            let a = MOMENT_WEIGHT.min((n - 1.0).max(0.0) / n);
-            m1 = d + a * (hs.y - d);
-            m2 = d * d + a * (hs.z - d * d);
-            if u.adaptive == 1 && n > ADAPT_AFTER {
-                w = adapted_weight(w, m1, m2, a, xs);
-            }
+        let a = MOMENT_WEIGHT.min((n - 1.0).max(0.0) / n);
+        m1 = d + a * (hs.y - d);
+        m2 = d * d + a * (hs.z - d * d);
+        if u.adaptive == 1 && n > ADAPT_AFTER {
+            w = adapted_weight(w, m1, m2, a, xs);
         }
     }
     // The current frame's 3×3 neighbourhood on the same surface: its spread clips the history,
@@ -864,22 +829,7 @@ impl Temporal {
 
 #[cfg(test)]
 mod tests {
-    use super::{NOISE_FLOOR, adapted_weight, catmull_rom_weights, input_changed};
-
-    /// A change is one where (d − m1)² exceeds k²·(m2 − m1² + 2·(NOISE_FLOOR·x)²): just
-    /// inside and just outside that boundary, for a noisy and a noise-free past.
-    #[test]
-    fn a_change_is_more_than_k_deviations_of_the_past_changes() {
-        for (m1, m2, x) in [(0.1f32, 0.26f32, 2.0f32), (0.0, 0.0, 1.0)] {
-            let sd = (m2 - m1 * m1 + 2.0 * (NOISE_FLOOR * x).powi(2)).sqrt();
-            for k in [2.0f32, 4.0] {
-                for sign in [1.0f32, -1.0] {
-                    assert!(!input_changed(m1 + sign * 0.999 * k * sd, m1, m2, x, k), "{m1} {m2} {x} {k}");
-                    assert!(input_changed(m1 + sign * 1.001 * k * sd, m1, m2, x, k), "{m1} {m2} {x} {k}");
-                }
-            }
-        }
-    }
+    use super::{adapted_weight, catmull_rom_weights};
 
     /// The adapted weight is the minimum of the squared error it balances,
     /// σ²·(1 − w)/(1 + w) + (δ·w/(1 − w))², over [0, w_max] (checked on a grid of 10⁴ weights,

@@ -32,19 +32,9 @@ struct Temporal {
     adaptive: u32,
     // temporal.rs TemporalSettings::young_frames, as a float (0 or 1: off).
     young_frames: f32,
-    // temporal.rs TemporalSettings::change_sigma (0: off).
-    change_sigma: f32,
+    _pad0: u32,
     _pad1: u32,
     _pad2: u32,
-}
-
-// temporal.rs input_changed: whether the input's change d from the reprojected previous input
-// is more than k standard deviations of its past changes (running moments m1, m2), with the
-// noise floor's share of the value x.
-fn input_changed(d: f32, m1: f32, m2: f32, x: f32, k: f32) -> bool {
-    let v = max(m2 - m1 * m1, 0.0);
-    let least = NOISE_FLOOR * x;
-    return (d - m1) * (d - m1) > k * k * (v + 2.0 * least * least);
 }
 
 // temporal.rs catmull_rom_weights: the weights of the texels at -1, 0, 1, 2 at fraction f.
@@ -225,26 +215,19 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     // The frames this pixel's history holds with this one: 1 where it starts (the first frame,
     // a reset, a rejection).
-    var youth = select(1.0, n + 1.0, w > 0.0);
+    let youth = select(1.0, n + 1.0, w > 0.0);
     // The running moments of the input's frame-to-frame change (its largest channel),
-    // restarted with the history; they steer the weight once ADAPT_AFTER frames are held, and
-    // a change they do not explain rejects the history (change_sigma).
+    // restarted with the history; they steer the weight once ADAPT_AFTER frames are held.
     let xs = max(c.r, max(c.g, c.b));
     var m1 = 0.0;
     var m2 = 0.0;
     if w > 0.0 {
         let d = xs - hs.x;
-        if params.change_sigma > 0.0 && n > ADAPT_AFTER && input_changed(d, hs.y, hs.z, xs, params.change_sigma) {
-            w = 0.0;
-            n = 0.0;
-            youth = 1.0;
-        } else {
-            let a = min(MOMENT_WEIGHT, max(n - 1.0, 0.0) / n);
-            m1 = d + a * (hs.y - d);
-            m2 = d * d + a * (hs.z - d * d);
-            if params.adaptive == 1u && n > ADAPT_AFTER {
-                w = adapted_weight(w, m1, m2, a, xs);
-            }
+        let a = min(MOMENT_WEIGHT, max(n - 1.0, 0.0) / n);
+        m1 = d + a * (hs.y - d);
+        m2 = d * d + a * (hs.z - d * d);
+        if params.adaptive == 1u && n > ADAPT_AFTER {
+            w = adapted_weight(w, m1, m2, a, xs);
         }
     }
     textureStore(stats_out, px, vec4<f32>(dist, xs, m1, m2));

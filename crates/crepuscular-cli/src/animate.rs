@@ -216,11 +216,8 @@ pub struct PathRenderer<'g> {
     pub motion_vectors: bool,
     /// The scene's own triangles (without the occluder).
     base: Geometry,
-    /// A box that moves across a shaft ([`PathRenderer::add_occluder`]), and whether it has
-    /// jumped.
-    occluder: Option<(Occluder, bool)>,
-    /// What the GPU host holds: the occluder's state when it was uploaded.
-    uploaded: Option<bool>,
+    /// A box that moves across a shaft ([`PathRenderer::add_occluder`]).
+    occluder: Option<Occluder>,
     /// The previous frame's world → clip matrix and vertex positions (for motion vectors).
     previous: Option<(glam::Mat4, Vec<[f32; 3]>)>,
 }
@@ -256,17 +253,17 @@ impl Occluder {
             .map(|l| crepuscular_scene::raster::render_shadow_map(&scene.geometry, &l.shadow))
             .collect();
         let cam = &scene.camera;
-        let lit = |p: Vec3| -> f32 {
+        let lit = |p: Vec3| -> f64 {
             desc.lights
                 .iter()
                 .zip(&maps)
                 .map(|(fl, m)| {
                     let (l, _) = crepuscular::integrand::lit_incident(fl, &desc.medium, m, p);
-                    l.x * 0.2126 + l.y * 0.7152 + l.z * 0.0722
+                    luminance(&l.extend(0.0).to_array())
                 })
                 .sum()
         };
-        let mut best = (f32::NEG_INFINITY, OCCLUDER_PLACES[0]);
+        let mut best = (f64::NEG_INFINITY, OCCLUDER_PLACES[0]);
         for f in OCCLUDER_PLACES {
             let v = lit(cam.position + (cam.look_at - cam.position) * f);
             if v > best.0 {
@@ -330,22 +327,33 @@ impl<'g> PathRenderer<'g> {
             light_turn_degrees: 0.0,
             motion_vectors: false,
             occluder: None,
-            uploaded: None,
             previous: None,
         })
     }
 
     /// Adds `occluder` to the scene from the next frame on (before its jump).
     pub fn add_occluder(&mut self, occluder: Occluder) {
-        self.occluder = Some((occluder, false));
+        self.place_occluder(&occluder, false);
+        self.occluder = Some(occluder);
     }
 
     /// Moves the occluder to its place after the jump from the next frame on (nothing without
     /// one).
     pub fn jump_occluder(&mut self) {
-        if let Some((_, jumped)) = &mut self.occluder {
-            *jumped = true;
+        if let Some(o) = self.occluder.clone() {
+            self.place_occluder(&o, true);
         }
+    }
+
+    /// The scene's own triangles and `occluder`'s, before or after its jump, here and on the
+    /// GPU host.
+    fn place_occluder(&mut self, occluder: &Occluder, jumped: bool) {
+        let mut g = self.base.clone();
+        g.append(&occluder.geometry(jumped));
+        if let (Some(gpu), Some(h)) = (self.gpu, &mut self.host) {
+            h.set_geometry(gpu, &g);
+        }
+        self.scene.geometry = g;
     }
 
     /// The scene (at t = 0).
@@ -362,17 +370,6 @@ impl<'g> PathRenderer<'g> {
             }
         }
         self.scene.camera = self.path.pose(&self.camera, &self.lights[0].light, t).0;
-        if let Some((occluder, jumped)) = &self.occluder
-            && self.uploaded != Some(*jumped)
-        {
-            let mut g = self.base.clone();
-            g.append(&occluder.geometry(*jumped));
-            if let (Some(gpu), Some(h)) = (self.gpu, &mut self.host) {
-                h.set_geometry(gpu, &g);
-            }
-            self.scene.geometry = g;
-            self.uploaded = Some(*jumped);
-        }
         let desc = frame_desc(&self.scene)?;
         let (depth, surface, shadow_map, textures) = match (self.gpu, &self.host) {
             (Some(g), Some(h)) => {

@@ -365,6 +365,61 @@ fn every_pixel_lies_between_the_lines_it_is_interpolated_from() {
     }
 }
 
+/// A local light's re-marched disc: the refinement lets the texels inside it interpolate from
+/// the line's first texel, on the epipole, where the in-scattering is singular, so they hold no
+/// estimate; the taps of a pixel outside the disc must not read them. Every texel inside the
+/// disc holds 10⁶ and every texel outside 1 (all at one view distance): the taps of every pixel
+/// within 4 px outside the disc, along the two lines around it, average to exactly 1. The same
+/// taps with the disc ignored (`local_light = 0`) do read in (the view the long robustness sweep
+/// failed on, #695, read them: NMAE 0.66).
+#[test]
+fn taps_outside_a_local_lights_disc_never_read_inside_it() {
+    let desc = view_desc(point(Vec3::new(2.0, 1.0, -10.0)), VW, VH);
+    let p = EpipolarParams::new(&EpipolarSettings::default(), &desc, 65535);
+    assert_eq!(p.local_light, 1, "a point light under the default equiangular steps");
+    let e = epipole_point(&p).expect("the point light is in view");
+    let lines = cpu::lines(&desc, &p);
+    let n = p.samples as usize;
+    let radiance: Vec<[f32; 4]> = lines
+        .iter()
+        .flat_map(|line| {
+            (0..p.samples).map(move |t| {
+                let v = if cpu::near_epipole(&p, cpu::texel_point(&p, line, t)) { 1e6 } else { 1.0 };
+                [v, v, v, 10.0]
+            })
+        })
+        .collect();
+    let taps_of = |p: &EpipolarParams, q: Vec2| {
+        let taps = |row: u32| cpu::line_taps(p, &lines[row as usize], &radiance[row as usize * n..][..n], q, 10.0, 1.0);
+        let c = cpu::choose_lines(&desc, p, q, &taps);
+        [c.a, c.b].into_iter().flatten().map(|(_, t)| t).collect::<Vec<_>>()
+    };
+    let (mut pixels, mut read_in) = (0, 0);
+    let ignoring = EpipolarParams { local_light: 0, ..p };
+    for y in 0..VH {
+        for x in 0..VW {
+            let q = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let r = (q.as_dvec2() - e).length() as f32;
+            if r < p.epipole_radius || r > p.epipole_radius + 4.0 {
+                continue;
+            }
+            pixels += 1;
+            for t in taps_of(&p, q) {
+                assert!(
+                    t.w > 0.0 && (t.sum / t.w - Vec3::ONE).abs().max_element() < 1e-6,
+                    "pixel ({x}, {y}), {r} px from the epipole: {t:?}"
+                );
+            }
+            if taps_of(&ignoring, q).iter().any(|t| t.sum.x / t.w > 2.0) {
+                read_in += 1;
+            }
+        }
+    }
+    eprintln!("{pixels} pixels within 4 px outside the disc; with the disc ignored, {read_in} of them read inside it");
+    assert!(pixels > 50, "{pixels}");
+    assert!(read_in > pixels / 10, "the test's taps never reach into the disc: {read_in} of {pixels}");
+}
+
 /// A depth buffer: a wall facing the camera at 30 m, and box faces (pixel rectangle
 /// [x0, y0, x1, y1), view depth in metres) in front of it.
 fn wall_depth(desc: &FrameDesc, boxes: &[([u32; 4], f32)]) -> Vec<f32> {

@@ -595,6 +595,14 @@ pub fn line_taps(p: &EpipolarParams, line: &EpipolarLine, radiance_row: &[[f32; 
         let fr = tj - i0 as f32;
         let ws = spatial_weight(p, j.unsigned_abs() as f32 / p.spatial_scale);
         for (i, wl) in [(i0, 1.0 - fr), (i1, fr)] {
+            // A texel inside the re-marched disc of a local light holds no estimate: the
+            // refinement let it interpolate from the line's first texel, on the epipole, where
+            // the in-scattering is singular ([`refine_texel`]); a pixel outside the disc whose
+            // taps reach in (towards the light, or the bilinear pair across the disc's edge)
+            // skips it.
+            if p.local_light == 1 && near_epipole(p, texel_point(p, line, i)) {
+                continue;
+            }
             let v = radiance_row[i as usize];
             let diff = (v[3] - s).abs();
             let w = ws * wl * depth_weight(p, diff * inv_s / p.depth_scale);

@@ -50,7 +50,11 @@
 //!   a 1080p frame; the paper's absolute counts are settings.
 //! - Pixels within `epipole_radius` (3 px) of the epipole are re-marched: a point or spot light
 //!   seen directly, or a strongly forward phase function, peaks at the light's own pixel, and
-//!   every line starts there.
+//!   every line starts there. For a point or spot light the texels inside the disc (which
+//!   interpolate from the line's first texel, on the singular epipole) are also left out of the
+//!   taps of the pixels outside it: a light a few metres from the camera puts half the
+//!   in-scattering within 4 px of its pixel, and those taps made the long robustness sweep's
+//!   worst views (docs/ROBUSTNESS.md) 0.60–0.66 off.
 //! - A spot light's pixels whose own ray misses the cone get zero without any filtering
 //!   (exact: the light is zero outside the cone), and the lines are clipped to the rays that
 //!   meet the cone (§4.1's "clip to the light frustum", found by testing the rays of each

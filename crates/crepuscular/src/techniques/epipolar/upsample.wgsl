@@ -12,6 +12,7 @@
 // - along each line a `taps`-tap 1D bilateral filter at P's projection ± j·l (in texels of the
 //   line, at least one), each tap interpolating the radiance texture linearly (two sub-taps,
 //   each with its own view distance); weight = spatial(|j|/σ_l) × linear × depth(|sᵢ − s|/s/σ_d);
+//   for a point or spot light, a sub-tap on a texel inside the re-marched disc is skipped;
 // - a line whose total weight is below MIN_WEIGHT (or that is culled) is replaced by the next
 //   outer line, up to `outer_lines` further on each side;
 // - between the two lines found: ((1 − f)·Σ₀wL + f·Σ₁wL) / ((1 − f)·W₀ + f·W₁), f measured
@@ -87,6 +88,11 @@ fn line_taps(row: u32, q: vec2<f32>, s: f32, l: f32) -> Taps {
         let ws = spatial_weight(f32(abs(j)) / params.spatial_scale);
         for (var h = 0u; h < 2u; h++) {
             let i = select(i0, i1, h == 1u);
+            // A texel inside a local light's re-marched disc holds no estimate (cpu.rs
+            // `line_taps`): skipped.
+            if params.local_light == 1u && near_epipole(texel_point(line, i)) {
+                continue;
+            }
             let wl = select(1.0 - fr, fr, h == 1u);
             let v = textureLoad(radiance_tex, vec2<i32>(i32(i), i32(row)), 0);
             let diff = abs(v.a - s);

@@ -241,6 +241,13 @@ struct BenchArgs {
     /// measured one).
     #[arg(long)]
     temporal_frames: Option<u32>,
+    /// The temporal column's ghosting measure: after the slow move, this many frames with every
+    /// light turned by 20° (a light jump; the camera keeps moving), the row as configured and
+    /// with the stage against each frame's reference, and how many frames each takes to come
+    /// back within 1 dB of its new steady state (the mean of the last 4). 0 or 8..=1000
+    /// (default 10; with --temporal). Cost: as many more frames as --temporal-frames costs.
+    #[arg(long)]
+    ghost_frames: Option<u32>,
     /// Where to compute: auto (GPU if any, else CPU), gpu, cpu.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     backend: Backend,
@@ -555,6 +562,14 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
         (false, _, Some(_)) => bail!("--temporal-frames needs --temporal"),
         (false, true, None) => None,
     };
+    if temporal.is_none() && a.ghost_frames.is_some() {
+        bail!("--ghost-frames needs --temporal");
+    }
+    let ghost_frames = match temporal {
+        Some(_) => a.ghost_frames.unwrap_or(bench::DEFAULT_GHOST_FRAMES),
+        None => 0,
+    };
+    bench::check_ghost_frames(ghost_frames)?;
     let temporal_frames = match temporal {
         Some(_) => a.temporal_frames.unwrap_or(bench::DEFAULT_TEMPORAL_FRAMES),
         None => 0,
@@ -564,7 +579,7 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
     let gpu = render::open_gpu(a.backend, &notice)?;
     let on = gpu.as_ref().map(|g| g.describe()).unwrap_or_else(|| "CPU".into());
     let total = (plan.scenes.len() * plan.sizes.len() * (plan.variants.len() + 2)) as u64
-        + (plan.scenes.len() as u64 * (flicker_frames + temporal_frames) as u64);
+        + (plan.scenes.len() as u64 * (flicker_frames + temporal_frames + ghost_frames) as u64);
     eprintln!(
         "bench `{}` on {on}: {} configurations",
         plan.name,
@@ -577,7 +592,7 @@ fn cmd_bench(a: BenchArgs) -> Result<()> {
     let (mut report, _) = bench::run(&plan, gpu.as_ref(), &command, &step, &rows, false)?;
     bench::measure_flicker(&mut report, gpu.as_ref(), flicker_frames, &step, &rows)?;
     if let Some(t) = temporal {
-        bench::measure_temporal(&mut report, gpu.as_ref(), temporal_frames, t, &step, &rows)?;
+        bench::measure_temporal(&mut report, gpu.as_ref(), temporal_frames, ghost_frames, t, &step, &rows)?;
     }
     bar.finish();
     for p in bench::write(&report, &a.output)? {

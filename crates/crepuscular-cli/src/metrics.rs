@@ -38,6 +38,20 @@ pub(crate) mod psnr_serde {
     }
 }
 
+/// A list of `psnr_db`s: each +∞ ↔ JSON `null`, as [`psnr_serde`].
+pub(crate) mod psnr_vec_serde {
+    use serde::Serializer;
+    use serde::ser::SerializeSeq;
+
+    pub fn serialize<S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
+        let mut seq = s.serialize_seq(Some(v.len()))?;
+        for x in v {
+            seq.serialize_element(&x.is_finite().then_some(*x))?;
+        }
+        seq.end()
+    }
+}
+
 /// Errors unless both images have the same, consistent, non-empty size.
 fn check_sizes(reference: &Image, test: &Image) -> Result<()> {
     if reference.width != test.width || reference.height != test.height {

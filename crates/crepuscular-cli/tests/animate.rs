@@ -289,7 +289,7 @@ fn bench_temporal_column_is_animate_temporal_on_the_same_frames() {
     let out = bin()
         .args(["bench", "--backend", "cpu", "--scenes", "cage", "--techniques", "brute-force"])
         .args(["--sizes", "32x18", "--repeat", "1", "--warmup", "0", "--reference-steps", "16"])
-        .args(["--flicker-frames", "0", "--temporal", "--temporal-frames", "3", "--output"])
+        .args(["--flicker-frames", "0", "--temporal", "--temporal-frames", "3", "--ghost-frames", "8", "--output"])
         .arg(&d)
         .output()
         .unwrap();
@@ -321,10 +321,48 @@ fn bench_temporal_column_is_animate_temporal_on_the_same_frames() {
     // "As configured" is brute-force without jitter; animate's "without" is the jittered
     // technique before the stage, so the two differ: the configured row has its own number.
     assert!(col["psnr_db_without"].as_f64().unwrap().is_finite(), "{col}");
-    for args in [vec!["--temporal-frames", "3"], vec!["--temporal", "--temporal-frames", "1"]] {
+    // The ghosting measure: the 8 frames after a light jump at frame 3 are animate's with
+    // `--light-jump 3` to the bit, and so is the recovery read off them.
+    assert_eq!(r["ghost_frames"], 8);
+    assert!(md.contains("### Light jump"), "{md}");
+    let jump = &col["light_jump"];
+    assert_eq!(jump["jump_frame"], 3, "{jump}");
+    let report = d.join("animate-jump.json");
+    let out = bin()
+        .args(["animate", "cage", "--backend", "cpu", "--size", "32x18", "--frames", "96", "--stop-after", "11"])
+        .args(["--still-lights", "--temporal", "--flicker", "--reference-steps", "16", "--set", "steps=32"])
+        .args(["--light-jump", "3", "--report"])
+        .arg(&report)
+        .arg("--output")
+        .arg(d.join("b.gif"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let a: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let frames = a["temporal"]["frames"].as_array().unwrap();
+    let psnr = jump["psnr_db"].as_array().unwrap();
+    assert_eq!(psnr.len(), 8, "{jump}");
+    for (k, p) in psnr.iter().enumerate() {
+        assert_eq!(*p, frames[3 + k]["psnr_db"], "frame {} after the jump: {jump}", k);
+    }
+    assert_eq!(jump["recovery_frames"], a["temporal"]["recovery_frames"], "{jump}");
+    // As configured, brute-force without jitter has no history: its recovery is whatever its
+    // own error does along the path, read the same way.
+    assert_eq!(jump["psnr_db_without"].as_array().unwrap().len(), 8, "{jump}");
+    for args in [
+        vec!["--temporal-frames", "3"],
+        vec!["--temporal", "--temporal-frames", "1"],
+        vec!["--ghost-frames", "8"],
+        vec!["--temporal", "--ghost-frames", "5"],
+    ] {
         let out = bin().args(["bench", "--backend", "cpu", "--scenes", "cage"]).args(args).output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success() && err.contains("--temporal") && !err.contains("panicked"), "{err}");
+        assert!(
+            !out.status.success()
+                && (err.contains("--temporal") || err.contains("--ghost-frames"))
+                && !err.contains("panicked"),
+            "{err}"
+        );
     }
 }
 

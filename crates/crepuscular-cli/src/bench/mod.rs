@@ -14,7 +14,8 @@
 //! [`report`] bench.md's tables; [`plot`] the plots and the files written.
 
 use crate::animate::{
-    AnimatedTechnique, Flicker, FlickerMeter, MotionPath, PathRenderer, Stage, frame_time, with_jitter,
+    AnimatedTechnique, Flicker, FlickerMeter, LIGHT_JUMP_DEGREES, MotionPath, PathRenderer, Stage, frame_time,
+    recovery_frames, with_jitter,
 };
 use crate::metrics::Quality;
 use crate::render::{self, AdapterStats, adapter_stats, frame_desc, load_scene, parse_technique};
@@ -188,7 +189,7 @@ pub struct BenchRecord {
 /// `jitter` on (where it has one) followed by the temporal stage, each frame against its own
 /// reference. PSNR of the linear in-scattering and FLIP of the tone-mapped final image are the
 /// last frame's (the frames before it are its history); flicker is over all the frames.
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize)]
 pub struct TemporalColumn {
     /// Last frame, the row as configured (no stage): PSNR dB.
     #[serde(with = "crate::metrics::psnr_serde")]
@@ -208,6 +209,32 @@ pub struct TemporalColumn {
     pub jitter_added: bool,
     /// The stage's wall-clock time per frame (median, ms), around its submit and wait.
     pub stage_ms: f64,
+    /// The ghosting measure: the frames after a light jump that follows the slow move
+    /// ([`BenchReport::ghost_frames`]); `None` where not measured.
+    pub light_jump: Option<LightJumpColumn>,
+}
+
+/// The frames after a light jump (every light turned by [`LIGHT_JUMP_DEGREES`] at the frame
+/// after the slow move's measured one, the camera still moving as before), the row as
+/// configured and with jitter + the stage, each frame against its own reference: what
+/// `animate --still-lights --frames 96 --light-jump F --temporal --flicker` measures on the
+/// same frames (its `recovery_frames`).
+#[derive(Clone, Debug, Serialize)]
+pub struct LightJumpColumn {
+    /// The frame the lights jumped at (the slow move's frame count).
+    pub jump_frame: u32,
+    /// Per frame from the jump on, the row as configured: PSNR dB.
+    #[serde(with = "crate::metrics::psnr_vec_serde")]
+    pub psnr_db_without: Vec<f64>,
+    /// Per frame from the jump on, jitter + stage: PSNR dB.
+    #[serde(with = "crate::metrics::psnr_vec_serde")]
+    pub psnr_db: Vec<f64>,
+    /// Frames from the jump until the row as configured is within 1 dB of its new steady state
+    /// (the mean of its last 4 frames; [`recovery_frames`]): 0 for a technique without
+    /// history, unless its error moves along the path.
+    pub recovery_frames_without: Option<u32>,
+    /// The same for jitter + stage: the ghosting measure. None: never within the frames.
+    pub recovery_frames: Option<u32>,
 }
 
 impl BenchRecord {
@@ -258,6 +285,9 @@ pub struct BenchReport {
     pub temporal_frames: u32,
     /// The temporal stage's settings of that column.
     pub temporal: Option<TemporalSettings>,
+    /// Frames of the temporal column's light jump, after its slow move (0: not measured;
+    /// [`LightJumpColumn`]).
+    pub ghost_frames: u32,
 }
 
 fn median_min_max(v: &[f64]) -> [f64; 3] {
@@ -505,6 +535,7 @@ pub fn run(
         flicker_size: None,
         temporal_frames: 0,
         temporal: None,
+        ghost_frames: 0,
     };
     Ok((report, kept))
 }
@@ -590,6 +621,11 @@ pub fn measure_flicker(
 /// Frames of the temporal column when `--temporal-frames` is not given: the issue's "after 8
 /// frames of a slow camera move" (8 frames of history, then the measured one).
 pub const DEFAULT_TEMPORAL_FRAMES: u32 = 9;
+/// Frames after the temporal column's light jump when `--ghost-frames` is not given: the
+/// jump frame and 9 more, so that the steady state [`recovery_frames`] compares with (the
+/// mean of the last 4) lies 6–9 frames after the jump, past the stage's young frames.
+pub const DEFAULT_GHOST_FRAMES: u32 = 10;
+
 /// The slow move of the temporal column: frame i is at 1/`TEMPORAL_LOOP` × i of the scene's
 /// `animate` loop (as `animate --frames 96 --stop-after 9 --still-lights`).
 pub const TEMPORAL_LOOP: u32 = 96;
@@ -598,12 +634,17 @@ pub const TEMPORAL_LOOP: u32 = 96;
 /// (at [`flicker_sizes`]' size): per scene, `frames` host frames along the scene's `animate`
 /// path with the lights still, 1/[`TEMPORAL_LOOP`] of the loop apart, each rendered by
 /// `reference` (the plan's reference steps, seed 1), by every row as configured and by every
-/// row with jitter and the temporal stage `settings`. Costs per scene `frames` host frames and
-/// references, per row 2 × `frames` frames (`frames` where jitter adds nothing) and `frames` stage passes. `frames` = 0 does nothing.
+/// row with jitter and the temporal stage `settings`; then, when `ghost_frames` > 0, that many
+/// more frames with every light turned by [`LIGHT_JUMP_DEGREES`] (the ghosting measure,
+/// [`LightJumpColumn`]; the flicker and the last frame's figures are the slow move's alone).
+/// Costs per scene `frames` + `ghost_frames` host frames and references, per row twice that
+/// many frames (once where jitter adds nothing) and as many stage passes. `frames` = 0 does
+/// nothing.
 pub fn measure_temporal(
     report: &mut BenchReport,
     gpu: Option<&GpuContext>,
     frames: u32,
+    ghost_frames: u32,
     settings: TemporalSettings,
     progress: &dyn Fn(&str),
     reference_progress: &(dyn Fn(u64, u64) + Sync),
@@ -612,6 +653,7 @@ pub fn measure_temporal(
         return Ok(());
     }
     check_temporal_frames(frames, report.plan.reference_steps)?;
+    check_ghost_frames(ghost_frames)?;
     settings.validate().map_err(|e| anyhow::anyhow!("--temporal-set: {e}"))?;
     let Some((rows_size, size)) = flicker_sizes(&report.plan) else { return Ok(()) };
     struct Row {
@@ -625,6 +667,8 @@ pub fn measure_temporal(
         meters: [FlickerMeter; 2],
         last: Option<[(f64, f64); 2]>,
         stage_ms: Vec<f64>,
+        /// PSNR per frame from the light jump on: as configured, jitter + stage.
+        jumped: [Vec<f64>; 2],
     }
     for scene_arg in &report.plan.scenes {
         let mut scene = load_scene(scene_arg)?;
@@ -648,6 +692,7 @@ pub fn measure_temporal(
                     meters: [FlickerMeter::new(), FlickerMeter::new()],
                     last: None,
                     stage_ms: Vec::new(),
+                    jumped: [Vec::new(), Vec::new()],
                 });
             }
         }
@@ -662,14 +707,19 @@ pub fn measure_temporal(
         let mut renderer = PathRenderer::new(scene, path, gpu)?;
         // The stage reads the frame's motion vectors, as it would an engine's (as `animate`).
         renderer.motion_vectors = true;
-        for f in 0..frames {
+        let total = frames + ghost_frames;
+        for f in 0..total {
             progress(&format!(
-                "{name} {}×{}: temporal frame {}/{frames} (reference + {} rows with and without the stage)",
+                "{name} {}×{}: temporal frame {}/{total}{} (reference + {} rows with and without the stage)",
                 size.0,
                 size.1,
                 f + 1,
+                if f >= frames { ", after the light jump" } else { "" },
                 rows.len()
             ));
+            if f == frames {
+                renderer.light_turn_degrees = LIGHT_JUMP_DEGREES;
+            }
             let mut frame = renderer.frame(frame_time(f, TEMPORAL_LOOP, true))?;
             let (ri, _) = reference.render(gpu, &mut frame, 0, reference_progress)?;
             let q = Quality {
@@ -692,10 +742,16 @@ pub fn measure_temporal(
                 let start = std::time::Instant::now();
                 let (out, _) = row.stage.resolve(gpu, &frame, fed, raw)?;
                 row.stage_ms.push(start.elapsed().as_secs_f64() * 1e3);
-                row.meters[0].push(&plain, &q.inscatter)?;
-                row.meters[1].push(&out, &q.inscatter)?;
+                if f < frames {
+                    row.meters[0].push(&plain, &q.inscatter)?;
+                    row.meters[1].push(&out, &q.inscatter)?;
+                }
                 if f + 1 == frames {
                     row.last = Some([q.measure(&plain, &frame.surface)?, q.measure(&out, &frame.surface)?]);
+                }
+                if f >= frames {
+                    row.jumped[0].push(q.measure(&plain, &frame.surface)?.0);
+                    row.jumped[1].push(q.measure(&out, &frame.surface)?.0);
                 }
             }
         }
@@ -711,10 +767,21 @@ pub fn measure_temporal(
                 flicker: m1.finish()?,
                 jitter_added: row.jitter_added,
                 stage_ms: median_min_max(&row.stage_ms)[0],
+                light_jump: (ghost_frames > 0).then(|| {
+                    let [without, with] = row.jumped;
+                    LightJumpColumn {
+                        jump_frame: frames,
+                        recovery_frames_without: recovery_frames(&without, 0),
+                        recovery_frames: recovery_frames(&with, 0),
+                        psnr_db_without: without,
+                        psnr_db: with,
+                    }
+                }),
             });
         }
     }
     report.temporal_frames = frames;
+    report.ghost_frames = ghost_frames;
     report.temporal = Some(settings);
     report.flicker_size = Some([size.0, size.1]);
     Ok(())
@@ -723,6 +790,15 @@ pub fn measure_temporal(
 /// Checks `--temporal-frames` against the plan before any work.
 pub fn check_temporal_frames(frames: u32, reference_steps: u32) -> Result<()> {
     check_measured_frames("--temporal-frames", "temporal column", frames, reference_steps)
+}
+
+/// Checks `--ghost-frames` before any work: 0 (no light jump) or 8..=1000 (the steady state a
+/// recovery is measured against is the mean of the last 4 frames, at least 8 after the jump).
+pub fn check_ghost_frames(frames: u32) -> Result<()> {
+    if frames != 0 && !(8..=1000).contains(&frames) {
+        bail!("--ghost-frames {frames}: must be 0 (no light jump) or in 8..=1000");
+    }
+    Ok(())
 }
 
 /// Checks `--flicker-frames` against the plan before any work.

@@ -46,7 +46,7 @@ pub const PRESETS: &[(&str, &str)] = &[
     ),
     (
         TEMPORAL_PRESET,
-        "the temporal stage at each technique's default cost: every GPU technique at its defaults on every built-in scene, 320×180, with the temporal column (8 frames of a slow camera move, then the measured one)",
+        "the temporal stage at each technique's default cost: every GPU technique at its defaults on every built-in scene, 320×180, with the temporal column (8 frames of a slow camera move, then the measured one, then 10 frames after a light jump)",
     ),
 ];
 
@@ -409,7 +409,8 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
             description: "The temporal stage at each technique's default cost: every GPU technique at its \
                           defaults on every built-in scene at 320×180, and the temporal column (turned on by \
                           this preset, as `--temporal`): after 8 frames of a slow camera move, the row as \
-                          configured against the row with jitter and the temporal stage (docs/MODEL.md §7). \
+                          configured against the row with jitter and the temporal stage (docs/MODEL.md §7), \
+                          then 10 frames after a light jump (the ghosting measure, `--ghost-frames`). \
                           The goals it measures (docs/RESULTS.md, \"Temporal accumulation\"): PSNR ≥ 40 dB \
                           and FLIP ≤ 0.02, flicker at most half of the technique's own."
                 .into(),

@@ -132,6 +132,47 @@ fn temporal_table(r: &BenchReport) -> String {
             c.stage_ms,
         );
     }
+    s += &light_jump_table(r);
+    s
+}
+
+/// The temporal column's ghosting measure (`--ghost-frames`): per row, the frames after the
+/// light jump, as configured and with jitter + the stage.
+fn light_jump_table(r: &BenchReport) -> String {
+    if r.ghost_frames == 0 {
+        return String::new();
+    }
+    let mut s = format!(
+        "\n### Light jump\n\nAfter the slow move's {} frames, every light turned by {}° (the camera moving on), {} \
+         frames against their own references: PSNR (dB) of the jump frame and of the frame after it, the steady \
+         state (the mean of the last 4 frames), and the frames until the PSNR is within 1 dB of that steady state \
+         (0: the jump frame is; never: not within the frames).\n\n\
+         | scene | configuration | as configured: jump, next, steady | recovery | jitter + stage: jump, next, steady | recovery |\n\
+         |---|---|---|---|---|---|\n",
+        r.temporal_frames,
+        crate::animate::LIGHT_JUMP_DEGREES,
+        r.ghost_frames,
+    );
+    let recovery = |f: Option<u32>| f.map_or_else(|| "never".to_string(), |n| n.to_string());
+    let figures = |p: &[f64]| {
+        let steady = p[p.len().saturating_sub(4)..].iter().sum::<f64>() / p.len().clamp(1, 4) as f64;
+        format!("{:.2}, {:.2}, {:.2}", p[0], p.get(1).copied().unwrap_or(f64::NAN), steady)
+    };
+    for x in &r.records {
+        let Some(j) = x.temporal.as_ref().and_then(|c| c.light_jump.as_ref()) else { continue };
+        if j.psnr_db.is_empty() || j.psnr_db_without.is_empty() {
+            continue;
+        }
+        s += &format!(
+            "| {} | {} | {} | {} | {} | {} |\n",
+            x.scene,
+            x.label,
+            figures(&j.psnr_db_without),
+            recovery(j.recovery_frames_without),
+            figures(&j.psnr_db),
+            recovery(j.recovery_frames),
+        );
+    }
     s
 }
 

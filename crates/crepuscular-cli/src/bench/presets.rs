@@ -412,7 +412,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
                           configured against the row with jitter and the temporal stage (docs/MODEL.md §7), \
                           then 10 frames after a light jump (the ghosting measure, `--ghost-frames`). \
                           The goals it measures (docs/RESULTS.md, \"Temporal accumulation\"): PSNR ≥ 40 dB \
-                          and FLIP ≤ 0.02, flicker at most half of the technique's own."
+                          and FLIP ≤ 0.02, flicker at most half of the technique's own, recovery from the light jump within 4 frames."
                 .into(),
             scenes: crepuscular_scene::builtin::builtin_names().iter().map(|(n, _)| n.to_string()).collect(),
             sizes: vec![(320, 180)],

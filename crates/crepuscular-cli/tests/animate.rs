@@ -457,17 +457,23 @@ fn animate_temporal_beats_the_technique_alone_on_a_slow_camera_move() {
     let without = t["flicker_without"]["relative"].as_f64().unwrap();
     eprintln!("mean PSNR gain over frames 4-11: {gain:.2} dB; flicker {flicker:.4} vs {without:.4} without the stage");
     assert!(gain > MEASURED_TEMPORAL_GAIN_DB - 2.0, "the temporal stage gained {gain:.2} dB");
-    assert!(flicker < 0.6 * without, "the temporal stage did not reduce flicker: {flicker} vs {without}");
+    assert!(
+        flicker < (MEASURED_FLICKER_RATIO + 0.12) * without,
+        "the temporal stage did not reduce flicker enough: {flicker} vs {without}"
+    );
 }
 
-/// Measured 2026-12-03 on llvmpipe by the test above (adaptive weight, young_frames 8): a mean
-/// gain of 6.42 dB over frames 4–11, flicker 0.0296 against 0.0575 without the stage (0.51×).
-/// (2026-12-02, before both: 5.15 dB, 0.58×.)
-const MEASURED_TEMPORAL_GAIN_DB: f64 = 6.42;
+/// Measured 2026-12-04 on llvmpipe by the test above, with the spatially stratified jitter
+/// (docs/MODEL.md §7): a mean gain of 10.17 dB over frames 4–11, flicker 0.0169 against 0.0604
+/// without the stage (0.28×). (2026-12-03, with a hashed pattern: 6.42 dB, 0.51×; 2026-12-02,
+/// before the adaptive weight and the young history: 5.15 dB, 0.58×.)
+const MEASURED_TEMPORAL_GAIN_DB: f64 = 10.17;
+/// The flicker ratio the test above measured (stage / without); it allows 0.12 more.
+const MEASURED_FLICKER_RATIO: f64 = 0.28;
 
 /// Measured by the test above: frame 0 PSNR with the stage minus without (its 3×3 mean).
-/// 41.63 against 35.92 dB on 2026-12-03.
-const MEASURED_FIRST_FRAME_GAIN_DB: f64 = 5.71;
+/// 44.23 against 36.22 dB on 2026-12-04 (hashed jitter, 2026-12-03: 41.63 against 35.92).
+const MEASURED_FIRST_FRAME_GAIN_DB: f64 = 8.01;
 
 /// Runs `animate colonnade --temporal --flicker --occluder-jump 4` on `backend` at `size` and
 /// returns its report.
@@ -517,15 +523,17 @@ fn animate_occluder_jump_leaves_no_ghost_worse_than_the_frame() {
     assert!(rec <= MEASURED_REGION_RECOVERY + 2, "the region took {rec} frames to settle");
 }
 
-/// Measured 2026-12-04 on llvmpipe by the test above: the smallest gain of the stage over the
-/// technique's own frame in the jump's region (276 pixels, 5.3 % of the frame), over frames
-/// 4–13: −0.76 dB, on the jump frame (43.31 against 44.07 dB); from frame 5 on it gains 0.3 to
-/// 6 dB. A ghost that the stage kept would cost far more (night-street's lamps, where the
-/// technique alone is exact: −29 dB on the jump frame; docs/RESULTS.md).
-const MEASURED_REGION_GAIN_DB: f64 = -0.76;
+/// Measured 2026-12-04 on llvmpipe by the test above, with the spatially stratified jitter: the
+/// smallest gain of the stage over the technique's own frame in the jump's region (478 pixels,
+/// 9.2 % of the frame), over frames 4–13: +1.82 dB, on the jump frame (45.52 against 43.70 dB);
+/// from frame 5 on it gains 2.9 to 8.9 dB. (With the hashed jitter, same day: −0.07 dB on the
+/// jump frame, 44.78 against 44.85.) A ghost that the stage kept would cost far more
+/// (night-street's lamps, where the technique alone is exact: −29 dB on the jump frame;
+/// docs/RESULTS.md).
+const MEASURED_REGION_GAIN_DB: f64 = 1.82;
 /// Measured by the test above: frames from the jump until the region is within 1 dB of its
-/// steady state.
-const MEASURED_REGION_RECOVERY: u64 = 1;
+/// steady state (2026-12-04: 0, with either jitter).
+const MEASURED_REGION_RECOVERY: u64 = 0;
 
 #[test]
 fn animate_occluder_jump_runs_on_the_cpu_with_the_hosts_motion_vectors() {

@@ -640,18 +640,12 @@ fn step_offset(sigma_mean: f32, delta: f32, j: f32) -> f32 {
     return -log(1.0 - j * (1.0 - exp(-x))) / sigma_mean;
 }
 
-// A 32-bit integer hash (PCG, Jarzynski & Olano 2020), mirrored by `pcg_hash` in Rust.
-fn pcg_hash(v: u32) -> u32 {
-    let state = v * 747796405u + 2891336453u;
-    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
-    return (word >> 22u) ^ word;
-}
-
-// A pixel's jitter in [0, 1): the golden-ratio sequence {hash(pixel) + frame/φ} (docs/MODEL.md
-// §7; low-discrepancy from frame to frame, uncorrelated between pixels), in integers modulo 2³²
-// so it is exact. Mirrored by `pixel_jitter` in Rust (`GOLDEN_STEP` = 2³²/φ).
+// A pixel's jitter in [0, 1): {x/g + y/g² + frame/φ} (docs/MODEL.md §7; the R2 sequence over
+// the pixels, spatially stratified, and the golden-ratio sequence from frame to frame), in
+// integers modulo 2³² so it is exact. Mirrored by `pixel_jitter` in Rust (`R2_STEPS`,
+// `GOLDEN_STEP`).
 fn pixel_jitter(px: vec2<u32>, frame: u32) -> f32 {
-    let h = pcg_hash(px.x ^ pcg_hash(px.y)) + frame * 2654435769u;
+    let h = px.x * 3242174889u + px.y * 2447445413u + frame * 2654435769u;
     return f32(h >> 8u) * (1.0 / 16777216.0);
 }
 

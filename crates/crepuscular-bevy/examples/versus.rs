@@ -7,9 +7,13 @@
 //! ```
 //!
 //! Per configuration: a fresh app on the demo colonnade, settled (pipelines built), then
-//! `--frames` frames each timed by wall clock from `update` to the device being idle (a
-//! software adapter's timestamps mean nothing; on hardware this still measures whole frames).
-//! The effect's cost is its frame's median minus the median of the same scene without fog.
+//! `--frames` timed frames. On a hardware adapter with timestamp queries the effect's cost is
+//! its GPU time: two timestamps in Bevy's encoder around the systems between the main pass and
+//! early post-processing (`demo::EffectTimer`: Bevy's fog pass, or the plugin's shadow copy,
+//! technique and composite), median over the frames, minus the same bracket's median without
+//! fog. On a software adapter (whose timestamps mean nothing) each frame is timed by wall clock
+//! from `update` to the device being idle, and the cost is the median frame minus the median
+//! frame without fog.
 //! Quality: PSNR and FLIP of the final (tone-mapped, 8-bit) picture against the effect's own
 //! converged picture: Bevy at 1024 steps; the plugin's brute-force march at 1024 steps.
 //! Writes `versus.md` (the table), `versus.json`, `side-by-side.png` and each picture.
@@ -48,7 +52,10 @@ struct Args {
 struct Run {
     label: String,
     family: &'static str,
-    ms: f64,
+    /// Median frame, wall clock (update to device idle), ms.
+    frame_ms: f64,
+    /// Median of the effect's GPU bracket, ms (hardware adapters with timestamps).
+    gpu_ms: Option<f64>,
     image: Image,
 }
 
@@ -56,6 +63,8 @@ struct Row {
     label: String,
     family: &'static str,
     cost_ms: f64,
+    /// The whole frame's median, wall clock (update to device idle), ms: the CPU's share too.
+    frame_ms: f64,
     psnr_db: f64,
     flip: f64,
 }
@@ -78,6 +87,8 @@ fn run(args: Args) -> Result<(), String> {
     let presets =
         args.presets.iter().map(|p| Preset::parse(p).map_err(|e| e.to_string())).collect::<Result<Vec<_>, _>>()?;
     std::fs::create_dir_all(&args.output).map_err(|e| format!("{}: {e}", args.output.display()))?;
+    // A fresh progress log for this run.
+    let _ = std::fs::remove_file(args.output.join("progress.log"));
 
     let mut configs: Vec<(String, &'static str, Effect)> = vec![("no fog".into(), "baseline", Effect::None)];
     for &s in &args.steps {
@@ -113,40 +124,70 @@ fn run(args: Args) -> Result<(), String> {
     bar.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed} {msg}").map_err(|e| e.to_string())?);
     let mut runs = Vec::new();
     let mut adapter = String::new();
+    let mut software = true;
     for (label, family, effect) in configs {
         bar.set_message(label.clone());
         // Bevy's logger is process-wide: the first app installs it.
         let opts = DemoOptions { width, height, effect, lamps: false, log: runs.is_empty(), ..Default::default() };
         let mut app = demo::headless_app(&opts);
+        let timer = demo::EffectTimer::install(&mut app);
         app.finish();
         app.cleanup();
         demo::settle(&mut app, 3).map_err(|e| format!("{label}: {e}"))?;
         let device = app.world().resource::<bevy::render::renderer::RenderDevice>().wgpu_device().clone();
+        let queue: wgpu::Queue = {
+            let q: &wgpu::Queue = &app.world().resource::<bevy::render::renderer::RenderQueue>().0;
+            q.clone()
+        };
         if adapter.is_empty() {
             let info = app.world().resource::<bevy::render::renderer::RenderAdapterInfo>();
+            let name = info.name.to_lowercase();
+            software =
+                info.device_type == wgpu::DeviceType::Cpu || name.contains("llvmpipe") || name.contains("swiftshader");
             adapter = format!(
                 "{} ({:?}, {:?}, driver {} {})",
                 info.name, info.backend, info.device_type, info.driver, info.driver_info
             );
         }
         crepuscular::gpu::wait_idle(&device).map_err(|e| e.to_string())?;
-        let mut times = Vec::new();
+        // Drop the settle frames' timestamps.
+        timer.read(&device, &queue).map_err(|e| format!("{label}: {e}"))?;
+        let (mut times, mut gpu) = (Vec::new(), Vec::new());
         for _ in 0..args.frames {
             let t0 = Instant::now();
             app.update();
             crepuscular::gpu::wait_idle(&device).map_err(|e| e.to_string())?;
             times.push(t0.elapsed().as_secs_f64() * 1e3);
+            if let Some(ms) = timer.read(&device, &queue).map_err(|e| format!("{label}: {e}"))? {
+                gpu.push(ms);
+            }
         }
-        times.sort_by(f64::total_cmp);
+        let bracket = (!gpu.is_empty() && gpu.len() == times.len()).then(|| median(&mut gpu));
+        // A software adapter's timestamps are logged (progress.log) but not used.
+        let gpu_ms = bracket.filter(|_| !software);
         let image = demo::capture(&mut app).map_err(|e| format!("{label}: {e}"))?;
         let file = args.output.join(format!("{}.png", slug(&label)));
         demo::save_png(&image, &file)?;
-        runs.push(Run { label, family, ms: times[times.len() / 2], image });
+        let run = Run { label, family, frame_ms: median(&mut times), gpu_ms, image };
+        let stamps = match bracket {
+            Some(ms) if software => format!("{ms:.3} ms (software adapter: not used)"),
+            Some(ms) => format!("{ms:.3} ms"),
+            None => "none".into(),
+        };
+        // Each configuration as it finishes (a long run cut short keeps what it measured).
+        append_line(
+            &args.output.join("progress.log"),
+            &format!("{} | frame {:.3} ms | effect timestamps {stamps}", run.label, run.frame_ms),
+        )?;
+        runs.push(run);
         bar.inc(1);
     }
     bar.finish_and_clear();
 
-    let base = runs.iter().find(|r| r.family == "baseline").ok_or("no baseline")?.ms;
+    let baseline = runs.iter().find(|r| r.family == "baseline").ok_or("no baseline")?;
+    // Timestamps only where every configuration has them (a hardware adapter).
+    let timing = if runs.iter().all(|r| r.gpu_ms.is_some()) { Timing::Gpu } else { Timing::WallClock };
+    let base = timing.ms(baseline);
     let bevy_ref = &runs.iter().find(|r| r.family == "bevy-converged").ok_or("no Bevy reference")?.image;
     let ours_ref = &runs.iter().find(|r| r.family == "ours-converged").ok_or("no plugin reference")?.image;
     let mut rows = Vec::new();
@@ -157,11 +198,18 @@ fn run(args: Args) -> Result<(), String> {
             _ => continue,
         };
         let (psnr_db, flip) = quality(reference, &r.image)?;
-        rows.push(Row { label: r.label.clone(), family: r.family, cost_ms: r.ms - base, psnr_db, flip });
+        rows.push(Row {
+            label: r.label.clone(),
+            family: r.family,
+            cost_ms: timing.ms(r) - base,
+            frame_ms: r.frame_ms,
+            psnr_db,
+            flip,
+        });
     }
-    let md = markdown(&rows, &adapter, width, height, args.frames, base);
+    let md = markdown(&rows, &adapter, width, height, args.frames, base, timing);
     write_atomic(&args.output.join("versus.md"), md.as_bytes())?;
-    write_atomic(&args.output.join("versus.json"), json(&rows, &adapter, width, height, base).as_bytes())?;
+    write_atomic(&args.output.join("versus.json"), json(&rows, &adapter, width, height, base, timing).as_bytes())?;
     // One picture of both: Bevy at 64 steps (its default) beside the plugin's default technique.
     let left = runs
         .iter()
@@ -177,6 +225,58 @@ fn run(args: Args) -> Result<(), String> {
     print!("{md}");
     eprintln!("wrote {}", args.output.join("versus.md").display());
     Ok(())
+}
+
+/// How the effect's cost was measured.
+#[derive(Clone, Copy)]
+enum Timing {
+    /// GPU timestamps around the effect (`demo::EffectTimer`).
+    Gpu,
+    /// Whole frames by wall clock, update to device idle.
+    WallClock,
+}
+
+impl Timing {
+    fn ms(self, r: &Run) -> f64 {
+        match self {
+            Timing::Gpu => r.gpu_ms.unwrap_or(f64::NAN),
+            Timing::WallClock => r.frame_ms,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Timing::Gpu => "gpu-timestamps",
+            Timing::WallClock => "wall-clock",
+        }
+    }
+
+    fn describe(self, base: f64) -> String {
+        match self {
+            Timing::Gpu => format!(
+                "Cost = the effect's GPU time (timestamps in Bevy's encoder after the main pass and before \
+                 early post-processing) − the same bracket without fog ({base:.3} ms)"
+            ),
+            Timing::WallClock => format!(
+                "Cost = frame time (wall clock, update to device idle) − the same scene without fog ({base:.1} ms)"
+            ),
+        }
+    }
+}
+
+fn append_line(path: &Path, line: &str) -> Result<(), String> {
+    use std::io::Write;
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    writeln!(f, "{line}").map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }
 
 fn slug(s: &str) -> String {
@@ -234,15 +334,21 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
     crepuscular_cli::output::write_atomic(path, bytes).map_err(|e| format!("{}: {e}", path.display()))
 }
 
-fn markdown(rows: &[Row], adapter: &str, w: u32, h: u32, frames: u32, base: f64) -> String {
+fn markdown(rows: &[Row], adapter: &str, w: u32, h: u32, frames: u32, base: f64, timing: Timing) -> String {
     let mut s = format!(
         "Adapter: {adapter}. {w}x{h}, the demo colonnade (sun, one cascade), median of {frames} frames. \
-         Cost = frame time − the same scene without fog ({base:.1} ms). Quality of the final picture against \
+         {}. Quality of the final picture against \
          the effect's own converged picture (Bevy: 1024 steps; plugin: brute-force 1024 steps).\n\n\
-         | effect | cost (ms) | PSNR (dB) | FLIP |\n| --- | ---: | ---: | ---: |\n"
+         | effect | cost (ms) | whole frame, wall clock (ms) | PSNR (dB) | FLIP |\n| --- | ---: | ---: | ---: | ---: |\n",
+        timing.describe(base)
     );
+    // Milliseconds to three decimals on hardware (costs below a millisecond), one on software.
+    let d = match timing {
+        Timing::Gpu => 3,
+        Timing::WallClock => 1,
+    };
     for r in rows {
-        s += &format!("| {} | {:.1} | {:.1} | {:.4} |\n", r.label, r.cost_ms, r.psnr_db, r.flip);
+        s += &format!("| {} | {:.d$} | {:.1} | {:.1} | {:.4} |\n", r.label, r.cost_ms, r.frame_ms, r.psnr_db, r.flip);
     }
     s += "\n**At equal quality** (for each plugin configuration, the cheapest Bevy step count whose PSNR is at least as high):\n\n\
           | plugin | its cost (ms) | PSNR | cheapest Bevy at ≥ that PSNR | Bevy's cost (ms) | plugin / Bevy |\n| --- | ---: | ---: | --- | ---: | ---: |\n";
@@ -254,7 +360,7 @@ fn markdown(rows: &[Row], adapter: &str, w: u32, h: u32, frames: u32, base: f64)
         match bevy {
             Some(b) => {
                 s += &format!(
-                    "| {} | {:.1} | {:.1} | {} ({:.1} dB) | {:.1} | {:.2} |\n",
+                    "| {} | {:.d$} | {:.1} | {} ({:.1} dB) | {:.d$} | {:.2} |\n",
                     r.label,
                     r.cost_ms,
                     r.psnr_db,
@@ -266,7 +372,7 @@ fn markdown(rows: &[Row], adapter: &str, w: u32, h: u32, frames: u32, base: f64)
             }
             None => {
                 s += &format!(
-                    "| {} | {:.1} | {:.1} | none measured reaches it | – | – |\n",
+                    "| {} | {:.d$} | {:.1} | none measured reaches it | – | – |\n",
                     r.label, r.cost_ms, r.psnr_db
                 )
             }
@@ -275,14 +381,15 @@ fn markdown(rows: &[Row], adapter: &str, w: u32, h: u32, frames: u32, base: f64)
     s
 }
 
-fn json(rows: &[Row], adapter: &str, w: u32, h: u32, base: f64) -> String {
+fn json(rows: &[Row], adapter: &str, w: u32, h: u32, base: f64, timing: Timing) -> String {
     let rows: Vec<_> = rows
         .iter()
         .map(|r| {
-            serde_json::json!({"effect": r.label, "family": r.family, "cost_ms": r.cost_ms,
+            serde_json::json!({"effect": r.label, "family": r.family, "cost_ms": r.cost_ms, "frame_ms": r.frame_ms,
                                "psnr_db": r.psnr_db, "flip": r.flip})
         })
         .collect();
-    let doc = serde_json::json!({"adapter": adapter, "width": w, "height": h, "baseline_ms": base, "rows": rows});
+    let doc = serde_json::json!({"adapter": adapter, "width": w, "height": h, "timing": timing.name(),
+                                 "baseline_ms": base, "rows": rows});
     serde_json::to_string_pretty(&doc).unwrap_or_default() + "\n"
 }

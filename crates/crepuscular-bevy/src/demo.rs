@@ -407,3 +407,108 @@ pub fn save_png(img: &Image, path: &std::path::Path) -> Result<(), String> {
     rgb.save_with_format(&tmp, image::ImageFormat::Png).map_err(|e| format!("{}: {e}", tmp.display()))?;
     std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
 }
+
+/// The GPU time of the volumetric effect alone, from two timestamps that Bevy's own command
+/// encoder writes each frame: one after Bevy's main pass (in `Core3dSystems::MainPass`, after
+/// `main_transparent_pass_3d`), one first in `Core3dSystems::EarlyPostProcess`. Between them run
+/// exactly the systems ordered after the main pass and before early post-processing: Bevy's
+/// `volumetric_fog` and the plugin's render system (shadow-map copy, technique, composite), so
+/// both effects are timed by the same bracket. Used by the `versus` example on hardware
+/// adapters; a software adapter's timestamps mean nothing (time it by wall clock instead).
+/// Needs `TIMESTAMP_QUERY` and `TIMESTAMP_QUERY_INSIDE_ENCODERS` (Bevy asks for every feature
+/// the adapter has); without them [`EffectTimer::read`] answers `None`.
+#[derive(Resource, Clone, Default)]
+pub struct EffectTimer(Arc<Mutex<Option<TimerGpu>>>);
+
+struct TimerGpu {
+    set: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    /// Nanoseconds per timestamp tick (`Queue::get_timestamp_period`).
+    period_ns: f64,
+    /// Whether a frame has written both timestamps since the last read.
+    written: bool,
+}
+
+impl EffectTimer {
+    /// Adds the bracket's two render systems to a demo app (call before `app.finish()`).
+    pub fn install(app: &mut App) -> Self {
+        use bevy::core_pipeline::core_3d::main_transparent_pass_3d;
+        use bevy::core_pipeline::schedule::{Core3d, Core3dSystems};
+        let timer = EffectTimer::default();
+        app.insert_resource(timer.clone());
+        if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
+            render_app.insert_resource(timer.clone()).add_systems(
+                Core3d,
+                (
+                    timer_begin.in_set(Core3dSystems::MainPass).after(main_transparent_pass_3d),
+                    timer_end.in_set(Core3dSystems::EarlyPostProcess),
+                ),
+            );
+        }
+        timer
+    }
+
+    /// The effect's GPU time in the last frame, milliseconds (wait for the device first, as
+    /// `versus` does after each `update`); `None` without timestamp queries or before a frame
+    /// wrote both timestamps.
+    pub fn read(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Option<f64>, String> {
+        let mut guard = self.0.lock().map_err(|e| e.to_string())?;
+        let Some(gpu) = guard.as_mut().filter(|g| g.written) else { return Ok(None) };
+        gpu.written = false;
+        let ticks = crepuscular::GpuContext::from_device(device, queue)
+            .read_mapped(&gpu.readback, "the effect's timestamps", |b| {
+                let t: &[u64] = bytemuck::cast_slice(&b[..16]);
+                t[1].wrapping_sub(t[0])
+            })
+            .map_err(|e| e.to_string())?;
+        // A wrapped or reordered pair (a driver that resets its counter) is not a time.
+        if ticks > u64::MAX / 2 {
+            return Err("the end timestamp precedes the begin timestamp".into());
+        }
+        Ok(Some(ticks as f64 * gpu.period_ns / 1e6))
+    }
+}
+
+fn timer_begin(
+    timer: Res<EffectTimer>,
+    device: Res<bevy::render::renderer::RenderDevice>,
+    queue: Res<bevy::render::renderer::RenderQueue>,
+    mut ctx: bevy::render::renderer::RenderContext,
+) {
+    let Ok(mut guard) = timer.0.lock() else { return };
+    if guard.is_none() {
+        let d = device.wgpu_device();
+        let needed = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
+        if !d.features().contains(needed) {
+            return;
+        }
+        let buffer = |label, usage| {
+            d.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: 16, usage, mapped_at_creation: false })
+        };
+        *guard = Some(TimerGpu {
+            set: d.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("effect timer"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            }),
+            resolve: buffer("effect timer resolve", wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC),
+            readback: buffer("effect timer readback", wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST),
+            period_ns: queue.0.get_timestamp_period() as f64,
+            written: false,
+        });
+    }
+    if let Some(gpu) = guard.as_mut() {
+        ctx.command_encoder().write_timestamp(&gpu.set, 0);
+    }
+}
+
+fn timer_end(timer: Res<EffectTimer>, mut ctx: bevy::render::renderer::RenderContext) {
+    let Ok(mut guard) = timer.0.lock() else { return };
+    let Some(gpu) = guard.as_mut() else { return };
+    let encoder = ctx.command_encoder();
+    encoder.write_timestamp(&gpu.set, 1);
+    encoder.resolve_query_set(&gpu.set, 0..2, &gpu.resolve, 0);
+    encoder.copy_buffer_to_buffer(&gpu.resolve, 0, &gpu.readback, 0, 16);
+    gpu.written = true;
+}

@@ -380,7 +380,8 @@ pub fn settle(app: &mut App, frames: u32) -> Result<(), String> {
     Ok(())
 }
 
-/// Captures the demo target's current image (a few frames of Bevy's screenshot readback).
+/// Captures the demo target's current image (a few frames of Bevy's screenshot readback, the
+/// device waited for after each).
 pub fn capture(app: &mut App) -> Result<Image, String> {
     let slot: Arc<Mutex<Option<Image>>> = Arc::default();
     let target = app.world().get_resource::<DemoTarget>().ok_or("the demo scene was not spawned")?.0.clone();
@@ -390,13 +391,17 @@ pub fn capture(app: &mut App) -> Result<Image, String> {
             *s = Some(captured.image.clone());
         }
     });
-    for _ in 0..10 {
+    // Bevy maps the screenshot's buffer without waiting for it: wait for the device between
+    // frames so that the readback lands (a fast GPU otherwise outruns it for many frames).
+    let device = app.world().resource::<bevy::render::renderer::RenderDevice>().wgpu_device().clone();
+    for _ in 0..30 {
         app.update();
+        crepuscular::gpu::wait_idle(&device).map_err(|e| e.to_string())?;
         if let Some(img) = slot.lock().ok().and_then(|mut s| s.take()) {
             return Ok(img);
         }
     }
-    Err("the screenshot did not arrive within 10 frames".into())
+    Err("the screenshot did not arrive within 30 frames".into())
 }
 
 /// Writes an 8-bit image as PNG atomically (a temporary file beside `path`, then a rename).

@@ -105,11 +105,52 @@ fn check(backend: &str, render: &dyn Fn(&TechniqueSettings, &CpuFrame) -> Option
                 failures.push(format!("{backend} {}: not finite", info.name));
             }
             if !(max <= bmax && mean <= bmean) {
-                failures.push(format!("{backend} {} medium {mi}: error {max:.5} of the peak (bound {bmax}), mean {mean:.5} (bound {bmean})", info.name));
+                let mut message = format!(
+                    "{backend} {} medium {mi}: error {max:.5} of the peak (bound {bmax}), mean {mean:.5} (bound {bmean})",
+                    info.name
+                );
+                if backend != "cpu" {
+                    message += &where_backends_differ(&settings, &frame, &img, &exact);
+                }
+                failures.push(message);
             }
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// For a failing GPU picture: how many pixels differ from the CPU backend's by over 1 % of the
+/// peak, and the five worst (pixel, GPU, CPU, exact green channel), so that a failure on new
+/// hardware says where it differs.
+fn where_backends_differ(settings: &TechniqueSettings, frame: &CpuFrame, gpu: &Image, exact: &Image) -> String {
+    let Ok((cpu, _)) = settings.render_cpu(frame, &[], &|_, _| {}) else { return String::new() };
+    let peak = exact.pixels.iter().map(|p| p[1]).fold(0.0f32, f32::max);
+    let mut apart: Vec<(f32, u32)> = (0..W * H)
+        .map(|i| ((gpu.pixels[i as usize][1] - cpu.pixels[i as usize][1]).abs() / peak, i))
+        .filter(|d| d.0 > 0.01)
+        .collect();
+    apart.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let worst: Vec<String> = apart
+        .iter()
+        .take(5)
+        .map(|&(_, i)| {
+            let i = i as usize;
+            format!(
+                "({}, {}) gpu {:.4} cpu {:.4} exact {:.4}",
+                i as u32 % W,
+                i as u32 / W,
+                gpu.pixels[i][1] / peak,
+                cpu.pixels[i][1] / peak,
+                exact.pixels[i][1] / peak
+            )
+        })
+        .collect();
+    format!(
+        "; {} of {} pixels differ from the CPU backend by > 1 % of the peak: {}",
+        apart.len(),
+        W * H,
+        worst.join(", ")
+    )
 }
 
 #[test]

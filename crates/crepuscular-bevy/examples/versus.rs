@@ -141,9 +141,8 @@ fn run(args: Args) -> Result<(), String> {
         };
         if adapter.is_empty() {
             let info = app.world().resource::<bevy::render::renderer::RenderAdapterInfo>();
-            let name = info.name.to_lowercase();
-            software =
-                info.device_type == wgpu::DeviceType::Cpu || name.contains("llvmpipe") || name.contains("swiftshader");
+            // The library's own rule for a software adapter (llvmpipe, SwiftShader, CPU type).
+            software = crepuscular::GpuContext::from_device(&device, &queue).software;
             adapter = format!(
                 "{} ({:?}, {:?}, driver {} {})",
                 info.name, info.backend, info.device_type, info.driver, info.driver_info

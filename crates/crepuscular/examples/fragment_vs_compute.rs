@@ -148,9 +148,10 @@ fn run() -> Result<(), String> {
         label: Some("fragment_vs_compute"),
         source: wgpu::ShaderSource::Wgsl(SHADER.into()),
     });
-    let layout_entries = |stage_extra: wgpu::ShaderStages| {
-        let vis = wgpu::ShaderStages::COMPUTE | wgpu::ShaderStages::FRAGMENT | stage_extra;
-        vec![
+    let vis = wgpu::ShaderStages::COMPUTE | wgpu::ShaderStages::FRAGMENT;
+    let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("fragment_vs_compute"),
+        entries: &[
             wgpu::BindGroupLayoutEntry {
                 binding: 0,
                 visibility: vis,
@@ -187,11 +188,7 @@ fn run() -> Result<(), String> {
                 },
                 count: None,
             },
-        ]
-    };
-    let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("fragment_vs_compute"),
-        entries: &layout_entries(wgpu::ShaderStages::empty()),
+        ],
     });
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some("fragment_vs_compute"),

@@ -16,6 +16,15 @@
 //! line per (lookup, steps): fragment ms, compute ms, ratio. On a software adapter the
 //! timestamps mean nothing and it says so; without timestamp queries it exits with an error.
 
+/// The full-screen triangle both fragment passes draw (prepended to their WGSL).
+const FULL_SCREEN_VS: &str = r#"
+@vertex
+fn vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
+    let p = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u));
+    return vec4<f32>(p * 2.0 - 1.0, 0.0, 1.0);
+}
+"#;
+
 const SHADER: &str = r#"
 @group(0) @binding(0) var shadow: texture_depth_2d;
 @group(0) @binding(1) var cmp: sampler_comparison;
@@ -44,11 +53,6 @@ fn march(pixel: vec2<f32>) -> vec4<f32> {
     return vec4<f32>(sum / f32(steps), 0.0, 0.0, 1.0);
 }
 
-@vertex
-fn vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
-    let p = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u));
-    return vec4<f32>(p * 2.0 - 1.0, 0.0, 1.0);
-}
 
 @fragment
 fn fs(@builtin(position) pos: vec4<f32>) -> @location(0) vec4<f32> {
@@ -121,22 +125,22 @@ fn run() -> Result<(), String> {
     // The fragment pass draws into one texture, the compute pass stores into another (a texture
     // cannot be a pass's colour target and a storage binding of the same pass); the fragment
     // pass's bind group holds a 1×1 storage texture it never writes.
-    let texture = |label, width, height, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba16Float,
-            usage,
-            view_formats: &[],
-        })
+    let drawn = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("fragment out"),
+        size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba16Float,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let storage = |label, width, height| {
+        crepuscular::gpu::storage_texture(device, label, wgpu::TextureFormat::Rgba16Float, width, height)
     };
-    let drawn = texture("fragment out", w, h, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC);
-    let stored = texture("compute out", w, h, wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC);
+    let stored = storage("compute out", w, h);
+    let unused_view = storage("unused", 1, 1).create_view(&Default::default());
     let (out_view, stored_view) = (drawn.create_view(&Default::default()), stored.create_view(&Default::default()));
-    let unused_view = texture("unused", 1, 1, wgpu::TextureUsages::STORAGE_BINDING).create_view(&Default::default());
     let shadow_view = shadow.create_view(&Default::default());
     let cmp = device.create_sampler(&wgpu::SamplerDescriptor {
         mag_filter: wgpu::FilterMode::Linear,
@@ -146,7 +150,7 @@ fn run() -> Result<(), String> {
     });
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("fragment_vs_compute"),
-        source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        source: wgpu::ShaderSource::Wgsl(format!("{FULL_SCREEN_VS}{SHADER}").into()),
     });
     let vis = wgpu::ShaderStages::COMPUTE | wgpu::ShaderStages::FRAGMENT;
     let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -195,31 +199,12 @@ fn run() -> Result<(), String> {
         bind_group_layouts: &[Some(&bgl)],
         immediate_size: 0,
     });
-    let render = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("fragment march"),
-        layout: Some(&layout),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs"),
-            compilation_options: Default::default(),
-            buffers: &[],
-        },
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs"),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format: wgpu::TextureFormat::Rgba16Float,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
-        primitive: Default::default(),
-        depth_stencil: None,
-        multisample: Default::default(),
-        multiview_mask: None,
-        cache: None,
-    });
+    let target = [Some(wgpu::ColorTargetState {
+        format: wgpu::TextureFormat::Rgba16Float,
+        blend: None,
+        write_mask: wgpu::ColorWrites::ALL,
+    })];
+    let render = full_screen_pipeline(device, "fragment march", Some(&layout), &module, &target, None);
     let compute = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some("compute march"),
         layout: Some(&layout),
@@ -353,11 +338,6 @@ fn fill_depth(
     const FILL: &str = r#"
 @group(0) @binding(0) var<storage, read> depth: array<f32>;
 @group(0) @binding(1) var<uniform> size: vec4<u32>;
-@vertex
-fn vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
-    let p = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u));
-    return vec4<f32>(p * 2.0 - 1.0, 0.0, 1.0);
-}
 @fragment
 fn fs(@builtin(position) pos: vec4<f32>) -> @builtin(frag_depth) f32 {
     let p = vec2<u32>(pos.xy);
@@ -367,7 +347,7 @@ fn fs(@builtin(position) pos: vec4<f32>) -> @builtin(frag_depth) f32 {
     use wgpu::util::DeviceExt;
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("fill depth"),
-        source: wgpu::ShaderSource::Wgsl(FILL.into()),
+        source: wgpu::ShaderSource::Wgsl(format!("{FULL_SCREEN_VS}{FILL}").into()),
     });
     let data = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("depth texels"),
@@ -379,33 +359,14 @@ fn fs(@builtin(position) pos: vec4<f32>) -> @builtin(frag_depth) f32 {
         contents: bytemuck::cast_slice(&[map, map, 0, 0]),
         usage: wgpu::BufferUsages::UNIFORM,
     });
-    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("fill depth"),
-        layout: None,
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs"),
-            compilation_options: Default::default(),
-            buffers: &[],
-        },
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs"),
-            compilation_options: Default::default(),
-            targets: &[],
-        }),
-        primitive: Default::default(),
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: wgpu::TextureFormat::Depth32Float,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Always),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        multiview_mask: None,
-        cache: None,
-    });
+    let depth = wgpu::DepthStencilState {
+        format: wgpu::TextureFormat::Depth32Float,
+        depth_write_enabled: Some(true),
+        depth_compare: Some(wgpu::CompareFunction::Always),
+        stencil: Default::default(),
+        bias: Default::default(),
+    };
+    let pipeline = full_screen_pipeline(device, "fill depth", None, &module, &[], Some(depth));
     let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("fill depth"),
         layout: &pipeline.get_bind_group_layout(0),
@@ -435,4 +396,36 @@ fn fs(@builtin(position) pos: vec4<f32>) -> @builtin(frag_depth) f32 {
     }
     queue.submit([enc.finish()]);
     crepuscular::gpu::wait_idle(device).map_err(|e| e.to_string())
+}
+
+/// A pipeline drawing [`FULL_SCREEN_VS`]'s triangle with `module`'s `vs` and `fs`.
+fn full_screen_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    layout: Option<&wgpu::PipelineLayout>,
+    module: &wgpu::ShaderModule,
+    targets: &[Option<wgpu::ColorTargetState>],
+    depth_stencil: Option<wgpu::DepthStencilState>,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout,
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some("fs"),
+            compilation_options: Default::default(),
+            targets,
+        }),
+        primitive: Default::default(),
+        depth_stencil,
+        multisample: Default::default(),
+        multiview_mask: None,
+        cache: None,
+    })
 }

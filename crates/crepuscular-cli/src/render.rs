@@ -25,24 +25,37 @@ pub enum Backend {
     Cpu,
 }
 
-/// Loads a built-in scene by name or a scene file by path.
+/// Loads a built-in scene by name or a scene file by path, with options after it, each
+/// `:key=value`, in any order:
 ///
-/// `NAME:lights=N` keeps the scene's first N lights (what `bench --preset lights` sweeps);
-/// `NAME:lights=0` keeps the first light with its scattering off, so that no light reaches the
-/// effect (its light-independent cost).
+/// - `NAME:lights=N` keeps the scene's first N lights (what `bench --preset lights` sweeps);
+///   `NAME:lights=0` keeps the first light with its scattering off, so that no light reaches
+///   the effect (its light-independent cost).
+/// - `NAME:shadow_filter=bilinear` (or `nearest`) reads every light's shadow map with that
+///   filter (the scene file's `render.shadow_filter`; `crepuscular::ShadowFilter`).
 pub fn load_scene(name_or_path: &str) -> Result<Scene> {
-    if let Some((base, n)) = name_or_path.rsplit_once(":lights=") {
-        let n: usize = n.parse().with_context(|| format!("{name_or_path}: `lights=` takes a count, not `{n}`"))?;
-        let mut scene = load_scene(base)?;
-        if n > scene.lights.len() {
-            bail!("{name_or_path}: lights={n}: `{}` has {} light(s); keep 0 to {0}", scene.name, scene.lights.len());
+    if let Some((base, option)) = name_or_path.rsplit_once(':') {
+        if let Some(n) = option.strip_prefix("lights=") {
+            let n: usize =
+                n.parse().with_context(|| format!("{name_or_path}: `lights=` takes a count, not `{n}`"))?;
+            let mut scene = load_scene(base)?;
+            if n > scene.lights.len() {
+                bail!("{name_or_path}: lights={n}: `{}` has {} light(s); keep 0 to {0}", scene.name, scene.lights.len());
+            }
+            scene.lights.truncate(n.max(1));
+            if n == 0 {
+                scene.lights[0].scattering = 0.0;
+            }
+            scene.name = format!("{}:lights={n}", scene.name);
+            return Ok(scene);
         }
-        scene.lights.truncate(n.max(1));
-        if n == 0 {
-            scene.lights[0].scattering = 0.0;
+        if let Some(f) = option.strip_prefix("shadow_filter=") {
+            let filter = crepuscular::ShadowFilter::parse(f).map_err(|e| anyhow::anyhow!("{name_or_path}: {e}"))?;
+            let mut scene = load_scene(base)?;
+            scene.render.shadow.filter = filter;
+            scene.name = format!("{}:shadow_filter={}", scene.name, filter.name());
+            return Ok(scene);
         }
-        scene.name = format!("{}:lights={n}", scene.name);
-        return Ok(scene);
     }
     if let Some(s) = builtin::builtin(name_or_path) {
         return Ok(s);

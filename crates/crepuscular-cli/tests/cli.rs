@@ -376,3 +376,25 @@ fn debug_views_are_written_for_their_techniques_and_refused_for_others() {
     assert!(!r.status.success() && err.contains("not a debug view of `brute-force`"), "{err}");
     assert!(!d.join("bf.png").exists(), "refused before rendering");
 }
+
+/// Scene options after the name (`render::load_scene`): `:lights=N` and `:shadow_filter=…`,
+/// in either order, each changing what it names; a bad value is an error naming it.
+#[test]
+fn scene_options_combine_and_bad_ones_are_named() {
+    use crepuscular::ShadowFilter;
+    use crepuscular_cli::render::load_scene;
+    let plain = load_scene("night-street").unwrap();
+    assert_eq!(plain.render.shadow.filter, ShadowFilter::Nearest);
+    assert!(plain.lights.len() > 2);
+    for name in ["night-street:lights=2:shadow_filter=bilinear", "night-street:shadow_filter=bilinear:lights=2"] {
+        let s = load_scene(name).unwrap();
+        assert_eq!(s.lights.len(), 2, "{name}");
+        assert_eq!(s.render.shadow.filter, ShadowFilter::Bilinear, "{name}");
+        let desc = crepuscular_cli::render::frame_desc(&s).unwrap();
+        assert!(desc.lights.iter().all(|l| l.shadow_filter == ShadowFilter::Bilinear), "{name}: reaches the frame");
+    }
+    let e = load_scene("night-street:shadow_filter=pcf").unwrap_err().to_string();
+    assert!(e.contains("night-street:shadow_filter=pcf") && e.contains("\"pcf\"") && e.contains("bilinear"), "{e}");
+    let e = load_scene("night-street:lights=x").unwrap_err().to_string();
+    assert!(e.contains("lights=") && e.contains("`x`"), "{e}");
+}

@@ -175,3 +175,58 @@ fn equiangular_steps_match_between_gpu_and_cpu_for_every_technique() {
         }
     }
 }
+
+/// The 2×2 bilinear shadow filter (`ShadowFilter::Bilinear`, docs/MODEL.md §1 "Visibility") on
+/// every built-in scene — directional, spot and point (cube) maps: each marching technique's
+/// GPU picture is its CPU mirror's (held to the nearest filter's own agreement), the filter
+/// changes the marches' pictures (the setting reaches both backends), and `minmax` and
+/// `prefiltered`, which keep their own visibility, give exactly the nearest filter's picture.
+#[test]
+fn bilinear_shadow_filter_matches_between_gpu_and_cpu() {
+    use crepuscular::ShadowFilter;
+    let Some(gpu) = test_gpu("bilinear_shadow_filter_matches_between_gpu_and_cpu") else { return };
+    for (name, _) in builtin::builtin_names() {
+        let mut scene = small(name);
+        scene.render.width = 96;
+        scene.render.height = 54;
+        let nearest = frame_desc(&scene).unwrap();
+        let mut bilinear = nearest.clone();
+        for l in &mut bilinear.lights {
+            l.shadow_filter = ShadowFilter::Bilinear;
+        }
+        let h = host_cpu::render(&scene.geometry, &scene.shading(), &nearest);
+        let frame = |desc| CpuFrame { desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };
+        let (fb, fne) = (frame(&bilinear), frame(&nearest));
+        let up = UploadedFrame::new(&gpu, &fb).unwrap();
+        for t in ["brute-force", "interleaved", "subsampled", "epipolar", "minmax", "prefiltered"] {
+            let settings = crepuscular_cli::render::parse_technique(t, &scene, &[]).unwrap();
+            let on_gpu = |desc: &crepuscular::frame::FrameDesc| {
+                let out = gpu.create_output_texture(desc.width, desc.height);
+                gpu_render(&gpu, settings.clone(), &up.frame(desc), &out.create_view(&Default::default())).unwrap();
+                gpu.read_image(&out).unwrap()
+            };
+            let (cpu_b, _) = settings.render_cpu(&fb, &[], &|_, _| {}).unwrap();
+            let (cpu_n, _) = settings.render_cpu(&fne, &[], &|_, _| {}).unwrap();
+            if matches!(t, "minmax" | "prefiltered") {
+                assert_eq!(cpu_b.pixels, cpu_n.pixels, "{name} {t}: the filter must not change it");
+                continue;
+            }
+            let (gpu_b, gpu_n) = (on_gpu(&bilinear), on_gpu(&nearest));
+            let peak = cpu_n.pixels.iter().flat_map(|p| p[..3].iter().copied()).fold(0.0f32, f32::max);
+            let rel = |a: &crepuscular::Image, b: &crepuscular::Image| {
+                let d: Vec<f32> = a.pixels.iter().flat_map(|p| p[..3].iter().map(|v| v / peak)).collect();
+                let e: Vec<f32> = b.pixels.iter().flat_map(|p| p[..3].iter().map(|v| v / peak)).collect();
+                mismatch(&d, &e, 1e-3)
+            };
+            let (b, n, changed) = (rel(&gpu_b, &cpu_b), rel(&gpu_n, &cpu_n), rel(&cpu_b, &cpu_n));
+            eprintln!(
+                "{name} {t}: GPU vs CPU {:.3}% differ > 1e-3 of the peak with the bilinear filter ({:.3}% nearest); bilinear vs nearest {:.2}%",
+                b * 100.0,
+                n * 100.0,
+                changed * 100.0
+            );
+            assert!(b < 0.005f64.max(2.0 * n), "{name} {t}: bilinear GPU and CPU differ on {:.3}%", b * 100.0);
+            assert!(changed > 0.001, "{name} {t}: the bilinear filter changes nothing ({:.3}%)", changed * 100.0);
+        }
+    }
+}

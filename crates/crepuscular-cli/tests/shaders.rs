@@ -95,6 +95,7 @@ fn frame_uniforms_match_the_wgsl_layout() {
             ("texture_layer", offset_of!(LightUniforms, texture_layer)),
             ("slot", offset_of!(LightUniforms, slot)),
             ("texture_size", offset_of!(LightUniforms, texture_size)),
+            ("shadow_filter", offset_of!(LightUniforms, shadow_filter)),
             ("_pad1", offset_of!(LightUniforms, _pad1)),
         ],
         std::mem::size_of::<LightUniforms>(),

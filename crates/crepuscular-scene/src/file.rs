@@ -74,6 +74,7 @@
 //! height = 540                           # pixels, 1 to 16384; default 540
 //! shadow_map_size = 2048                 # texels per side, 1 to 16384; default 2048
 //! shadow_bias = 0.02                     # metres along the light's depth axis, ≥ 0; default 0.02
+//! shadow_filter = "bilinear"             # volume lookups: "nearest" | "bilinear" (2×2 PCF); default "nearest"
 //! shadow_normal_offset_texels = 1.5      # surface-lookup offset, shadow-map texels, ≥ 0; default 1.5
 //! ambient = [0.03, 0.03, 0.03]           # radiance added to surfaces (× albedo), ≥ 0; default 0.03
 //! exposure = 1.0                         # multiplier before the tone curve, > 0; default 1
@@ -366,14 +367,23 @@ struct RawRender {
     height: Option<u32>,
     shadow_map_size: Option<u32>,
     shadow_bias: Option<f32>,
+    shadow_filter: Option<String>,
     shadow_normal_offset_texels: Option<f32>,
     ambient: Option<Rgb>,
     exposure: Option<f32>,
     techniques: BTreeMap<String, toml::Table>,
 }
 
-const RENDER_KEYS: &[&str] =
-    &["width", "height", "shadow_map_size", "shadow_bias", "shadow_normal_offset_texels", "ambient", "exposure"];
+const RENDER_KEYS: &[&str] = &[
+    "width",
+    "height",
+    "shadow_map_size",
+    "shadow_bias",
+    "shadow_filter",
+    "shadow_normal_offset_texels",
+    "ambient",
+    "exposure",
+];
 
 /// A technique table under `[render]`; any other value there is an unknown key. Reading it
 /// through a seed (rather than failing after the value) keeps the key in the error's path.
@@ -414,6 +424,7 @@ impl<'de> Deserialize<'de> for RawRender {
                         "height" => r.height = Some(map.next_value()?),
                         "shadow_map_size" => r.shadow_map_size = Some(map.next_value()?),
                         "shadow_bias" => r.shadow_bias = Some(map.next_value()?),
+                        "shadow_filter" => r.shadow_filter = Some(map.next_value()?),
                         "shadow_normal_offset_texels" => r.shadow_normal_offset_texels = Some(map.next_value()?),
                         "ambient" => r.ambient = Some(map.next_value()?),
                         "exposure" => r.exposure = Some(map.next_value()?),
@@ -885,6 +896,10 @@ fn build_render(ctx: &Ctx, r: RawRender) -> Result<RenderSettings, SceneError> {
             return Err(ctx.err("render.shadow_bias", fmt_num(b), "must be finite and ≥ 0"));
         }
         s.shadow.bias = b;
+    }
+    if let Some(f) = &r.shadow_filter {
+        s.shadow.filter = crepuscular::ShadowFilter::parse(f)
+            .map_err(|_| ctx.err("render.shadow_filter", format!("{f:?}"), "must be \"nearest\" or \"bilinear\""))?;
     }
     if let Some(b) = r.shadow_normal_offset_texels {
         if !(b.is_finite() && b >= 0.0) {

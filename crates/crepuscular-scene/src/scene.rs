@@ -59,7 +59,7 @@ pub struct RenderSettings {
     pub width: u32,
     /// Output height in pixels. Default 540.
     pub height: u32,
-    /// Shadow-map settings (`shadow_map_size`, `shadow_bias`).
+    /// Shadow-map settings (`shadow_map_size`, `shadow_bias`, `shadow_filter`).
     pub shadow: ShadowSettings,
     /// Ambient radiance added to surfaces (times albedo), linear RGB. Default 0.03.
     pub ambient: Vec3,
@@ -146,6 +146,7 @@ impl Scene {
                 let shadow = ShadowProjection::fit(&l.light, &self.camera, aspect, bounds, r.shadow.size);
                 FrameLight {
                     shadow_bias: r.shadow.bias,
+                    shadow_filter: r.shadow.filter,
                     scattering: l.scattering,
                     ..FrameLight::new(l.light.clone(), shadow)
                 }

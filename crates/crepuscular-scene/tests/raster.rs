@@ -3,7 +3,7 @@
 //! clamped instead of clipped), CPU and GPU.
 
 use crepuscular::techniques::prefiltered::raster::{RasterRegion, RectifiedRaster};
-use crepuscular::{Camera, Light, ShadowProjection};
+use crepuscular::{Camera, Light, ShadowFilter, ShadowProjection};
 use crepuscular_scene::builtin::builtin;
 use crepuscular_scene::host::hardware_depth_clamp;
 use crepuscular_scene::raster::{
@@ -486,9 +486,9 @@ fn point_light_shadow_map_has_six_layers() {
     }
     // Lookups through the map agree: a point just in front of a wall is lit, one behind a
     // wall (outside the room) in shadow.
-    assert_eq!(map.visibility(Vec3::ZERO, Vec3::new(1.9, 0.2, 0.1), 0.02), 1.0);
-    assert_eq!(map.visibility(Vec3::ZERO, Vec3::new(2.5, 0.2, 0.1), 0.02), 0.0);
-    assert_eq!(map.visibility(Vec3::ZERO, Vec3::new(0.1, -0.3, -3.5), 0.02), 0.0);
+    assert_eq!(map.visibility(Vec3::ZERO, Vec3::new(1.9, 0.2, 0.1), 0.02, ShadowFilter::Nearest), 1.0);
+    assert_eq!(map.visibility(Vec3::ZERO, Vec3::new(2.5, 0.2, 0.1), 0.02, ShadowFilter::Nearest), 0.0);
+    assert_eq!(map.visibility(Vec3::ZERO, Vec3::new(0.1, -0.3, -3.5), 0.02, ShadowFilter::Nearest), 0.0);
 
     // A spot light has one layer.
     let spot = Light::Spot {

@@ -223,6 +223,7 @@ fn documented_example_parses_with_all_keys() {
     let r = &s.render;
     assert_eq!((r.width, r.height, r.shadow.size), (960, 540, 2048));
     assert_eq!((r.shadow.bias, r.shadow.normal_offset_texels), (0.02, 1.5));
+    assert_eq!(r.shadow.filter, crepuscular::ShadowFilter::Bilinear);
     assert_eq!(r.ambient, Vec3::splat(0.03));
     assert_eq!(r.exposure, 1.0);
     let bf = r.techniques.get("brute-force").expect("technique table kept");
@@ -390,6 +391,8 @@ fn bad_files_fail_with_one_line_naming_file_and_key() {
     check_bad(&dir, "zero.toml", "[render]\nwidth = 0\n", "render.width", &["= 0"]);
     check_bad(&dir, "huge.toml", "[render]\nheight = 100000\n", "render.height", &["100000"]);
     check_bad(&dir, "zero_shadow.toml", "[render]\nshadow_map_size = 0\n", "render.shadow_map_size", &[]);
+    check_bad(&dir, "filter.toml", "[render]\nshadow_filter = \"pcf\"\n", "render.shadow_filter", &["\"pcf\"", "bilinear"]);
+    check_bad(&dir, "filter2.toml", "[render]\nshadow_filter = 2\n", "render.shadow_filter", &[]);
     check_bad(&dir, "near.toml", "[camera]\nnear = 0\n", "camera.near", &[]);
     check_bad(&dir, "far.toml", "[camera]\nnear = 5\nfar = 2\n", "camera.far", &[]);
     check_bad(&dir, "fov.toml", "[camera]\nfov_y_degrees = 180\n", "camera.fov_y_degrees", &["180"]);

@@ -13,7 +13,7 @@ use crate::image::Image;
 use crate::integrand::light_position;
 use crate::march::REACH_OPTICAL_DEPTH;
 use crate::model::{Light, Medium, RgbTexture};
-use crate::shadow::{ShadowMap, ShadowProjection};
+use crate::shadow::{ShadowFilter, ShadowMap, ShadowProjection};
 use glam::Vec3;
 
 /// [`LightUniforms::kind`] of a directional light (a sun); `LIGHT_DIRECTIONAL` in WGSL.
@@ -119,8 +119,10 @@ pub struct LightUniforms {
     /// Width and height of the projected texture (texels; it sits in the top-left corner of
     /// its layer).
     pub texture_size: [u32; 2],
+    /// How the volume lookups read the shadow map: [`ShadowFilter::code`].
+    pub shadow_filter: u32,
     /// Padding.
-    pub _pad1: [u32; 2],
+    pub _pad1: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<LightUniforms>() == 496);
@@ -149,6 +151,12 @@ pub struct FrameLight {
     /// Volume shadow bias of this light, world units along its depth axis (see
     /// [`crate::ShadowSettings::bias`]). Default 0.02.
     pub shadow_bias: f32,
+    /// How the in-scattering reads this light's shadow map: the nearest texel (binary
+    /// visibility) or a 2×2 bilinear percentage-closer filter (four reads per sample instead
+    /// of one; docs/MODEL.md §1 "Visibility"). Read by the reference and the marching
+    /// techniques; `minmax` and `prefiltered` keep their own visibility. Default
+    /// [`ShadowFilter::Nearest`].
+    pub shadow_filter: ShadowFilter,
     /// First layer of this light's shadow map in the frame's shadow-map array
     /// ([`GpuFrame::shadow_maps`]); the map takes `shadow.layers` layers from there. Default 0.
     pub shadow_layer: u32,
@@ -162,9 +170,18 @@ pub struct FrameLight {
 }
 
 impl FrameLight {
-    /// `light` with its shadow projection, bias 0.02, layers 0, scattering 1.
+    /// `light` with its shadow projection, bias 0.02, the nearest-texel filter, layers 0,
+    /// scattering 1.
     pub fn new(light: Light, shadow: ShadowProjection) -> Self {
-        Self { light, shadow, shadow_bias: 0.02, shadow_layer: 0, texture_layer: 0, scattering: 1.0 }
+        Self {
+            light,
+            shadow,
+            shadow_bias: 0.02,
+            shadow_filter: ShadowFilter::Nearest,
+            shadow_layer: 0,
+            texture_layer: 0,
+            scattering: 1.0,
+        }
     }
 
     /// The spot light's projected texture, if any.
@@ -206,7 +223,8 @@ impl FrameLight {
             texture_layer: if tex.is_some() { self.texture_layer } else { NO_TEXTURE },
             slot: 0,
             texture_size: tex.map_or([0, 0], |t| [t.width, t.height]),
-            _pad1: [0; 2],
+            shadow_filter: self.shadow_filter.code(),
+            _pad1: 0,
         }
     }
 }

@@ -70,7 +70,7 @@ pub fn lit_incident(fl: &FrameLight, medium: &Medium, shadow: &ShadowMap, p: Vec
     if l_in == Vec3::ZERO {
         return (l_in, wl);
     }
-    (l_in * shadow.visibility(light_position(&fl.light), p, fl.shadow_bias), wl)
+    (l_in * shadow.visibility(light_position(&fl.light), p, fl.shadow_bias, fl.shadow_filter), wl)
 }
 
 /// σs·p(cos θ)·L_in(x)·V(x) of one light at a point x on a view ray of unit direction

@@ -37,6 +37,6 @@ pub use gpu::{GpuContext, StatsMode};
 pub use image::Image;
 pub use model::{Camera, Light, Medium, Phase, RgbTexture};
 pub use scattering::Scattering;
-pub use shadow::{Bounds, ShadowMap, ShadowProjection, ShadowSettings};
+pub use shadow::{Bounds, ShadowCoord, ShadowFilter, ShadowMap, ShadowProjection, ShadowSettings};
 pub use techniques::{AnyGpuTechnique, TechniqueSettings};
 pub use temporal::{CpuTemporal, HistoryFilter, Temporal, TemporalSettings};

@@ -6,7 +6,7 @@
 
 use crate::camera::DepthConvention;
 use crate::model::{Camera, Light};
-use glam::{Mat4, Vec3, Vec4, Vec4Swizzles};
+use glam::{Mat4, UVec2, Vec2, Vec3, Vec4, Vec4Swizzles};
 use serde::{Deserialize, Serialize};
 
 /// World-space axis-aligned bounds of a scene's geometry.
@@ -56,11 +56,61 @@ pub struct ShadowSettings {
     pub bias: f32,
     /// Normal offset for surface lookups, in shadow-map texels. Default 1.5.
     pub normal_offset_texels: f32,
+    /// How the volume lookups read the map ([`ShadowFilter`]; each light's
+    /// [`crate::FrameLight::shadow_filter`]). Default [`ShadowFilter::Nearest`].
+    pub filter: ShadowFilter,
 }
 
 impl Default for ShadowSettings {
     fn default() -> Self {
-        Self { size: 2048, bias: 0.02, normal_offset_texels: 1.5 }
+        Self { size: 2048, bias: 0.02, normal_offset_texels: 1.5, filter: ShadowFilter::Nearest }
+    }
+}
+
+/// How the in-scattering reads a light's shadow map at a sample point: the visibility V of
+/// docs/MODEL.md §1 ("Visibility"), for the reference and the marching techniques
+/// (brute-force, interleaved, subsampled, epipolar). `minmax` always tests the nearest texel
+/// (its walk is exact for that step function, docs/MODEL.md §8) and `prefiltered` has its own
+/// filtered visibility (Klehm et al. 2014 §3); both ignore this setting.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ShadowFilter {
+    /// One texel, the one the point falls in: V is 0 or 1 (one texture read per sample).
+    /// Default: the model the papers' techniques are written for.
+    #[default]
+    Nearest,
+    /// Percentage-closer, 2×2 bilinear: the four texels around the point, each tested, the
+    /// results weighted by the point's bilinear position between their centres (what a
+    /// comparison sampler with linear filtering returns in an engine's own lookups, Bevy's
+    /// and Unreal's). V ramps across one texel instead of stepping, so a march's samples
+    /// alias less on shaft edges. Cost: four texture reads per sample instead of one.
+    Bilinear,
+}
+
+impl ShadowFilter {
+    /// The code the shaders read (`Light::shadow_filter` in common.wgsl): 0 nearest, 1 bilinear.
+    pub fn code(self) -> u32 {
+        match self {
+            Self::Nearest => 0,
+            Self::Bilinear => 1,
+        }
+    }
+
+    /// The setting's name as the scene file and the command line spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Nearest => "nearest",
+            Self::Bilinear => "bilinear",
+        }
+    }
+
+    /// Parses `nearest` or `bilinear`; the error lists both.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "nearest" => Ok(Self::Nearest),
+            "bilinear" => Ok(Self::Bilinear),
+            _ => Err(format!("unknown shadow filter {s:?}: expected \"nearest\" or \"bilinear\"")),
+        }
     }
 }
 
@@ -302,10 +352,23 @@ pub struct ShadowMap {
     pub depth: Vec<f32>,
 }
 
+/// Where a world point falls in a light's shadow map (`ShadowCoord` in common.wgsl).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShadowCoord {
+    /// The layer (0, or a cube face).
+    pub layer: u32,
+    /// Texture coordinates in [0, 1]², v = 0 at the top.
+    pub uv: Vec2,
+    /// The texel that holds `uv`.
+    pub texel: UVec2,
+    /// The point's linear light-space depth (world units).
+    pub depth: f32,
+}
+
 impl ShadowMap {
     /// Which layer, texel and linear depth a world point falls on; None outside the map
     /// (outside the light frustum). Mirrors `shadow_coord` in common.wgsl.
-    pub fn coord(&self, light_pos: Vec3, p: Vec3) -> Option<(u32, u32, u32, f32)> {
+    pub fn coord(&self, light_pos: Vec3, p: Vec3) -> Option<ShadowCoord> {
         let pr = &self.projection;
         let layer = if pr.layers == 6 { cube_face(p - light_pos) } else { 0 };
         self.clip_coord(layer, pr.view_proj[layer as usize] * Vec4::new(p.x, p.y, p.z, 1.0))
@@ -313,7 +376,7 @@ impl ShadowMap {
 
     /// [`ShadowMap::coord`] of a point already in layer `layer`'s clip space (`c`); None
     /// behind the light or outside the map. Mirrors `shadow_coord_clip` in common.wgsl.
-    pub fn clip_coord(&self, layer: u32, c: Vec4) -> Option<(u32, u32, u32, f32)> {
+    pub fn clip_coord(&self, layer: u32, c: Vec4) -> Option<ShadowCoord> {
         let pr = &self.projection;
         if c.w <= 0.0 {
             return None;
@@ -323,9 +386,9 @@ impl ShadowMap {
             return None;
         }
         let n = pr.size as f32;
-        let tx = ((ndc.x * 0.5 + 0.5) * n).floor().min(n - 1.0) as u32;
-        let ty = ((0.5 - ndc.y * 0.5) * n).floor().min(n - 1.0) as u32;
-        Some((layer, tx, ty, pr.linear(ndc.z)))
+        let uv = Vec2::new(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+        let texel = (uv * n).floor().min(Vec2::splat(n - 1.0)).as_uvec2();
+        Some(ShadowCoord { layer, uv, texel, depth: pr.linear(ndc.z) })
     }
 
     /// Stored depth at a texel.
@@ -334,17 +397,38 @@ impl ShadowMap {
         self.depth[((layer * n + y) * n + x) as usize]
     }
 
-    /// Binary visibility of a point from the light (1 lit, 0 shadowed); points outside the map
-    /// are lit. Mirrors `shadow_visibility` in common.wgsl.
-    pub fn visibility(&self, light_pos: Vec3, p: Vec3, bias: f32) -> f32 {
-        match self.coord(light_pos, p) {
-            None => 1.0,
-            Some((l, x, y, z)) => {
-                let stored = self.projection.linear(self.texel(l, x, y));
-                if z <= stored + bias { 1.0 } else { 0.0 }
+    /// Visibility of a point from the light, in [0, 1] (1 lit, 0 shadowed), read with
+    /// `filter`; points outside the map are lit. Mirrors `shadow_visibility` in common.wgsl.
+    pub fn visibility(&self, light_pos: Vec3, p: Vec3, bias: f32, filter: ShadowFilter) -> f32 {
+        let Some(sc) = self.coord(light_pos, p) else {
+            return 1.0;
+        };
+        let pr = &self.projection;
+        let lit = |x: u32, y: u32| if sc.depth <= pr.linear(self.texel(sc.layer, x, y)) + bias { 1.0 } else { 0.0 };
+        match filter {
+            ShadowFilter::Nearest => lit(sc.texel.x, sc.texel.y),
+            ShadowFilter::Bilinear => {
+                let (corner, w) = bilinear_footprint(sc.uv, pr.size);
+                let [x0, y0, x1, y1] = corner;
+                let top = lit(x0, y0) + (lit(x1, y0) - lit(x0, y0)) * w.x;
+                let bottom = lit(x0, y1) + (lit(x1, y1) - lit(x0, y1)) * w.x;
+                top + (bottom - top) * w.y
             }
         }
     }
+}
+
+/// The 2×2 texels around `uv` in a `size`² map and the bilinear weights between their centres:
+/// ([x0, y0, x1, y1] clamped to the map, (wx, wy) the weights of x1 and y1). Mirrors
+/// `bilinear_footprint` in common.wgsl.
+pub fn bilinear_footprint(uv: Vec2, size: u32) -> ([u32; 4], Vec2) {
+    let x = uv * size as f32 - 0.5;
+    let x0 = x.floor();
+    let w = x - x0;
+    let hi = size as i32 - 1;
+    let (i, j) = (x0.x as i32, x0.y as i32);
+    let c = |v: i32| v.clamp(0, hi) as u32;
+    ([c(i), c(j), c(i + 1), c(j + 1)], w)
 }
 
 impl ShadowMap {
@@ -357,9 +441,10 @@ impl ShadowMap {
             texel *= (p - light_pos).length();
         }
         let q = p + n * (normal_offset_texels * texel);
-        let Some((layer, tx, ty, z)) = self.coord(light_pos, q) else {
+        let Some(ShadowCoord { layer, texel, depth: z, .. }) = self.coord(light_pos, q) else {
             return 1.0;
         };
+        let (tx, ty) = (texel.x, texel.y);
         let size = pr.size as i32;
         let mut sum = 0.0;
         for dy in -1..=1 {
@@ -371,5 +456,82 @@ impl ShadowMap {
             }
         }
         sum / 9.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An 8² orthographic map looking down −z from the origin over [−1, 1]², depth 0..10 m:
+    /// its left half (columns 0..4) holds an occluder at 2 m, its right half is empty.
+    fn half_map() -> ShadowMap {
+        let size = 8;
+        let projection = ShadowProjection {
+            view_proj: [Mat4::orthographic_rh(-1.0, 1.0, -1.0, 1.0, 0.0, 10.0); 6],
+            layers: 1,
+            near: 0.0,
+            far: 10.0,
+            orthographic: true,
+            size,
+            texel_world: 2.0 / size as f32,
+            depth: DepthConvention::Standard,
+        };
+        let depth = (0..size * size).map(|i| if i % size < size / 2 { 0.2 } else { 1.0 }).collect();
+        ShadowMap { projection, depth }
+    }
+
+    /// The point at 5 m depth over map coordinate u (x = 2u − 1), v = 0.3 (y = 0.4).
+    fn at(u: f32) -> Vec3 {
+        Vec3::new(2.0 * u - 1.0, 0.4, -5.0)
+    }
+
+    #[test]
+    fn bilinear_filter_ramps_across_one_texel_and_equals_nearest_at_texel_centres() {
+        let m = half_map();
+        let v = |u: f32, f| m.visibility(Vec3::ZERO, at(u), 0.02, f);
+        // Nearest: a step at u = 0.5 (the occluder's edge).
+        assert_eq!(v(0.49, ShadowFilter::Nearest), 0.0);
+        assert_eq!(v(0.51, ShadowFilter::Nearest), 1.0);
+        // At every texel centre the four texels' weights are (1, 0): the nearest test exactly.
+        for i in 0..8 {
+            let u = (i as f32 + 0.5) / 8.0;
+            assert_eq!(v(u, ShadowFilter::Bilinear), v(u, ShadowFilter::Nearest), "texel {i}");
+        }
+        // Between the centres of columns 3 (shadowed) and 4 (lit), V = 8u − 3.5 exactly (the
+        // closed form of the 2×2 filter over this step); flat outside them.
+        for k in 0..=20 {
+            let u = 3.5 / 8.0 + k as f32 / 20.0 / 8.0;
+            let want = 8.0 * u - 3.5;
+            let got = v(u, ShadowFilter::Bilinear);
+            assert!((got - want).abs() < 1e-5, "u {u}: V {got}, closed form {want}");
+        }
+        assert_eq!(v(0.3, ShadowFilter::Bilinear), 0.0);
+        assert_eq!(v(0.7, ShadowFilter::Bilinear), 1.0);
+        // Half a texel from the map's border the footprint clamps to the edge texel.
+        assert_eq!(v(0.01, ShadowFilter::Bilinear), 0.0);
+        assert_eq!(v(0.99, ShadowFilter::Bilinear), 1.0);
+        // Outside the map is lit, either way.
+        assert_eq!(m.visibility(Vec3::ZERO, Vec3::new(-1.5, 0.4, -5.0), 0.02, ShadowFilter::Bilinear), 1.0);
+    }
+
+    #[test]
+    fn bilinear_footprint_clamps_and_weights() {
+        assert_eq!(bilinear_footprint(Vec2::new(0.5, 0.5), 8), ([3, 3, 4, 4], Vec2::splat(0.5)));
+        assert_eq!(bilinear_footprint(Vec2::new(0.0, 1.0), 8), ([0, 7, 0, 7], Vec2::splat(0.5)));
+        let (c, w) = bilinear_footprint(Vec2::new(4.5 / 8.0, 0.25 / 8.0), 8);
+        assert_eq!(c, [4, 0, 5, 0]);
+        assert_eq!(w, Vec2::new(0.0, 0.75));
+    }
+
+    #[test]
+    fn shadow_filter_names_round_trip() {
+        for f in [ShadowFilter::Nearest, ShadowFilter::Bilinear] {
+            assert_eq!(ShadowFilter::parse(f.name()), Ok(f));
+        }
+        assert_eq!(ShadowFilter::Nearest.code(), 0);
+        assert_eq!(ShadowFilter::Bilinear.code(), 1);
+        let e = ShadowFilter::parse("pcf").unwrap_err();
+        assert!(e.contains("\"pcf\"") && e.contains("bilinear"), "{e}");
     }
 }

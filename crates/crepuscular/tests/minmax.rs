@@ -127,7 +127,7 @@ fn a_shadowed_frame_equals_a_dense_march_through_the_standard_map() {
             let mut dark = 0;
             for i in 0..n {
                 let t = (i as f32 + 0.5) * delta;
-                if sm.visibility(Vec3::ZERO, d.camera.position + dir * t, fl.shadow_bias) > 0.0 {
+                if sm.visibility(Vec3::ZERO, d.camera.position + dir * t, fl.shadow_bias, fl.shadow_filter) > 0.0 {
                     sum += f * (-st * (i as f32 * delta)).exp() * segment_transmittance(st, delta);
                 } else {
                     dark += 1;

@@ -298,6 +298,15 @@ impl Viewer {
                 changed = true;
             }
             ui.checkbox(&mut self.continuous, "continuous").on_hover_text("re-render every frame (for timing)");
+            let filter = &mut self.scene.render.shadow.filter;
+            let mut bilinear = *filter == crepuscular::ShadowFilter::Bilinear;
+            let tip = "shadow filter of the volume lookups (docs/MODEL.md §1 \"Visibility\"): off, the nearest \
+                       texel; on, the 2×2 bilinear percentage-closer filter (4 reads per sample; the reference \
+                       and the marches read it, minmax and prefiltered keep their own)";
+            if ui.checkbox(&mut bilinear, "bilinear shadows").on_hover_text(tip).changed() {
+                *filter = if bilinear { crepuscular::ShadowFilter::Bilinear } else { crepuscular::ShadowFilter::Nearest };
+                changed = true;
+            }
         });
         ui.small("left drag orbit · shift/middle drag pan · wheel dolly · WASD QE fly · right (ctrl) drag the selected light, + shift moves spot/point · F12/P screenshot · N scene · T technique");
         if changed {

@@ -41,7 +41,8 @@ struct Light {
     texture_layer: u32,
     slot: u32, // this light's index in `lights` (light_view_proj)
     texture_size: vec2<u32>,
-    _pad1: vec2<u32>,
+    shadow_filter: u32, // SHADOW_FILTER_*
+    _pad1: u32,
 }
 
 // frame.rs MAX_LIGHTS, LightsUniforms.
@@ -66,6 +67,9 @@ const LIGHT_SPOT: u32 = 1u;
 const LIGHT_POINT: u32 = 2u;
 // A point light's shadow map: one layer per cube face (shadow.rs CUBE_FACES).
 const CUBE_LAYERS: u32 = 6u;
+// Light::shadow_filter (shadow.rs ShadowFilter::code).
+const SHADOW_FILTER_NEAREST: u32 = 0u;
+const SHADOW_FILTER_BILINEAR: u32 = 1u;
 const PHASE_ISOTROPIC: u32 = 0u;
 const PHASE_HENYEY_GREENSTEIN: u32 = 1u;
 const PHASE_RAYLEIGH: u32 = 2u;
@@ -241,14 +245,49 @@ fn shadow_stored(l: Light, shadow_map: texture_2d_array<f32>, t: vec2<i32>, laye
     return shadow_linear_depth(l, textureLoad(shadow_map, t, i32(l.shadow_first_layer + layer), 0).r);
 }
 
-// shadow.rs ShadowMap::visibility: 1 lit, 0 shadowed; outside the map is lit.
+// 1 where the point at linear depth `depth` is lit at texel t of the light's layer, else 0.
+fn shadow_lit(l: Light, shadow_map: texture_2d_array<f32>, t: vec2<u32>, layer: u32, depth: f32) -> f32 {
+    return select(0.0, 1.0, depth <= shadow_stored(l, shadow_map, vec2<i32>(t), layer) + l.shadow_bias);
+}
+
+// shadow.rs bilinear_footprint: the 2×2 texels around uv (x0, y0, x1, y1, clamped to the map)
+// and the bilinear weights of x1 and y1 between their centres.
+struct Footprint {
+    corner: vec4<u32>,
+    w: vec2<f32>,
+}
+
+fn bilinear_footprint(uv: vec2<f32>, size: u32) -> Footprint {
+    let x = uv * f32(size) - 0.5;
+    let x0 = floor(x);
+    let i = vec2<i32>(x0);
+    let hi = i32(size) - 1;
+    let lo = clamp(i, vec2<i32>(0), vec2<i32>(hi));
+    let up = clamp(i + vec2<i32>(1), vec2<i32>(0), vec2<i32>(hi));
+    return Footprint(vec4<u32>(u32(lo.x), u32(lo.y), u32(up.x), u32(up.y)), x - x0);
+}
+
+// shadow.rs ShadowMap::visibility: in [0, 1] (1 lit, 0 shadowed), the nearest texel's test or
+// the 2×2 bilinear percentage-closer filter (l.shadow_filter; docs/MODEL.md §1 "Visibility");
+// outside the map is lit.
 fn shadow_visibility(l: Light, shadow_map: texture_2d_array<f32>, p: vec3<f32>) -> f32 {
     let sc = shadow_coord(l, p);
     if !sc.valid {
         return 1.0;
     }
-    let stored = shadow_stored(l, shadow_map, vec2<i32>(sc.texel), sc.layer);
-    return select(0.0, 1.0, sc.depth <= stored + l.shadow_bias);
+    if l.shadow_filter != SHADOW_FILTER_BILINEAR {
+        return shadow_lit(l, shadow_map, sc.texel, sc.layer, sc.depth);
+    }
+    let fp = bilinear_footprint(sc.uv, l.shadow_size);
+    let c = fp.corner;
+    let v00 = shadow_lit(l, shadow_map, c.xy, sc.layer, sc.depth);
+    let v10 = shadow_lit(l, shadow_map, c.zy, sc.layer, sc.depth);
+    let v01 = shadow_lit(l, shadow_map, c.xw, sc.layer, sc.depth);
+    let v11 = shadow_lit(l, shadow_map, c.zw, sc.layer, sc.depth);
+    // a + (b − a)·w, as the Rust twin writes it (not mix(), whose rounding is the driver's).
+    let top = v00 + (v10 - v00) * fp.w.x;
+    let bottom = v01 + (v11 - v01) * fp.w.x;
+    return top + (bottom - top) * fp.w.y;
 }
 
 // model.rs RgbTexture::sample: bilinear, clamp to edge, four loads, in the top-left `size`

@@ -543,10 +543,10 @@ pub fn resolve_mixed(
     // One piece [a, b] of fixed texel on face `layer` (clip line c + t·d): its lit part. The
     // texel is the one at the piece's midpoint (ShadowMap::clip_coord, on the clip line).
     let piece = |a: f32, b: f32, layer: u32, c: Vec4, d: Vec4| -> (f32, f32) {
-        let Some((_, tx, ty, _)) = shadow.clip_coord(layer, c + d * (0.5 * (a + b))) else {
+        let Some(sc) = shadow.clip_coord(layer, c + d * (0.5 * (a + b))) else {
             return (a, b);
         };
-        let limit = pr.linear(shadow.texel(layer, tx, ty)) + bias;
+        let limit = pr.linear(shadow.texel(layer, sc.texel.x, sc.texel.y)) + bias;
         let depth = |t: f32| {
             let q = c + d * t;
             pr.linear(q.z / q.w)

@@ -16,6 +16,7 @@ use crate::image::Image;
 use crate::integrand::light_position;
 use crate::march::cone_interval;
 use crate::model::Light;
+use crate::shadow::ShadowFilter;
 use crate::shaders::pcg_hash;
 use crate::stats::{PassTime, TechniqueStats};
 use glam::{DMat4, DVec3, DVec4};
@@ -101,10 +102,29 @@ impl<'a> Integrand<'a> {
             return 1.0;
         }
         let n = pr.size as f64;
-        let tx = ((ndc.x * 0.5 + 0.5) * n).floor().min(n - 1.0) as u32;
-        let ty = ((0.5 - ndc.y * 0.5) * n).floor().min(n - 1.0) as u32;
-        let stored = pr.linear_f64(sm.texel(layer, tx, ty) as f64);
-        if pr.linear_f64(ndc.z) <= stored + self.light.shadow_bias as f64 { 1.0 } else { 0.0 }
+        let (u, v) = (ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+        let z = pr.linear_f64(ndc.z);
+        let bias = self.light.shadow_bias as f64;
+        let lit = |x: u32, y: u32| if z <= pr.linear_f64(sm.texel(layer, x, y) as f64) + bias { 1.0 } else { 0.0 };
+        match self.light.shadow_filter {
+            ShadowFilter::Nearest => {
+                let tx = (u * n).floor().min(n - 1.0) as u32;
+                let ty = (v * n).floor().min(n - 1.0) as u32;
+                lit(tx, ty)
+            }
+            // The 2×2 percentage-closer filter of shadow.rs ShadowMap::visibility, in f64.
+            ShadowFilter::Bilinear => {
+                let (x, y) = (u * n - 0.5, v * n - 0.5);
+                let (x0, y0) = (x.floor(), y.floor());
+                let (wx, wy) = (x - x0, y - y0);
+                let hi = pr.size as i64 - 1;
+                let c = |i: f64| (i as i64).clamp(0, hi) as u32;
+                let (i0, j0, i1, j1) = (c(x0), c(y0), c(x0 + 1.0), c(y0 + 1.0));
+                let top = lit(i0, j0) + (lit(i1, j0) - lit(i0, j0)) * wx;
+                let bottom = lit(i0, j1) + (lit(i1, j1) - lit(i0, j1)) * wx;
+                top + (bottom - top) * wy
+            }
+        }
     }
 
     fn density(&self, view_dir: DVec3, p: DVec3) -> DVec3 {

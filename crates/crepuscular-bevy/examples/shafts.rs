@@ -15,7 +15,6 @@ use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use clap::Parser;
 use crepuscular::TechniqueSettings;
 use crepuscular::techniques::presets::Preset;
-use crepuscular_bevy::Crepuscular;
 use crepuscular_bevy::demo::{self, DemoOptions, Effect};
 
 #[derive(Parser)]
@@ -75,7 +74,7 @@ fn run(args: Args) -> Result<(), String> {
         if !technique.has_gpu() {
             return Err(format!("--technique {}: CPU only; the plugin runs GPU techniques", args.technique));
         }
-        Effect::Crepuscular(Crepuscular { technique, ..Default::default() })
+        Effect::Crepuscular(demo::crepuscular(technique))
     };
     let opts = DemoOptions { width, height, effect, lamps: args.lamps, ..Default::default() };
     let Some(screenshot) = args.screenshot else {

@@ -25,7 +25,6 @@ use bevy::prelude::*;
 use clap::Parser;
 use crepuscular::TechniqueSettings;
 use crepuscular::techniques::presets::Preset;
-use crepuscular_bevy::Crepuscular;
 use crepuscular_bevy::demo::{self, DemoOptions, Effect};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -44,6 +43,10 @@ struct Args {
     /// Presets of the plugin's techniques to measure.
     #[arg(long, value_delimiter = ',', default_value = "fast,balanced")]
     presets: Vec<String>,
+    /// How the plugin's lights read Bevy's shadow maps (`CrepuscularLight::shadow_filter`):
+    /// nearest (one texel) or bilinear (2×2 percentage-closer, as Bevy's own lookups).
+    #[arg(long, default_value = "nearest", value_parser = crepuscular::ShadowFilter::parse)]
+    shadow_filter: crepuscular::ShadowFilter,
     /// Output folder.
     #[arg(long, default_value = "bevy-versus")]
     output: PathBuf,
@@ -99,12 +102,17 @@ fn run(args: Args) -> Result<(), String> {
         "bevy-converged",
         Effect::BevyFog { steps: 1024 },
     ));
+    // The plugin's rows name a non-default shadow filter, so tables of both can be merged.
+    let filter = match args.shadow_filter {
+        crepuscular::ShadowFilter::Nearest => String::new(),
+        f => format!(", {} shadow filter", f.name()),
+    };
     let mut converged = crepuscular::techniques::presets::Preset::ReferenceLike.brute_force();
     converged.ray_march.steps = 1024;
     configs.push((
-        "crepuscular brute-force 1024 steps (converged)".into(),
+        format!("crepuscular brute-force 1024 steps (converged{filter})"),
         "ours-converged",
-        Effect::Crepuscular(Crepuscular { technique: TechniqueSettings::BruteForce(converged), ..Default::default() }),
+        Effect::Crepuscular(demo::crepuscular(TechniqueSettings::BruteForce(converged))),
     ));
     for info in crepuscular::techniques::TECHNIQUES {
         for &p in &presets {
@@ -113,9 +121,9 @@ fn run(args: Args) -> Result<(), String> {
                 continue;
             }
             configs.push((
-                format!("crepuscular {} ({})", info.name, p.name()),
+                format!("crepuscular {} ({}{filter})", info.name, p.name()),
                 "ours",
-                Effect::Crepuscular(Crepuscular { technique: t, ..Default::default() }),
+                Effect::Crepuscular(demo::crepuscular(t)),
             ));
         }
     }
@@ -128,7 +136,15 @@ fn run(args: Args) -> Result<(), String> {
     for (label, family, effect) in configs {
         bar.set_message(label.clone());
         // Bevy's logger is process-wide: the first app installs it.
-        let opts = DemoOptions { width, height, effect, lamps: false, log: runs.is_empty(), ..Default::default() };
+        let opts = DemoOptions {
+            width,
+            height,
+            effect,
+            lamps: false,
+            shadow_filter: args.shadow_filter,
+            log: runs.is_empty(),
+            ..Default::default()
+        };
         let mut app = demo::headless_app(&opts);
         let timer = demo::EffectTimer::install(&mut app);
         app.finish();

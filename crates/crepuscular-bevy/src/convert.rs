@@ -259,6 +259,7 @@ impl LightsInView {
         fl.shadow_layer = layer;
         fl.scattering = marker.scattering;
         fl.shadow_bias = marker.shadow_bias;
+        fl.shadow_filter = marker.shadow_filter;
         fl
     }
 }

@@ -44,6 +44,9 @@ pub struct DemoOptions {
     pub lamps: bool,
     /// Side of Bevy's directional (and spot) shadow maps, texels. Default 1024.
     pub shadow_map_size: usize,
+    /// How the plugin's lights read those maps ([`CrepuscularLight::shadow_filter`]). Default
+    /// `Nearest`.
+    pub shadow_filter: crepuscular::ShadowFilter,
     /// Installs Bevy's `LogPlugin` (a process-wide logger: tests that build several apps in one
     /// process turn it off). Default true.
     pub log: bool,
@@ -57,6 +60,7 @@ impl Default for DemoOptions {
             effect: Effect::Crepuscular(Crepuscular::default()),
             lamps: false,
             shadow_map_size: 1024,
+            shadow_filter: crepuscular::ShadowFilter::Nearest,
             log: true,
         }
     }
@@ -189,6 +193,14 @@ pub fn surface_distance(p: Vec3) -> f32 {
 /// The far end of the medium (and of Bevy's fog volume), world units.
 pub const FAR: f32 = 60.0;
 
+/// The plugin's camera component for the demo scene: `technique` over the library's default
+/// medium, ending at [`FAR`] as Bevy's fog box does ([`spawn_colonnade`] centres a box of side
+/// 2·`FAR` on the camera), so that the two effects integrate the same medium along the same
+/// rays. (The component's own default, 200, would march sky rays 3.3× as far as Bevy's.)
+pub fn crepuscular(technique: crepuscular::TechniqueSettings) -> Crepuscular {
+    Crepuscular { technique, far: FAR, ..Default::default() }
+}
+
 /// Spawns the colonnade, its lights and the camera (rendering into `target`).
 pub fn spawn_colonnade(
     commands: &mut Commands,
@@ -226,7 +238,7 @@ pub fn spawn_colonnade(
     ));
     match &opts.effect {
         Effect::Crepuscular(_) => {
-            sun.insert(CrepuscularLight::default());
+            sun.insert(CrepuscularLight { shadow_filter: opts.shadow_filter, ..default() });
         }
         Effect::BevyFog { .. } => {
             sun.insert(VolumetricLight);
@@ -247,7 +259,7 @@ pub fn spawn_colonnade(
         ));
         match opts.effect {
             Effect::Crepuscular(_) => {
-                spot.insert(CrepuscularLight { texture: Some(gobo), ..default() });
+                spot.insert(CrepuscularLight { texture: Some(gobo), shadow_filter: opts.shadow_filter, ..default() });
             }
             Effect::BevyFog { .. } => {
                 spot.insert(VolumetricLight);
@@ -260,7 +272,7 @@ pub fn spawn_colonnade(
         ));
         match opts.effect {
             Effect::Crepuscular(_) => {
-                point.insert(CrepuscularLight::default());
+                point.insert(CrepuscularLight { shadow_filter: opts.shadow_filter, ..default() });
             }
             Effect::BevyFog { .. } => {
                 point.insert(VolumetricLight);

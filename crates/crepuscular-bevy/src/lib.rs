@@ -140,6 +140,13 @@ pub struct CrepuscularLight {
     /// `FrameLight::shadow_bias`; Bevy's own depth and normal biases already apply to the
     /// map). Default 0.02.
     pub shadow_bias: f32,
+    /// How the volume reads this light's shadow map (the library's
+    /// `FrameLight::shadow_filter`, docs/MODEL.md §1 "Visibility"): `Nearest`, one texel's
+    /// test, or `Bilinear`, the 2×2 percentage-closer filter — what Bevy's own lookups into the
+    /// same map return through their comparison sampler, so shaft edges step less; four
+    /// texture reads per sample instead of one. Read by the reference and the marching
+    /// techniques; `minmax` and `prefiltered` keep their own visibility. Default `Nearest`.
+    pub shadow_filter: crepuscular::ShadowFilter,
     /// A spot light's projected texture ("gobo", stained glass): a Bevy image, mapped over the
     /// spot's square shadow frustum, its RGB multiplying the light (linear; an sRGB image is
     /// decoded). Read into the effect once it is loaded and whenever the handle changes; any
@@ -150,7 +157,7 @@ pub struct CrepuscularLight {
 
 impl Default for CrepuscularLight {
     fn default() -> Self {
-        Self { scattering: 1.0, shadow_bias: 0.02, texture: None }
+        Self { scattering: 1.0, shadow_bias: 0.02, shadow_filter: crepuscular::ShadowFilter::Nearest, texture: None }
     }
 }
 

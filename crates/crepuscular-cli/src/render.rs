@@ -36,11 +36,14 @@ pub enum Backend {
 pub fn load_scene(name_or_path: &str) -> Result<Scene> {
     if let Some((base, option)) = name_or_path.rsplit_once(':') {
         if let Some(n) = option.strip_prefix("lights=") {
-            let n: usize =
-                n.parse().with_context(|| format!("{name_or_path}: `lights=` takes a count, not `{n}`"))?;
+            let n: usize = n.parse().with_context(|| format!("{name_or_path}: `lights=` takes a count, not `{n}`"))?;
             let mut scene = load_scene(base)?;
             if n > scene.lights.len() {
-                bail!("{name_or_path}: lights={n}: `{}` has {} light(s); keep 0 to {0}", scene.name, scene.lights.len());
+                bail!(
+                    "{name_or_path}: lights={n}: `{}` has {} light(s); keep 0 to {0}",
+                    scene.name,
+                    scene.lights.len()
+                );
             }
             scene.lights.truncate(n.max(1));
             if n == 0 {

@@ -391,7 +391,13 @@ fn bad_files_fail_with_one_line_naming_file_and_key() {
     check_bad(&dir, "zero.toml", "[render]\nwidth = 0\n", "render.width", &["= 0"]);
     check_bad(&dir, "huge.toml", "[render]\nheight = 100000\n", "render.height", &["100000"]);
     check_bad(&dir, "zero_shadow.toml", "[render]\nshadow_map_size = 0\n", "render.shadow_map_size", &[]);
-    check_bad(&dir, "filter.toml", "[render]\nshadow_filter = \"pcf\"\n", "render.shadow_filter", &["\"pcf\"", "bilinear"]);
+    check_bad(
+        &dir,
+        "filter.toml",
+        "[render]\nshadow_filter = \"pcf\"\n",
+        "render.shadow_filter",
+        &["\"pcf\"", "bilinear"],
+    );
     check_bad(&dir, "filter2.toml", "[render]\nshadow_filter = 2\n", "render.shadow_filter", &[]);
     check_bad(&dir, "near.toml", "[camera]\nnear = 0\n", "camera.near", &[]);
     check_bad(&dir, "far.toml", "[camera]\nnear = 5\nfar = 2\n", "camera.far", &[]);

@@ -304,7 +304,8 @@ impl Viewer {
                        texel; on, the 2×2 bilinear percentage-closer filter (4 reads per sample; the reference \
                        and the marches read it, minmax and prefiltered keep their own)";
             if ui.checkbox(&mut bilinear, "bilinear shadows").on_hover_text(tip).changed() {
-                *filter = if bilinear { crepuscular::ShadowFilter::Bilinear } else { crepuscular::ShadowFilter::Nearest };
+                *filter =
+                    if bilinear { crepuscular::ShadowFilter::Bilinear } else { crepuscular::ShadowFilter::Nearest };
                 changed = true;
             }
         });

@@ -45,7 +45,7 @@ pub struct DemoOptions {
     /// Side of Bevy's directional (and spot) shadow maps, texels. Default 1024.
     pub shadow_map_size: usize,
     /// How the plugin's lights read those maps ([`CrepuscularLight::shadow_filter`]). Default
-    /// `Nearest`.
+    /// `Nearest`; `Bilinear` costs four reads per march sample instead of one.
     pub shadow_filter: crepuscular::ShadowFilter,
     /// Installs Bevy's `LogPlugin` (a process-wide logger: tests that build several apps in one
     /// process turn it off). Default true.

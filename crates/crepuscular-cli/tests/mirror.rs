@@ -185,6 +185,7 @@ fn equiangular_steps_match_between_gpu_and_cpu_for_every_technique() {
 fn bilinear_shadow_filter_matches_between_gpu_and_cpu() {
     use crepuscular::ShadowFilter;
     let Some(gpu) = test_gpu("bilinear_shadow_filter_matches_between_gpu_and_cpu") else { return };
+    let mut most_changed = 0.0f64;
     for (name, _) in builtin::builtin_names() {
         let mut scene = small(name);
         scene.render.width = 96;
@@ -207,10 +208,6 @@ fn bilinear_shadow_filter_matches_between_gpu_and_cpu() {
             };
             let (cpu_b, _) = settings.render_cpu(&fb, &[], &|_, _| {}).unwrap();
             let (cpu_n, _) = settings.render_cpu(&fne, &[], &|_, _| {}).unwrap();
-            if matches!(t, "minmax" | "prefiltered") {
-                assert_eq!(cpu_b.pixels, cpu_n.pixels, "{name} {t}: the filter must not change it");
-                continue;
-            }
             let (gpu_b, gpu_n) = (on_gpu(&bilinear), on_gpu(&nearest));
             let peak = cpu_n.pixels.iter().flat_map(|p| p[..3].iter().copied()).fold(0.0f32, f32::max);
             let rel = |a: &crepuscular::Image, b: &crepuscular::Image| {
@@ -218,15 +215,37 @@ fn bilinear_shadow_filter_matches_between_gpu_and_cpu() {
                 let e: Vec<f32> = b.pixels.iter().flat_map(|p| p[..3].iter().map(|v| v / peak)).collect();
                 mismatch(&d, &e, 1e-3)
             };
-            let (b, n, changed) = (rel(&gpu_b, &cpu_b), rel(&gpu_n, &cpu_n), rel(&cpu_b, &cpu_n));
+            let (b, n) = (rel(&gpu_b, &cpu_b), rel(&gpu_n, &cpu_n));
+            let (changed, gpu_changed) = (rel(&cpu_b, &cpu_n), rel(&gpu_b, &gpu_n));
             eprintln!(
-                "{name} {t}: GPU vs CPU {:.3}% differ > 1e-3 of the peak with the bilinear filter ({:.3}% nearest); bilinear vs nearest {:.2}%",
+                "{name} {t}: GPU vs CPU {:.3}% differ > 1e-3 of the peak with the bilinear filter ({:.3}% nearest); \
+                 bilinear vs nearest {:.2}% (CPU), {:.2}% (GPU)",
                 b * 100.0,
                 n * 100.0,
-                changed * 100.0
+                changed * 100.0,
+                gpu_changed * 100.0
             );
             assert!(b < 0.005f64.max(2.0 * n), "{name} {t}: bilinear GPU and CPU differ on {:.3}%", b * 100.0);
-            assert!(changed > 0.001, "{name} {t}: the bilinear filter changes nothing ({:.3}%)", changed * 100.0);
+            if matches!(t, "minmax" | "prefiltered") {
+                // Their own visibility (min-max walk, filtered maps) ignores the filter; only the
+                // epipole disc, a plain march, reads it: the picture may or may not change.
+                continue;
+            }
+            // The GPU must honour it as the CPU does: where the filter changes the CPU's picture,
+            // it changes the GPU's as much (a GPU that ignored the filter would keep its nearest
+            // picture). Scenes whose shadow edges are finer than a pixel change little.
+            if changed > 0.001 {
+                assert!(
+                    gpu_changed > 0.5 * changed,
+                    "{name} {t}: the filter changes {:.3}% of the CPU's pixels but {:.3}% of the GPU's",
+                    changed * 100.0,
+                    gpu_changed * 100.0
+                );
+            }
+            most_changed = most_changed.max(changed);
         }
     }
+    // Colonnade's and forest's shafts are edged by shadow-map texels: the filter must show there
+    // (measured: 49–75 % of the marches' pixels move by more than 1e-3 of the peak).
+    assert!(most_changed > 0.2, "the bilinear filter changes at most {:.2}% of any picture", most_changed * 100.0);
 }

@@ -273,6 +273,8 @@ fn wgsl_light_and_phase_kinds_are_the_rust_constants() {
         ("SPOT_APPENDIX_B_CONSTANT", crepuscular::march::SpotSteps::AppendixBConstant.code()),
         ("SPOT_APPENDIX_B_SMOOTHSTEP", crepuscular::march::SpotSteps::AppendixBSmoothstep.code()),
         ("MARCH_EQUIANGULAR", crepuscular::march::EQUIANGULAR_BIT),
+        ("SHADOW_FILTER_NEAREST", crepuscular::ShadowFilter::Nearest.code()),
+        ("SHADOW_FILTER_BILINEAR", crepuscular::ShadowFilter::Bilinear.code()),
     ] {
         let decl = format!("const {name}: u32 = {value}u;");
         assert!(common.contains(&decl), "common.wgsl lacks `{decl}`");

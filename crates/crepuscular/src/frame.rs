@@ -153,9 +153,9 @@ pub struct FrameLight {
     pub shadow_bias: f32,
     /// How the in-scattering reads this light's shadow map: the nearest texel (binary
     /// visibility) or a 2×2 bilinear percentage-closer filter (four reads per sample instead
-    /// of one; docs/MODEL.md §1 "Visibility"). Read by the reference and the marching
-    /// techniques; `minmax` and `prefiltered` keep their own visibility. Default
-    /// [`ShadowFilter::Nearest`].
+    /// of one; docs/MODEL.md §1 "Visibility"). Read by the reference and every step-by-step
+    /// march ([`ShadowFilter`] lists them); `minmax`'s walk and `prefiltered`'s filtered maps
+    /// keep their own visibility outside the epipole disc. Default [`ShadowFilter::Nearest`].
     pub shadow_filter: ShadowFilter,
     /// First layer of this light's shadow map in the frame's shadow-map array
     /// ([`GpuFrame::shadow_maps`]); the map takes `shadow.layers` layers from there. Default 0.

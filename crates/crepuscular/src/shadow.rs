@@ -57,7 +57,8 @@ pub struct ShadowSettings {
     /// Normal offset for surface lookups, in shadow-map texels. Default 1.5.
     pub normal_offset_texels: f32,
     /// How the volume lookups read the map ([`ShadowFilter`]; each light's
-    /// [`crate::FrameLight::shadow_filter`]). Default [`ShadowFilter::Nearest`].
+    /// [`crate::FrameLight::shadow_filter`]). Default [`ShadowFilter::Nearest`]; `Bilinear`
+    /// costs four texture reads per march sample instead of one.
     pub filter: ShadowFilter,
 }
 
@@ -68,10 +69,12 @@ impl Default for ShadowSettings {
 }
 
 /// How the in-scattering reads a light's shadow map at a sample point: the visibility V of
-/// docs/MODEL.md §1 ("Visibility"), for the reference and the marching techniques
-/// (brute-force, interleaved, subsampled, epipolar). `minmax` always tests the nearest texel
-/// (its walk is exact for that step function, docs/MODEL.md §8) and `prefiltered` has its own
-/// filtered visibility (Klehm et al. 2014 §3); both ignore this setting.
+/// docs/MODEL.md §1 ("Visibility"), for the reference and every step-by-step march
+/// (brute-force, interleaved, subsampled, epipolar's stepped samples and re-marched pixels, and
+/// the ray-marched epipole disc of `minmax` and `prefiltered`). `minmax`'s walk (and epipolar's
+/// `march = "minmax"`) always tests the nearest texel (the walk is exact for that step
+/// function, docs/MODEL.md §8) and `prefiltered` has its own filtered visibility (Klehm et al.
+/// 2014 §3): outside the epipole disc those two ignore this setting.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ShadowFilter {

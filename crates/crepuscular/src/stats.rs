@@ -25,7 +25,8 @@ pub struct TechniqueStats {
     pub timing: String,
     /// Per-pass times, in order.
     pub passes: Vec<PassTime>,
-    /// Number of ray-marched samples (shadow-map lookups along view rays) in the frame. Under
+    /// Number of ray-marched samples (shadow-map tests along view rays; four texture reads each
+    /// under [`crate::ShadowFilter::Bilinear`]) in the frame. Under
     /// [`crate::StatsMode::Off`] the samples only the GPU counts (epipolar's classified and
     /// re-marched pixels, subsampled's re-marched silhouette pixels) are not included.
     pub raymarched_samples: u64,

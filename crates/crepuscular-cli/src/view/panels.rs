@@ -302,7 +302,7 @@ impl Viewer {
             let mut bilinear = *filter == crepuscular::ShadowFilter::Bilinear;
             let tip = "shadow filter of the volume lookups (docs/MODEL.md §1 \"Visibility\"): off, the nearest \
                        texel; on, the 2×2 bilinear percentage-closer filter (4 reads per sample; the reference \
-                       and the marches read it, minmax and prefiltered keep their own)";
+                       and the marches read it; minmax and prefiltered keep their own outside the epipole disc)";
             if ui.checkbox(&mut bilinear, "bilinear shadows").on_hover_text(tip).changed() {
                 *filter =
                     if bilinear { crepuscular::ShadowFilter::Bilinear } else { crepuscular::ShadowFilter::Nearest };

@@ -81,7 +81,8 @@ pub struct Crepuscular {
     pub phase: Phase,
     /// Where the rays of pixels with no geometry (the sky) and the medium end, world units:
     /// Bevy's projection has no far plane. Default 200. Cost: none; precision of the techniques
-    /// that sample along rays falls as it grows.
+    /// that sample along rays falls as it grows. Set it to your fog's extent: beside Bevy's
+    /// `FogVolume` (a box), its half side, or the sky gathers more path than Bevy's fog does.
     pub far: f32,
     /// Which of a directional light's shadow cascades the effect reads (docs/BEVY.md
     /// "Cascades"). Default [`CascadeChoice::Farthest`].

@@ -25,6 +25,14 @@ fn mismatch(a: &[f32], b: &[f32], tol: f32) -> f64 {
     a.iter().zip(b).filter(|(x, y)| (*x - *y).abs() > tol).count() as f64 / a.len() as f64
 }
 
+/// The fraction of two images' RGB values that differ by more than 1e-3 of `peak`.
+fn mismatch_of_peak(a: &crepuscular::Image, b: &crepuscular::Image, peak: f32) -> f64 {
+    let rgb = |i: &crepuscular::Image| -> Vec<f32> {
+        i.pixels.iter().flat_map(|p| p[..3].iter().map(|v| v / peak)).collect()
+    };
+    mismatch(&rgb(a), &rgb(b), 1e-3)
+}
+
 #[test]
 fn host_depth_and_shadow_maps_match_between_gpu_and_cpu() {
     let Some(gpu) = test_gpu("host_depth_and_shadow_maps_match_between_gpu_and_cpu") else { return };
@@ -144,11 +152,7 @@ fn equiangular_steps_match_between_gpu_and_cpu_for_every_technique() {
             let img = on_gpu(settings);
             let uniform_gpu = on_gpu(parse("uniform"));
             let peak = cpu.pixels.iter().flat_map(|p| p[..3].iter().copied()).fold(0.0f32, f32::max);
-            let rel = |a: &crepuscular::Image, b: &crepuscular::Image| {
-                let d: Vec<f32> = a.pixels.iter().flat_map(|p| p[..3].iter().map(|v| v / peak)).collect();
-                let e: Vec<f32> = b.pixels.iter().flat_map(|p| p[..3].iter().map(|v| v / peak)).collect();
-                mismatch(&d, &e, 1e-3)
-            };
+            let rel = |a: &crepuscular::Image, b: &crepuscular::Image| mismatch_of_peak(a, b, peak);
             let (gpu_vs_cpu, vs_uniform) = (rel(&img, &cpu), rel(&uniform, &cpu));
             // The uniform layout's own GPU/CPU agreement (prefiltered's filtered visibility
             // rounds differently on the two backends near the spot's texture edges).
@@ -210,11 +214,7 @@ fn bilinear_shadow_filter_matches_between_gpu_and_cpu() {
             let (cpu_n, _) = settings.render_cpu(&fne, &[], &|_, _| {}).unwrap();
             let (gpu_b, gpu_n) = (on_gpu(&bilinear), on_gpu(&nearest));
             let peak = cpu_n.pixels.iter().flat_map(|p| p[..3].iter().copied()).fold(0.0f32, f32::max);
-            let rel = |a: &crepuscular::Image, b: &crepuscular::Image| {
-                let d: Vec<f32> = a.pixels.iter().flat_map(|p| p[..3].iter().map(|v| v / peak)).collect();
-                let e: Vec<f32> = b.pixels.iter().flat_map(|p| p[..3].iter().map(|v| v / peak)).collect();
-                mismatch(&d, &e, 1e-3)
-            };
+            let rel = |a: &crepuscular::Image, b: &crepuscular::Image| mismatch_of_peak(a, b, peak);
             let (b, n) = (rel(&gpu_b, &cpu_b), rel(&gpu_n, &cpu_n));
             let (changed, gpu_changed) = (rel(&cpu_b, &cpu_n), rel(&gpu_b, &gpu_n));
             eprintln!(

@@ -43,6 +43,10 @@ struct Args {
     /// Presets of the plugin's techniques to measure.
     #[arg(long, value_delimiter = ',', default_value = "fast,balanced")]
     presets: Vec<String>,
+    /// The plugin's techniques to measure (names as `crepuscular techniques` lists them);
+    /// default: every technique with a GPU implementation.
+    #[arg(long, value_delimiter = ',')]
+    techniques: Vec<String>,
     /// How the plugin's lights read Bevy's shadow maps (`CrepuscularLight::shadow_filter`):
     /// nearest (one texel) or bilinear (2×2 percentage-closer, as Bevy's own lookups).
     #[arg(long, default_value = "nearest", value_parser = crepuscular::ShadowFilter::parse)]
@@ -89,6 +93,12 @@ fn run(args: Args) -> Result<(), String> {
     }
     let presets =
         args.presets.iter().map(|p| Preset::parse(p).map_err(|e| e.to_string())).collect::<Result<Vec<_>, _>>()?;
+    for t in &args.techniques {
+        if !crepuscular::techniques::TECHNIQUES.iter().any(|info| info.name == t) {
+            let names: Vec<&str> = crepuscular::techniques::TECHNIQUES.iter().map(|i| i.name).collect();
+            return Err(format!("--techniques {t}: unknown technique (one of {})", names.join(", ")));
+        }
+    }
     std::fs::create_dir_all(&args.output).map_err(|e| format!("{}: {e}", args.output.display()))?;
     // A fresh progress log for this run.
     let _ = std::fs::remove_file(args.output.join("progress.log"));
@@ -115,6 +125,9 @@ fn run(args: Args) -> Result<(), String> {
         Effect::Crepuscular(demo::crepuscular(TechniqueSettings::BruteForce(converged))),
     ));
     for info in crepuscular::techniques::TECHNIQUES {
+        if !args.techniques.is_empty() && !args.techniques.iter().any(|t| t == info.name) {
+            continue;
+        }
         for &p in &presets {
             let Some(t) = p.settings(info.name) else { continue };
             if !t.has_gpu() {

@@ -369,8 +369,10 @@ pub struct ShadowCoord {
 }
 
 impl ShadowMap {
-    /// Which layer, texel and linear depth a world point falls on; None outside the map
-    /// (outside the light frustum). Mirrors `shadow_coord` in common.wgsl.
+    /// Which layer, texel and linear depth a world point falls on; None outside the map's
+    /// footprint or nearer the light than its near plane; a point beyond its far plane gets
+    /// the far plane's depth (docs/MODEL.md §1 "Visibility"). Mirrors `shadow_coord` in
+    /// common.wgsl.
     pub fn coord(&self, light_pos: Vec3, p: Vec3) -> Option<ShadowCoord> {
         let pr = &self.projection;
         let layer = if pr.layers == 6 { cube_face(p - light_pos) } else { 0 };
@@ -378,20 +380,37 @@ impl ShadowMap {
     }
 
     /// [`ShadowMap::coord`] of a point already in layer `layer`'s clip space (`c`); None
-    /// behind the light or outside the map. Mirrors `shadow_coord_clip` in common.wgsl.
+    /// behind the light, outside the map's footprint or nearer than its near plane; beyond
+    /// the far plane, the far plane's depth. Mirrors `shadow_coord_clip` in common.wgsl.
     pub fn clip_coord(&self, layer: u32, c: Vec4) -> Option<ShadowCoord> {
         let pr = &self.projection;
         if c.w <= 0.0 {
             return None;
         }
         let ndc = c.xyz() / c.w;
-        if ndc.z < 0.0 || ndc.z > 1.0 || ndc.x.abs() > 1.0 || ndc.y.abs() > 1.0 {
+        if ndc.x.abs() > 1.0 || ndc.y.abs() > 1.0 {
             return None;
         }
+        // Light-space depth as a fraction from the near plane (0) to the far plane (1).
+        let from_near = match pr.depth {
+            DepthConvention::Standard => ndc.z,
+            DepthConvention::Reversed => 1.0 - ndc.z,
+        };
+        // Nearer the light than the near plane: nothing the map holds lies in front of it.
+        if from_near < 0.0 {
+            return None;
+        }
+        // Beyond the far plane, but inside the map's footprint: behind whatever occluder its
+        // texel holds, so it is tested at the far plane — shadowed where the texel holds an
+        // occluder, lit where it is empty (docs/MODEL.md §1 "Visibility"). An engine's sun
+        // cascade is fitted to the view frustum's slice, whose far side (from the light) can
+        // stop short of the eye: until 2026-12-05 the first centimetres of every view ray
+        // facing the sun read lit there.
+        let z = if from_near > 1.0 { pr.depth.far_value() } else { ndc.z };
         let n = pr.size as f32;
         let uv = Vec2::new(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
         let texel = (uv * n).floor().min(Vec2::splat(n - 1.0)).as_uvec2();
-        Some(ShadowCoord { layer, uv, texel, depth: pr.linear(ndc.z) })
+        Some(ShadowCoord { layer, uv, texel, depth: pr.linear(z) })
     }
 
     /// Stored depth at a texel.
@@ -401,7 +420,9 @@ impl ShadowMap {
     }
 
     /// Visibility of a point from the light, in [0, 1] (1 lit, 0 shadowed), read with
-    /// `filter`; points outside the map are lit. Mirrors `shadow_visibility` in common.wgsl.
+    /// `filter`; points outside the map's footprint or nearer than its near plane are lit,
+    /// points beyond its far plane are lit only where their texels are empty. Mirrors
+    /// `shadow_visibility` in common.wgsl.
     pub fn visibility(&self, light_pos: Vec3, p: Vec3, bias: f32, filter: ShadowFilter) -> f32 {
         let Some(sc) = self.coord(light_pos, p) else {
             return 1.0;
@@ -516,6 +537,36 @@ mod tests {
         assert_eq!(v(0.99, ShadowFilter::Bilinear), 1.0);
         // Outside the map is lit, either way.
         assert_eq!(m.visibility(Vec3::ZERO, Vec3::new(-1.5, 0.4, -5.0), 0.02, ShadowFilter::Bilinear), 1.0);
+    }
+
+    /// Beyond the far plane a point is behind whatever its texel holds: shadowed over the
+    /// occluder, lit over the empty half; nearer than the near plane it is lit. In both depth
+    /// conventions and with both filters (docs/MODEL.md §1 "Visibility").
+    #[test]
+    fn beyond_the_far_plane_is_tested_at_it_and_before_the_near_plane_is_lit() {
+        let standard = half_map();
+        // The same map stored reversed: 1 at the near plane, 0 (the clear value) at the far.
+        let mut reversed = half_map();
+        reversed.projection.view_proj = [Mat4::orthographic_rh(-1.0, 1.0, -1.0, 1.0, 10.0, 0.0); 6];
+        reversed.projection.depth = DepthConvention::Reversed;
+        reversed.depth = standard.depth.iter().map(|d| 1.0 - d).collect();
+        for m in [&standard, &reversed] {
+            for f in [ShadowFilter::Nearest, ShadowFilter::Bilinear] {
+                let v = |u: f32, depth: f32| m.visibility(Vec3::ZERO, Vec3::new(2.0 * u - 1.0, 0.4, -depth), 0.02, f);
+                let conv = m.projection.depth;
+                // Inside the depth range: the occluder at 2 m shadows what is behind it.
+                assert_eq!(v(0.2, 5.0), 0.0, "{conv:?} {f:?}");
+                assert_eq!(v(0.8, 5.0), 1.0, "{conv:?} {f:?}");
+                // Beyond the far plane (10 m): tested there.
+                assert_eq!(v(0.2, 10.5), 0.0, "{conv:?} {f:?}: behind the occluder");
+                assert_eq!(v(0.8, 10.5), 1.0, "{conv:?} {f:?}: over an empty texel");
+                assert_eq!(v(0.8, 1000.0), 1.0, "{conv:?} {f:?}: far beyond, empty texel");
+                // Nearer the light than the near plane (0 m): lit, whatever the texel.
+                assert_eq!(v(0.2, -0.5), 1.0, "{conv:?} {f:?}");
+                let c = m.coord(Vec3::ZERO, Vec3::new(-0.6, 0.4, -10.5)).expect("inside the footprint");
+                assert!((c.depth - 10.0).abs() < 1e-5, "{conv:?}: the far plane's depth, got {}", c.depth);
+            }
+        }
     }
 
     #[test]

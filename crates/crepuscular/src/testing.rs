@@ -166,6 +166,40 @@ pub fn half_plane_frame(medium: Medium, w: u32, h: u32, size: u32) -> (FrameDesc
     (desc, depth, map, HalfPlane { height: HALF_PLANE_HEIGHT, edge_x: edge })
 }
 
+/// [`half_plane_frame`] with the sun's map cut as an engine's cascade leaves it: its far plane
+/// (the side away from the light) moved to `behind` metres of light depth *in front of* the
+/// eye, so the first stretch of every view ray lies beyond the map's depth range, inside its
+/// footprint. The map is re-encoded for the shorter range (texels whose occluder lies beyond
+/// it are emptied: none of them shadows a view ray, which all lie nearer the light than the
+/// eye). The closed form is unchanged — the eye is in the plane's shadow — so a technique that
+/// reads the points beyond the far plane as lit gains a lit stretch at the start of each ray
+/// (docs/MODEL.md §1 "Visibility").
+pub fn half_plane_frame_cut(
+    medium: Medium,
+    w: u32,
+    h: u32,
+    size: u32,
+    behind: f32,
+) -> (FrameDesc, Vec<f32>, ShadowMap, HalfPlane) {
+    let (mut desc, depth, mut map, plane) = half_plane_frame(medium, w, h, size);
+    let pr = map.projection.clone();
+    assert!(pr.orthographic && pr.depth == crate::camera::DepthConvention::Standard, "a standard orthographic fit");
+    let eye = desc.camera.inv_view().w_axis;
+    let eye_depth = pr.linear((pr.view_proj[0] * eye).z);
+    let far = eye_depth - behind;
+    assert!(far > pr.near + 1.0, "half_plane_frame_cut: the cut leaves no depth range ({far} m)");
+    // Orthographic, standard: ndc z = (z − near)/(far − near), so the new range scales z.
+    let k = (pr.far - pr.near) / (far - pr.near);
+    let scale = glam::Mat4::from_scale(Vec3::new(1.0, 1.0, k));
+    let mut cut = pr.clone();
+    cut.view_proj = pr.view_proj.map(|m| scale * m);
+    cut.far = far;
+    map.depth = map.depth.iter().map(|&d| if d >= 1.0 || d * k > 1.0 { 1.0 } else { d * k }).collect();
+    map.projection = cut.clone();
+    desc.lights[0].shadow = cut;
+    (desc, depth, map, plane)
+}
+
 impl HalfPlane {
     /// The in-scattering at pixel (x, y) of a [`half_plane_frame`], in f64. The camera sits in
     /// the shadow, which is {x < edge, y < height − bias·|d_y|} (a point is shadowed where the

@@ -229,13 +229,27 @@ fn shadow_coord_clip(l: Light, layer: u32, c: vec4<f32>) -> ShadowCoord {
         return sc;
     }
     let ndc = c.xyz / c.w;
-    if ndc.z < 0.0 || ndc.z > 1.0 || abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 {
+    if abs(ndc.x) > 1.0 || abs(ndc.y) > 1.0 {
         return sc;
+    }
+    // Depth from the near plane (0) to the far plane (1); a reversed-Z map (clear 0) swaps them.
+    var from_near = ndc.z;
+    if l.shadow_clear == 0.0 {
+        from_near = 1.0 - ndc.z;
+    }
+    // Nearer the light than the near plane: lit. Beyond the far plane: tested at the far plane
+    // (shadowed where the texel holds an occluder).
+    if from_near < 0.0 {
+        return sc;
+    }
+    var z = ndc.z;
+    if from_near > 1.0 {
+        z = l.shadow_clear;
     }
     let n = f32(l.shadow_size);
     sc.uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
     sc.texel = vec2<u32>(min(floor(sc.uv * n), vec2<f32>(n - 1.0)));
-    sc.depth = shadow_linear_depth(l, ndc.z);
+    sc.depth = shadow_linear_depth(l, z);
     sc.valid = true;
     return sc;
 }
@@ -269,7 +283,8 @@ fn bilinear_footprint(uv: vec2<f32>, size: u32) -> Footprint {
 
 // shadow.rs ShadowMap::visibility: in [0, 1] (1 lit, 0 shadowed), the nearest texel's test or
 // the 2×2 bilinear percentage-closer filter (l.shadow_filter; docs/MODEL.md §1 "Visibility");
-// outside the map is lit.
+// outside the map's footprint or nearer than its near plane is lit, beyond its far plane is
+// tested at the far plane (shadow_coord_clip).
 fn shadow_visibility(l: Light, shadow_map: texture_2d_array<f32>, p: vec3<f32>) -> f32 {
     let sc = shadow_coord(l, p);
     if !sc.valid {

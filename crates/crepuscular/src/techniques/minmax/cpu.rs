@@ -546,7 +546,12 @@ pub fn resolve_mixed(
         let Some(sc) = shadow.clip_coord(layer, c + d * (0.5 * (a + b))) else {
             return (a, b);
         };
-        let limit = pr.linear(shadow.texel(layer, sc.texel.x, sc.texel.y)) + bias;
+        let stored = shadow.texel(layer, sc.texel.x, sc.texel.y);
+        // An empty texel lights the whole piece, beyond the far plane too (clip_coord).
+        if pr.is_empty(stored) {
+            return (a, b);
+        }
+        let limit = pr.linear(stored) + bias;
         let depth = |t: f32| {
             let q = c + d * t;
             pr.linear(q.z / q.w)

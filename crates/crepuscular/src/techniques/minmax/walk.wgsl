@@ -184,7 +184,12 @@ fn resolve_piece(l: Light, a: f32, b: f32, layer: u32, c: vec4<f32>, d: vec4<f32
     if !sc.valid {
         return vec2<f32>(a, b);
     }
-    let limit = shadow_stored(l, shadow_map, vec2<i32>(sc.texel), layer) + l.shadow_bias;
+    // An empty texel lights the whole piece, beyond the far plane too (shadow_coord_clip).
+    let raw = textureLoad(shadow_map, vec2<i32>(sc.texel), i32(l.shadow_first_layer + layer), 0).r;
+    if (l.shadow_clear == 1.0 && raw >= 1.0) || (l.shadow_clear == 0.0 && raw <= 0.0) {
+        return vec2<f32>(a, b);
+    }
+    let limit = shadow_linear_depth(l, raw) + l.shadow_bias;
     let qa = c + d * a;
     let qb = c + d * b;
     let da = shadow_linear_depth(l, qa.z / qa.w);

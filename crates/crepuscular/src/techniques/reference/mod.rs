@@ -98,12 +98,20 @@ impl<'a> Integrand<'a> {
             return 1.0;
         }
         let ndc = c.truncate() / c.w;
-        if ndc.z < 0.0 || ndc.z > 1.0 || ndc.x.abs() > 1.0 || ndc.y.abs() > 1.0 {
+        if ndc.x.abs() > 1.0 || ndc.y.abs() > 1.0 {
             return 1.0;
         }
+        // shadow.rs ShadowMap::clip_coord: lit nearer the light than the near plane, tested at
+        // the far plane beyond it.
+        let reversed = pr.depth == crate::camera::DepthConvention::Reversed;
+        let from_near = if reversed { 1.0 - ndc.z } else { ndc.z };
+        if from_near < 0.0 {
+            return 1.0;
+        }
+        let nz = if from_near > 1.0 { pr.depth.far_value() as f64 } else { ndc.z };
         let n = pr.size as f64;
         let (u, v) = (ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
-        let z = pr.linear_f64(ndc.z);
+        let z = pr.linear_f64(nz);
         let bias = self.light.shadow_bias as f64;
         let lit = |x: u32, y: u32| if z <= pr.linear_f64(sm.texel(layer, x, y) as f64) + bias { 1.0 } else { 0.0 };
         match self.light.shadow_filter {

@@ -7,7 +7,8 @@
 //!   after a technique switch at run time;
 //! - the shafts are where the scene has them: the pillars' shadows cut the in-scattering along
 //!   the ground into stripes, and shadows only ever remove light;
-//! - the composite lands in Bevy's picture.
+//! - the composite lands in Bevy's picture;
+//! - the eye, beyond the far plane of Bevy's sun cascade, reads the shadow it stands in.
 
 use std::sync::Mutex;
 
@@ -59,17 +60,19 @@ fn gpu_of(app: &App) -> GpuContext {
 /// The library's own in-scattering of a captured frame: a fresh `Scattering` on the same
 /// device, reading the captured depth and shadow maps.
 fn library_result(gpu: &GpuContext, c: &CapturedFrame, shadow_maps: &wgpu::Texture) -> crepuscular::Image {
-    library_render(gpu, c, shadow_maps, StatsMode::Off).0
+    library_render(gpu, c, &c.technique, shadow_maps, StatsMode::Off).0
 }
 
-/// [`library_result`] with its statistics, measured in `mode`.
+/// [`library_result`] with `technique` (the captured one or another) and its statistics,
+/// measured in `mode`.
 fn library_render(
     gpu: &GpuContext,
     c: &CapturedFrame,
+    technique: &TechniqueSettings,
     shadow_maps: &wgpu::Texture,
     mode: StatsMode,
 ) -> (crepuscular::Image, crepuscular::stats::TechniqueStats) {
-    let mut s = Scattering::from_gpu(gpu, c.technique.clone())
+    let mut s = Scattering::from_gpu(gpu, technique.clone())
         .and_then(|s| s.with_stats(mode))
         .and_then(|s| s.with_output_format(wgpu::TextureFormat::Rgba32Float))
         .expect("the technique builds");
@@ -268,7 +271,7 @@ fn the_plugins_statistics_arrive_and_match_the_library() {
     let got = got.expect("the plugin's statistics arrived within 10 frames");
     let c = take_capture(&mut app);
     let gpu = gpu_of(&app);
-    let (_, want) = library_render(&gpu, &c, &c.shadow_maps, StatsMode::Deferred);
+    let (_, want) = library_render(&gpu, &c, &c.technique, &c.shadow_maps, StatsMode::Deferred);
     eprintln!(
         "plugin stats: {} ({}), {} ray-marched samples, passes {:?}; library: {} samples",
         got.technique,
@@ -531,4 +534,65 @@ fn the_effect_timer_brackets_the_effect_alone() {
             eprintln!("SKIPPED the_effect_timer_brackets_the_effect_alone: {why}");
         }
     }
+}
+
+/// The sun's cascade stops short of the eye, and the library reads what lies between as
+/// shadowed where the map's texel holds an occluder (docs/MODEL.md §1 "Visibility"). Bevy fits
+/// the cascade to the view frustum's slice from `minimum_distance` (0.1 m), so with the sun
+/// facing the camera the eye lies beyond the cascade's far plane. The demo's camera stands in
+/// the colonnade's shadow, so every point just in front of it must read as the points a little
+/// further along, inside the map's depth range, do. Until 2026-12-05 those first centimetres
+/// read lit: a lit slab at the start of every ray facing the sun, which a march hit or missed
+/// by where its first sample fell (docs/RESULTS.md, the Bevy section).
+#[test]
+fn the_eye_beyond_the_suns_cascade_is_shadowed_as_its_surroundings() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    if !adapter("the_eye_beyond_the_suns_cascade_is_shadowed_as_its_surroundings") {
+        return;
+    }
+    let effect = Effect::Crepuscular(full_float(TechniqueSettings::named("brute-force").unwrap()));
+    let (app, c) = app_with_capture(effect, false);
+    let gpu = gpu_of(&app);
+    let desc = &c.desc;
+    let fl = &desc.lights[0];
+    assert_eq!(fl.light.kind_name(), "directional", "the demo's first light is its sun");
+    let n = fl.shadow.size;
+    let side = c.shadow_maps.width();
+    let texels = gpu.read_texture_f32(&c.shadow_maps, fl.shadow_layer).expect("shadow readback");
+    let depth = (0..n * n).map(|i| texels[((i / n) * side + i % n) as usize]).collect();
+    let map = crepuscular::shadow::ShadowMap { projection: fl.shadow.clone(), depth };
+    let eye = desc.camera.inv_view().w_axis.truncate();
+    let from_near = |p: glam::Vec3| {
+        let q = fl.shadow.view_proj[0] * p.extend(1.0);
+        let z = q.z / q.w;
+        match fl.shadow.depth {
+            crepuscular::DepthConvention::Reversed => 1.0 - z,
+            crepuscular::DepthConvention::Standard => z,
+        }
+    };
+    // The premise: Bevy's cascade ends before the eye.
+    eprintln!("the eye at {:.4} of the cascade's depth range (beyond the far plane above 1)", from_near(eye));
+    assert!(from_near(eye) > 1.0, "Bevy's cascade now reaches the eye: this test no longer tests the rule");
+    let (mut checked, mut shadowed) = (0, 0);
+    for (x, y) in [(10, 10), (80, 20), (150, 30), (40, 60), (120, 80), (80, 45)] {
+        let dir = desc.pixel_ray(x, y);
+        let inside = eye + dir * 0.5;
+        assert!(from_near(inside) <= 1.0, "0.5 m along pixel ({x}, {y}) is inside the depth range");
+        let want = map.visibility(glam::Vec3::ZERO, inside, fl.shadow_bias, fl.shadow_filter);
+        for t in [0.0, 0.005, 0.01] {
+            let p = eye + dir * t;
+            if from_near(p) <= 1.0 {
+                continue;
+            }
+            let got = map.visibility(glam::Vec3::ZERO, p, fl.shadow_bias, fl.shadow_filter);
+            assert_eq!(
+                got, want,
+                "pixel ({x}, {y}), {t} m from the eye (beyond the cascade): V {got}, 0.5 m on {want}"
+            );
+            checked += 1;
+            shadowed += (got == 0.0) as usize;
+        }
+    }
+    eprintln!("{checked} points beyond the cascade checked, {shadowed} shadowed");
+    assert!(checked >= 6 && shadowed == checked, "the demo's camera stands in shadow: {shadowed} of {checked}");
 }

@@ -221,7 +221,6 @@ fn epipolar_params_match_the_wgsl_layout_in_every_pass() {
         ("max_workgroups", offset_of!(EpipolarParams, max_workgroups)),
         ("prefilter_level", offset_of!(EpipolarParams, prefilter_level)),
         ("epipole_radius", offset_of!(EpipolarParams, epipole_radius)),
-        ("local_light", offset_of!(EpipolarParams, local_light)),
         ("epipole", offset_of!(EpipolarParams, epipole)),
     ];
     for (name, src, entries) in SHADERS {

@@ -370,12 +370,17 @@ pub fn coordinates(frame: &CpuFrame, p: &EpipolarParams, lines: &[EpipolarLine])
 
 /// Mirrors `refine_texel` in refine.wgsl: (left, right) of texel t over the view distances
 /// `s` of its line (left = right = t for a ray-march sample). `near[t]`: texel t lies within
-/// `epipole_radius` of the epipole ([`near_epipole`]) and the light is a spot or point light
-/// marched with equiangular steps (`local_light`). The disc's edge then breaks the search as a depth discontinuity does: the texels on either side of it become ray-march samples, so no
-/// texel outside the disc interpolates from one inside it. Inside, a point or spot light seen
-/// directly peaks like 1/r towards the epipole (the ray through it passes the light at distance
-/// 0), and a line's first texel sits on the epipole: interpolating from it would smear that
-/// peak over the whole first initial segment (the disc's pixels are re-marched instead).
+/// `epipole_radius` of the epipole ([`near_epipole`]). The disc's edge breaks the search as a
+/// depth discontinuity does: the texels on either side of it become ray-march samples, so no
+/// texel outside the disc interpolates from one inside it (the disc's pixels are re-marched
+/// instead). Every line's first texel sits on the epipole, where the in-scattering is least
+/// like the rest of the line: a point or spot light seen directly peaks like 1/r there (the
+/// ray through it passes the light at distance 0); under a sun the ray runs along the light,
+/// so an occluder's edge through the epipole lets that one ray read the edge's partial light
+/// over its whole length. Interpolating from it smeared either over the line's whole first
+/// initial segment: for the sun, a starburst from the epipole over the dark occluder
+/// (docs/RESULTS.md, the Bevy comparison: epipolar's fast preset 28.5 → 37.8 dB with the
+/// disc's break under the sun).
 pub fn refine_texel(p: &EpipolarParams, s: &[f32], near: &[bool], t: u32, n_init: u32) -> (u32, u32) {
     let (a, b) = segment(p, t, n_init);
     let mut left = t;
@@ -425,8 +430,7 @@ pub fn refine(desc: &FrameDesc, p: &EpipolarParams, lines: &[EpipolarLine], coor
                 return (vec![0; n], Vec::new());
             }
             let s: Vec<f32> = row.iter().map(|c| c[2]).collect();
-            let near: Vec<bool> =
-                row.iter().map(|c| p.local_light == 1 && near_epipole(p, Vec2::new(c[0], c[1]))).collect();
+            let near: Vec<bool> = row.iter().map(|c| near_epipole(p, Vec2::new(c[0], c[1]))).collect();
             let mut interp = Vec::with_capacity(n);
             let mut pixels = Vec::new();
             for t in 0..n as u32 {
@@ -595,12 +599,12 @@ pub fn line_taps(p: &EpipolarParams, line: &EpipolarLine, radiance_row: &[[f32; 
         let fr = tj - i0 as f32;
         let ws = spatial_weight(p, j.unsigned_abs() as f32 / p.spatial_scale);
         for (i, wl) in [(i0, 1.0 - fr), (i1, fr)] {
-            // A texel inside the re-marched disc of a local light holds no estimate: the
-            // refinement let it interpolate from the line's first texel, on the epipole, where
-            // the in-scattering is singular ([`refine_texel`]); a pixel outside the disc whose
-            // taps reach in (towards the light, or the bilinear pair across the disc's edge)
-            // skips it.
-            if p.local_light == 1 && near_epipole(p, texel_point(p, line, i)) {
+            // A texel inside the re-marched disc holds no estimate: the refinement let it
+            // interpolate from the line's first texel, on the epipole, where the in-scattering
+            // peaks or is singular ([`refine_texel`]); a pixel outside the disc whose taps
+            // reach in (towards the light, or the bilinear pair across the disc's edge) skips
+            // it.
+            if near_epipole(p, texel_point(p, line, i)) {
                 continue;
             }
             let v = radiance_row[i as usize];

@@ -32,7 +32,8 @@ pub enum TexelClass {
     Interpolated,
     /// An initial ray-march sample (evenly spaced, §4.1).
     Initial,
-    /// A ray-march sample placed by the refinement at a depth discontinuity (§4.2).
+    /// A ray-march sample placed by the refinement at a depth discontinuity (§4.2) or on either
+    /// side of the edge of the re-marched disc around the epipole (`epipole_radius`).
     Discontinuity,
 }
 

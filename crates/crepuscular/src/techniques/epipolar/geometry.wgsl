@@ -27,7 +27,7 @@ struct Params {
     max_workgroups: u32,
     prefilter_level: u32,
     epipole_radius: f32,
-    local_light: u32,
+    _pad0: u32,
     _pad1: u32,
     _pad2: u32,
     epipole: vec4<f32>,

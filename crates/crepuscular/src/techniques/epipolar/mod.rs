@@ -50,11 +50,14 @@
 //!   a 1080p frame; the paper's absolute counts are settings.
 //! - Pixels within `epipole_radius` (3 px) of the epipole are re-marched: a point or spot light
 //!   seen directly, or a strongly forward phase function, peaks at the light's own pixel, and
-//!   every line starts there. For a point or spot light the texels inside the disc (which
-//!   interpolate from the line's first texel, on the singular epipole) are also left out of the
-//!   taps of the pixels outside it: a light a few metres from the camera puts half the
-//!   in-scattering within 4 px of its pixel, and those taps made the long robustness sweep's
-//!   worst views (docs/ROBUSTNESS.md) 0.60–0.66 off.
+//!   every line starts there. The disc's edge also breaks the lines (its texels on either side
+//!   are ray-march samples), and the texels inside it (which interpolate from the line's first
+//!   texel, on the epipole) are left out of the taps of the pixels outside it: a light a few
+//!   metres from the camera puts half the in-scattering within 4 px of its pixel, and those
+//!   taps made the long robustness sweep's worst views (docs/ROBUSTNESS.md) 0.60–0.66 off;
+//!   under a sun whose epipole sits on an occluder's edge, the first texel's ray reads the
+//!   edge's partial light over its whole length, and the lines spread it as a starburst over
+//!   the occluder (docs/RESULTS.md, the Bevy comparison).
 //! - A spot light's pixels whose own ray misses the cone get zero without any filtering
 //!   (exact: the light is zero outside the cone), and the lines are clipped to the rays that
 //!   meet the cone (§4.1's "clip to the light frustum", found by testing the rays of each
@@ -91,7 +94,7 @@ pub use settings::{EpipolarMarch, EpipolarSettings, SpotPrefilter, Weighting};
 use crate::error::Error;
 use crate::frame::{FrameDesc, GpuFrame};
 use crate::gpu::{GpuContext, Recorder};
-use crate::march::{LocalSteps, MarchSettings, StepPolicy};
+use crate::march::{MarchSettings, StepPolicy};
 use crate::model::Light;
 use crate::stats::TechniqueStats;
 use crate::techniques::pass::{self, Bound, Pass};
@@ -212,14 +215,11 @@ pub struct EpipolarParams {
     pub max_workgroups: u32,
     /// Spot texture prefilter level (0: none).
     pub prefilter_level: u32,
-    /// Re-march radius around the epipole, pixels (point and spot lights).
+    /// Re-march radius around the epipole, pixels; the refinement breaks the lines at the
+    /// disc's edge and the upsampling's taps skip the texels inside it (cpu.rs `refine_texel`).
     pub epipole_radius: f32,
-    /// 1 for a spot or point light marched with equiangular steps: its in-scattering, resolved
-    /// there, is singular at the epipole (a ray through it passes the light), and the
-    /// refinement breaks the lines at the re-march disc's edge (cpu.rs `refine_texel`).
-    pub local_light: u32,
     /// Padding.
-    pub _pad: [u32; 2],
+    pub _pad: [u32; 3],
     /// The epipole, homogeneous pixel coordinates (x, y, w) scaled to max-abs 1; w = 0 is a
     /// point at infinity (parallel lines). The fourth component is 0.
     pub epipole: [f32; 4],
@@ -255,9 +255,7 @@ impl EpipolarParams {
             max_workgroups,
             prefilter_level: s.prefilter_level(desc),
             epipole_radius: s.epipole_radius,
-            local_light: (s.policy.local == LocalSteps::Equiangular
-                && !matches!(desc.lights[0].light, Light::Directional { .. })) as u32,
-            _pad: [0; 2],
+            _pad: [0; 3],
             epipole,
         }
     }

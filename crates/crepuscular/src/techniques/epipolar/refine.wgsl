@@ -24,8 +24,8 @@
 @group(0) @binding(7) var<storage, read_write> dispatch: array<u32, 3>;
 @group(0) @binding(8) var<storage, read_write> claims: array<atomic<u32>>;
 
-// Texel t of line k: its view distance, and whether the re-march disc's edge counts there
-// (near_epipole, local lights under equiangular steps only).
+// Texel t of line k: its view distance, and whether it lies inside the re-marched disc
+// around the epipole (near_epipole).
 struct Texel {
     s: f32,
     near: bool,
@@ -33,7 +33,7 @@ struct Texel {
 
 fn texel_at(t: u32, k: u32) -> Texel {
     let c = textureLoad(coord_tex, vec2<i32>(i32(t), i32(k)), 0);
-    return Texel(c.z, params.local_light == 1u && near_epipole(c.xy));
+    return Texel(c.z, near_epipole(c.xy));
 }
 
 // A break between adjacent texels a and b: a depth discontinuity, or the edge of the

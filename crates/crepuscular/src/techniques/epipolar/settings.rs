@@ -211,8 +211,14 @@ pub struct EpipolarSettings {
     /// of interpolating them (not in the paper). The in-scattering may peak at the light's own
     /// pixel — like 1/d² for a point or spot light seen directly, and for a sun seen through a
     /// strongly forward phase function (g → 1) — and the lines, which all start there, would
-    /// smear the peak linearly over their first initial segment. Costs about π·r² pixel
-    /// marches (counted in `remarched_pixels`; none when the epipole is off screen or in the
+    /// smear the peak linearly over their first initial segment. The disc's edge breaks the
+    /// lines (both texels across it are ray-march samples) and its texels are left out of the
+    /// upsampling's taps, for every light: under a sun whose epipole sits on an occluder's
+    /// edge, the first texel's ray reads the edge's partial light over its whole length, and
+    /// without the break the lines spread it over the occluder as a starburst (the Bevy demo
+    /// at 480×270, bilinear lookups: the fast preset 28.5 → 37.8 dB, balanced 34.3 → 41.5 dB;
+    /// terrain −0.24 dB, night-street +1.25 dB, the other built-in scenes unchanged). Costs
+    /// about π·r² pixel marches (counted in `remarched_pixels`; none when the epipole is off screen or in the
     /// degenerate case). Pixels, finite, in [0, 64]; 0 disables. Default 3. Measured on cage
     /// (the point light in view): 48.62 dB at 0, 47.99 at 1, 51.50 at 2, 54.33 at 3 (28
     /// pixels), 54.61 at 4 (51 pixels; brute-force 54.60); the other built-in scenes change by

@@ -88,9 +88,9 @@ fn line_taps(row: u32, q: vec2<f32>, s: f32, l: f32) -> Taps {
         let ws = spatial_weight(f32(abs(j)) / params.spatial_scale);
         for (var h = 0u; h < 2u; h++) {
             let i = select(i0, i1, h == 1u);
-            // A texel inside a local light's re-marched disc holds no estimate (cpu.rs
-            // `line_taps`): skipped.
-            if params.local_light == 1u && near_epipole(texel_point(line, i)) {
+            // A texel inside the re-marched disc holds no estimate (cpu.rs `line_taps`):
+            // skipped.
+            if near_epipole(texel_point(line, i)) {
                 continue;
             }
             let wl = select(1.0 - fr, fr, h == 1u);

@@ -577,7 +577,11 @@ impl Taps {
 /// distance s and tap spacing l (pixels), over the radiance texture.
 pub fn line_taps(p: &EpipolarParams, line: &EpipolarLine, radiance_row: &[[f32; 4]], q: Vec2, s: f32, l: f32) -> Taps {
     let mut r = Taps::NONE;
-    if line.valid == 0 {
+    // A line on which q's own point lies inside the re-marched disc has no estimate near q:
+    // its texels there are skipped (below), and the taps left, j·l further out, would
+    // extrapolate the in-scattering from farther from the light (darker where it peaks at the
+    // epipole); the line is passed over as a culled one is.
+    if line.valid == 0 || near_epipole(p, projection(line, q)) {
         return r;
     }
     let last = p.samples - 1;
@@ -681,6 +685,26 @@ struct Ctx<'a> {
     radiance: &'a [[f32; 4]],
 }
 
+/// Mirrors `remarched_near_epipole` in upsample.wgsl: the pixel at q is re-marched, not
+/// interpolated, because it lies within `epipole_radius` of the epipole ([`near_epipole`]) or
+/// its points on both lines around it, k₀ and k₀ + 1 ([`line_position`]), do. Near the epipole
+/// the lines fan out (an epipole a few pixels inside the border sends the lines through that
+/// border radians apart), so a pixel just outside the disc can have its projections on both
+/// neighbouring lines inside it: those lines offer no taps there ([`line_taps`]), and the
+/// lines further out only taps farther from the light. The disc itself is a special case
+/// (a projection is never farther from the epipole than the pixel).
+pub fn remarched_near_epipole(desc: &FrameDesc, p: &EpipolarParams, lines: &[EpipolarLine], q: Vec2) -> bool {
+    if near_epipole(p, q) {
+        return true;
+    }
+    if p.degenerate == 1 {
+        return false;
+    }
+    let k0 = line_position(desc, p, q).floor() as i32;
+    let inside = |k: i32| near_epipole(p, projection(&lines[line_row(p, k) as usize], q));
+    inside(k0) && inside(k0 + 1)
+}
+
 /// Mirrors `upsample_pixel`: (in-scattering, re-marched).
 fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
     let desc = c.frame.desc;
@@ -693,7 +717,7 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
         return (Vec3::ZERO, false);
     }
     let q = Vec2::new(x as f32, y as f32) + 0.5;
-    if near_epipole(p, q) {
+    if remarched_near_epipole(desc, p, c.lines, q) {
         return (
             {
                 let (m, policy) = pixel_march(p);

@@ -57,7 +57,9 @@
 //!   taps made the long robustness sweep's worst views (docs/ROBUSTNESS.md) 0.60–0.66 off;
 //!   under a sun whose epipole sits on an occluder's edge, the first texel's ray reads the
 //!   edge's partial light over its whole length, and the lines spread it as a starburst over
-//!   the occluder (docs/RESULTS.md, the Bevy comparison).
+//!   the occluder (docs/RESULTS.md, the Bevy comparison). A pixel just outside the disc
+//!   whose points on both lines around it lie inside is re-marched too: near the epipole the
+//!   lines fan out, and the next lines out offer only taps farther from the light.
 //! - A spot light's pixels whose own ray misses the cone get zero without any filtering
 //!   (exact: the light is zero outside the cone), and the lines are clipped to the rays that
 //!   meet the cone (§4.1's "clip to the light frustum", found by testing the rays of each
@@ -216,7 +218,9 @@ pub struct EpipolarParams {
     /// Spot texture prefilter level (0: none).
     pub prefilter_level: u32,
     /// Re-march radius around the epipole, pixels; the refinement breaks the lines at the
-    /// disc's edge and the upsampling's taps skip the texels inside it (cpu.rs `refine_texel`).
+    /// disc's edge, the upsampling's taps skip the texels inside it and the lines on which
+    /// the pixel's own point lies inside it (cpu.rs `refine_texel`, `line_taps`,
+    /// `remarched_near_epipole`).
     pub epipole_radius: f32,
     /// Padding.
     pub _pad: [u32; 3],

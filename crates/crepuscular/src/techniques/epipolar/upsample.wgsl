@@ -1,7 +1,8 @@
 // epipolar / upsample: interpolation between the epipolar lines (Engelhardt & Dachsbacher 2010,
 // §4.3, Fig. 5, §5.3, Fig. 8). One thread per pixel P:
 // - a spot light's pixel whose own ray misses the cone before its surface gets 0 (exact);
-// - a pixel within `epipole_radius` of the epipole is re-marched (the in-scattering may peak at
+// - a pixel within `epipole_radius` of the epipole, or whose points on both lines around it lie
+//   within it (`remarched_near_epipole`: near the epipole the lines fan out), is re-marched (the in-scattering may peak at
 //   the light's own pixel — 1/d² of a point or spot light seen directly, a g → 1 phase
 //   function around the sun — which linear interpolation along the lines, all of which start
 //   there, would smear over their first initial segment);
@@ -12,7 +13,8 @@
 // - along each line a `taps`-tap 1D bilateral filter at P's projection ± j·l (in texels of the
 //   line, at least one), each tap interpolating the radiance texture linearly (two sub-taps,
 //   each with its own view distance); weight = spatial(|j|/σ_l) × linear × depth(|sᵢ − s|/s/σ_d);
-//   for a point or spot light, a sub-tap on a texel inside the re-marched disc is skipped;
+//   a sub-tap on a texel inside the re-marched disc is skipped, and a line on which P's own
+//   point lies inside the disc offers no taps (those left would extrapolate from farther out);
 // - a line whose total weight is below MIN_WEIGHT (or that is culled) is replaced by the next
 //   outer line, up to `outer_lines` further on each side;
 // - between the two lines found: ((1 − f)·Σ₀wL + f·Σ₁wL) / ((1 − f)·W₀ + f·W₁), f measured
@@ -65,7 +67,9 @@ fn line_taps(row: u32, q: vec2<f32>, s: f32, l: f32) -> Taps {
     r.nearest = vec3<f32>(0.0);
     r.nearest_diff = 3.0e38;
     let line = lines_buf[row];
-    if line.valid == 0u {
+    // q's own point on the line inside the re-marched disc: no estimate near q (cpu.rs
+    // `line_taps`); the line is passed over as a culled one is.
+    if line.valid == 0u || near_epipole(projection(row, q)) {
         return r;
     }
     let last = params.samples - 1u;
@@ -108,6 +112,19 @@ fn line_taps(row: u32, q: vec2<f32>, s: f32, l: f32) -> Taps {
     return r;
 }
 
+// Within `epipole_radius` of the epipole, or both of q's points on the lines around it are
+// (cpu.rs `remarched_near_epipole`).
+fn remarched_near_epipole(q: vec2<f32>) -> bool {
+    if near_epipole(q) {
+        return true;
+    }
+    if params.degenerate == 1u {
+        return false;
+    }
+    let k0 = i32(floor(line_position(frame, q)));
+    return near_epipole(projection(u32(line_row(k0)), q)) && near_epipole(projection(u32(line_row(k0 + 1)), q));
+}
+
 struct Upsampled {
     radiance: vec3<f32>,
     remarched: bool,
@@ -126,7 +143,7 @@ fn upsample_pixel(px: vec2<u32>) -> Upsampled {
         }
     }
     let q = vec2<f32>(px) + 0.5;
-    if near_epipole(q) {
+    if remarched_near_epipole(q) {
         out.radiance = march_ray(px, dir, s);
         out.remarched = true;
         return out;

@@ -2,10 +2,10 @@
 // §4.3, Fig. 5, §5.3, Fig. 8). One thread per pixel P:
 // - a spot light's pixel whose own ray misses the cone before its surface gets 0 (exact);
 // - a pixel within `epipole_radius` of the epipole, or whose points on both lines around it lie
-//   within it (`remarched_near_epipole`: near the epipole the lines fan out), is re-marched (the in-scattering may peak at
-//   the light's own pixel — 1/d² of a point or spot light seen directly, a g → 1 phase
-//   function around the sun — which linear interpolation along the lines, all of which start
-//   there, would smear over their first initial segment);
+//   within it (`remarched_near_epipole`: near the epipole the lines fan out), is re-marched
+//   (the in-scattering may peak at the light's own pixel — 1/d² of a point or spot light seen
+//   directly, a g → 1 phase function around the sun — which linear interpolation along the
+//   lines, all of which start there, would smear over their first initial segment);
 // - its position between lines, k + f (`line_position`: the ray from the epipole through P
 //   leaves the sample rect at a border point, and the lines' border points are equidistant, so
 //   the paper's 1D lookup texture is inverted in closed form);

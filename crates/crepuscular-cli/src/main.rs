@@ -156,7 +156,7 @@ struct AnimateArgs {
     /// A temporal-stage setting, `key=value` (with --temporal), e.g. `--temporal-set
     /// history_weight=0.8`; repeatable. Keys: history_weight, clip, clip_sigma,
     /// depth_tolerance, light_jump_degrees, history_filter ("bilinear" or "catmull-rom"),
-    /// adaptive_weight, young_frames (docs/MODEL.md §7).
+    /// adaptive_weight, young_frames, light_disc_radius (docs/MODEL.md §7).
     #[arg(long = "temporal-set", value_name = "KEY=VALUE")]
     temporal_set: Vec<String>,
     /// Write the run's report (settings, per-frame times, flicker, the temporal stage's

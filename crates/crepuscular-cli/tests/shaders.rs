@@ -309,9 +309,10 @@ fn temporal_uniforms_match_their_wgsl_layout() {
             ("motion", offset_of!(T, motion)),
             ("adaptive", offset_of!(T, adaptive)),
             ("young_frames", offset_of!(T, young_frames)),
+            ("lamp_count", offset_of!(T, lamp_count)),
+            ("lamp_radius", offset_of!(T, lamp_radius)),
             ("_pad0", offset_of!(T, _pad0)),
-            ("_pad1", offset_of!(T, _pad1)),
-            ("_pad2", offset_of!(T, _pad2)),
+            ("lamps", offset_of!(T, lamps)),
         ],
         std::mem::size_of::<T>(),
     );

@@ -21,7 +21,12 @@ const W: u32 = 96;
 const H: u32 = 54;
 
 fn scene() -> Scene {
-    let mut s = builtin::builtin("colonnade").expect("built-in scene");
+    named("colonnade")
+}
+
+/// A built-in scene at W×H with a 512² shadow map.
+fn named(name: &str) -> Scene {
+    let mut s = builtin::builtin(name).expect("built-in scene");
     s.render.width = W;
     s.render.height = H;
     s.render.shadow.size = 512;
@@ -455,10 +460,14 @@ fn gpu_resolve(
 #[test]
 fn gpu_temporal_matches_its_cpu_mirror_frame_by_frame() {
     let Some(gpu) = test_gpu("gpu_temporal_matches_its_cpu_mirror_frame_by_frame") else { return };
-    let sc = scene();
-    for (filter, by_motion) in
-        [(HistoryFilter::Bilinear, false), (HistoryFilter::CatmullRom, false), (HistoryFilter::Bilinear, true)]
-    {
+    // colonnade (a sun) three ways, and cage, whose point light is in view (its disc).
+    for (name, filter, by_motion) in [
+        ("colonnade", HistoryFilter::Bilinear, false),
+        ("colonnade", HistoryFilter::CatmullRom, false),
+        ("colonnade", HistoryFilter::Bilinear, true),
+        ("cage", HistoryFilter::Bilinear, false),
+    ] {
+        let sc = named(name);
         let settings = TemporalSettings { history_filter: filter, ..Default::default() };
         let mut cpu = CpuTemporal::new(settings).unwrap();
         let mut gt = Temporal::new(&gpu.device, settings).unwrap();
@@ -499,7 +508,7 @@ fn gpu_temporal_matches_its_cpu_mirror_frame_by_frame() {
             }
             let kept = cw.iter().filter(|&&w| w > 0.0).count();
             eprintln!(
-                "{filter:?}{}, frame {k}: history kept on {kept} of {n} pixels; {differ} pixels decided differently; \
+                "{name} {filter:?}{}, frame {k}: history kept on {kept} of {n} pixels; {differ} pixels decided differently; \
                  weights apart by {worst_w:.1e} at most, by ≥ 1e-4 on {adapted_apart}; worst relative difference \
                  elsewhere {worst:.2e}",
                 if by_motion { " by motion vectors" } else { "" }
@@ -576,6 +585,74 @@ fn jittered_brute_force_accumulated_over_8_frames_is_closer_to_the_reference() {
 /// The PSNR gain the test above measured (see its comment).
 const MEASURED_GAIN_DB: f64 = 13.94;
 
+/// `light_disc_radius` (docs/MODEL.md §7, step 0): through a camera move over cage, whose
+/// point light is in view, every pixel within the radius (a fraction of the image height) of
+/// the light's projection whose surface lies beyond the light shows the current frame
+/// exactly, with weight 0, while most other pixels keep their history; at radius 0 the same
+/// pixels keep theirs. The disc is found here from the light's position, independently of the
+/// stage's own list.
+#[test]
+fn pixels_in_a_lights_disc_show_the_current_frame_and_the_rest_keep_their_history() {
+    let sc = named("cage");
+    let radius = TemporalSettings::default().light_disc_radius;
+    let mut with = CpuTemporal::new(TemporalSettings::default()).unwrap();
+    let mut without = CpuTemporal::new(TemporalSettings { light_disc_radius: 0.0, ..Default::default() }).unwrap();
+    for k in 0..4u32 {
+        let (desc, depth, _) = posed(&sc, Vec3::new(0.05 * k as f32, 0.0, 0.02 * k as f32));
+        let cur = noise(k);
+        let got = with.resolve(&desc, &depth, &cur, None).unwrap();
+        let other = without.resolve(&desc, &depth, &cur, None).unwrap();
+        let dist = view_distances(&desc, &depth);
+        let eye = desc.camera.position;
+        let lamps: Vec<(f32, f32, f32)> = desc
+            .lights
+            .iter()
+            .filter_map(|l| match &l.light {
+                crepuscular::Light::Point { position, .. } | crepuscular::Light::Spot { position, .. } => {
+                    let c = desc.camera.view_proj() * position.extend(1.0);
+                    (c.w > 0.0).then(|| {
+                        let (x, y) = (c.x / c.w, c.y / c.w);
+                        ((x * 0.5 + 0.5) * W as f32, (0.5 - y * 0.5) * H as f32, (*position - eye).length())
+                    })
+                }
+                _ => None,
+            })
+            .collect();
+        let r = radius * H as f32;
+        let (mut inside, mut kept_outside, mut outside, mut differ) = (0, 0, 0, 0);
+        for y in 0..H {
+            for x in 0..W {
+                let i = (y * W + x) as usize;
+                let disc = lamps.iter().any(|&(lx, ly, ld)| {
+                    let d = ((x as f32 + 0.5 - lx).powi(2) + (y as f32 + 0.5 - ly).powi(2)).sqrt();
+                    d < r && (dist[i] < 0.0 || ld < dist[i])
+                });
+                if disc {
+                    inside += 1;
+                    assert_eq!(got.pixels[i], cur.pixels[i], "frame {k}, pixel ({x}, {y}) in the disc");
+                    assert_eq!(with.weights()[i], 0.0);
+                    if k > 0 {
+                        assert!(without.weights()[i] > 0.0, "frame {k}, ({x}, {y}): radius 0 keeps the history");
+                        differ += (other.pixels[i] != cur.pixels[i]) as usize;
+                    }
+                } else {
+                    outside += 1;
+                    kept_outside += (with.weights()[i] > 0.0) as usize;
+                }
+            }
+        }
+        eprintln!("frame {k}: {inside} pixels in the disc (π·r² = {:.0}), history kept on {kept_outside} of {outside} others", std::f32::consts::PI * r * r);
+        // The light is in view (the cage's bars hide part of its disc: 27 of ~74 pixels here).
+        assert!(inside >= 10, "frame {k}: only {inside} pixels in the disc");
+        if k > 0 {
+            assert!(kept_outside * 10 > outside * 7, "frame {k}: history kept on {kept_outside} of {outside}");
+            // At radius 0 the disc's pixels blend in their history (a pixel whose 3×3
+            // neighbourhood shows no other point of its surface is clipped to itself).
+            assert!(differ * 2 > inside, "frame {k}: radius 0 changed only {differ} of the {inside} pixels");
+        }
+    }
+}
+
 #[test]
 fn bad_temporal_settings_are_errors_naming_the_setting() {
     let bad = [
@@ -585,6 +662,9 @@ fn bad_temporal_settings_are_errors_naming_the_setting() {
         (TemporalSettings { history_weight: f32::NAN, ..Default::default() }, "history_weight"),
         (TemporalSettings { clip_sigma: -1.0, ..Default::default() }, "clip_sigma"),
         (TemporalSettings { depth_tolerance: f32::INFINITY, ..Default::default() }, "depth_tolerance"),
+        (TemporalSettings { light_disc_radius: -0.1, ..Default::default() }, "light_disc_radius"),
+        (TemporalSettings { light_disc_radius: f32::NAN, ..Default::default() }, "light_disc_radius"),
+        (TemporalSettings { light_disc_radius: 1.5, ..Default::default() }, "light_disc_radius"),
     ];
     for (s, key) in bad {
         let e = CpuTemporal::new(s).unwrap_err().to_string();

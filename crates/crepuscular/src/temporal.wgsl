@@ -32,9 +32,26 @@ struct Temporal {
     adaptive: u32,
     // temporal.rs TemporalSettings::young_frames, as a float (0 or 1: off).
     young_frames: f32,
+    // How many of `lamps` are set; the disc radius in pixels (temporal.rs
+    // TemporalSettings::light_disc_radius).
+    lamp_count: u32,
+    lamp_radius: f32,
     _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
+    // The point and spot lights in front of the eye: their projection in pixels (xy) and their
+    // distance from the eye (z) (temporal.rs lamp_discs).
+    lamps: array<vec4<f32>, MAX_LIGHTS>,
+}
+
+// temporal.rs in_lamp_disc: within lamp_radius of a light nearer than the pixel's surface.
+fn in_lamp_disc(p: vec2<u32>, dist: f32) -> bool {
+    let q = vec2<f32>(p) + 0.5;
+    for (var i = 0u; i < params.lamp_count; i++) {
+        let l = params.lamps[i];
+        if length(q - l.xy) < params.lamp_radius && (dist < 0.0 || l.z < dist) {
+            return true;
+        }
+    }
+    return false;
 }
 
 // temporal.rs catmull_rom_weights: the weights of the texels at -1, 0, 1, 2 at fraction f.
@@ -132,6 +149,15 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
     let dir = pixel_ray(frame, gid.xy);
     let dist = current_distance(gid.xy);
     let sky = dist < 0.0;
+    // Within the disc of a light seen directly: the current frame as it is, and a history that
+    // starts again from it.
+    if in_lamp_disc(gid.xy, dist) {
+        textureStore(stats_out, px, vec4<f32>(dist, max(c.r, max(c.g, c.b)), 0.0, 0.0));
+        textureStore(out_tex, px, cur);
+        textureStore(history_out, px, vec4<f32>(c, 1.0));
+        textureStore(weight_out, px, vec4<f32>(0.0));
+        return;
+    }
 
     var w = 0.0;
     var n = 0.0;

@@ -301,10 +301,10 @@ pub struct TemporalUniforms {
     pub lamps: [[f32; 4]; MAX_LIGHTS],
 }
 
-/// The point and spot lights of `desc` in front of the eye, for [`TemporalSettings::
-/// light_disc_radius`]: each light's position projected into the image, in pixels (pixel
-/// centres at +0.5), and its distance from the eye; (the array, how many are set). A light
-/// whose projection lies off the image is kept (its disc may reach in).
+/// The point and spot lights of `desc` in front of the eye, for
+/// [`TemporalSettings::light_disc_radius`]: each light's position projected into the image,
+/// in pixels (pixel centres at +0.5), and its distance from the eye; (the array, how many are
+/// set). A light whose projection lies off the image is kept (its disc may reach in).
 pub fn lamp_discs(desc: &FrameDesc) -> ([[f32; 4]; MAX_LIGHTS], u32) {
     let mut lamps = [[0.0f32; 4]; MAX_LIGHTS];
     let mut n = 0usize;

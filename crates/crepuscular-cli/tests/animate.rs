@@ -505,7 +505,9 @@ fn animate_temporal_keeps_the_peaks_of_lamps_in_view() {
         let gain = (0..9).map(|k| f(k, "psnr_db") - f(k, "psnr_db_without")).sum::<f64>() / 9.0;
         let flicker = r["flicker"]["relative"].as_f64().unwrap();
         let without = r["temporal"]["flicker_without"]["relative"].as_f64().unwrap();
-        eprintln!("light_disc_radius {radius}: mean PSNR gain over frames 0-8 {gain:.2} dB; flicker {flicker:.4} vs {without:.4} without the stage");
+        eprintln!(
+            "light_disc_radius {radius}: mean PSNR gain over frames 0-8 {gain:.2} dB; flicker {flicker:.4} vs {without:.4} without the stage"
+        );
         (gain, flicker / without)
     };
     let default = crepuscular::TemporalSettings::default().light_disc_radius.to_string();

@@ -641,7 +641,10 @@ fn pixels_in_a_lights_disc_show_the_current_frame_and_the_rest_keep_their_histor
                 }
             }
         }
-        eprintln!("frame {k}: {inside} pixels in the disc (π·r² = {:.0}), history kept on {kept_outside} of {outside} others", std::f32::consts::PI * r * r);
+        eprintln!(
+            "frame {k}: {inside} pixels in the disc (π·r² = {:.0}), history kept on {kept_outside} of {outside} others",
+            std::f32::consts::PI * r * r
+        );
         // The light is in view (the cage's bars hide part of its disc: 27 of ~74 pixels here).
         assert!(inside >= 10, "frame {k}: only {inside} pixels in the disc");
         if k > 0 {

@@ -331,9 +331,9 @@ pub fn lamp_discs(desc: &FrameDesc) -> ([[f32; 4]; MAX_LIGHTS], u32) {
 /// ([`TemporalSettings::light_disc_radius`]). Mirrors `in_lamp_disc` in temporal.wgsl.
 pub fn in_lamp_disc(u: &TemporalUniforms, x: u32, y: u32, dist: f32) -> bool {
     let q = glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-    u.lamps[..u.lamp_count as usize].iter().any(|l| {
-        (q - glam::Vec2::new(l[0], l[1])).length() < u.lamp_radius && (dist < 0.0 || l[2] < dist)
-    })
+    u.lamps[..u.lamp_count as usize]
+        .iter()
+        .any(|l| (q - glam::Vec2::new(l[0], l[1])).length() < u.lamp_radius && (dist < 0.0 || l[2] < dist))
 }
 
 fn uniforms(s: &TemporalSettings, prev: Option<&Previous>, motion: bool, desc: &FrameDesc) -> TemporalUniforms {

@@ -685,26 +685,6 @@ struct Ctx<'a> {
     radiance: &'a [[f32; 4]],
 }
 
-/// Mirrors `remarched_near_epipole` in upsample.wgsl: the pixel at q is re-marched, not
-/// interpolated, because it lies within `epipole_radius` of the epipole ([`near_epipole`]) or
-/// its points on both lines around it, k₀ and k₀ + 1 ([`line_position`]), do. Near the epipole
-/// the lines fan out (an epipole a few pixels inside the border sends the lines through that
-/// border radians apart), so a pixel just outside the disc can have its projections on both
-/// neighbouring lines inside it: those lines offer no taps there ([`line_taps`]), and the
-/// lines further out only taps farther from the light. The disc itself is a special case
-/// (a projection is never farther from the epipole than the pixel).
-pub fn remarched_near_epipole(desc: &FrameDesc, p: &EpipolarParams, lines: &[EpipolarLine], q: Vec2) -> bool {
-    if near_epipole(p, q) {
-        return true;
-    }
-    if p.degenerate == 1 {
-        return false;
-    }
-    let k0 = line_position(desc, p, q).floor() as i32;
-    let inside = |k: i32| near_epipole(p, projection(&lines[line_row(p, k) as usize], q));
-    inside(k0) && inside(k0 + 1)
-}
-
 /// Mirrors `upsample_pixel`: (in-scattering, re-marched).
 fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
     let desc = c.frame.desc;
@@ -717,7 +697,23 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
         return (Vec3::ZERO, false);
     }
     let q = Vec2::new(x as f32, y as f32) + 0.5;
-    if remarched_near_epipole(desc, p, c.lines, q) {
+    let k0 = line_position(desc, p, q).floor() as i32;
+    // q's points on the lines around it, k₀ and k₀ + 1: their distance is the tap spacing l.
+    // The pixel is re-marched, not interpolated, when it lies within `epipole_radius` of the
+    // epipole ([`near_epipole`]) or both those points do. Near the epipole the lines fan out
+    // (an epipole a few pixels inside the border sends the lines through that border radians
+    // apart), so a pixel just outside the disc can have both points inside it: those lines
+    // offer no taps there ([`line_taps`]), and the lines further out only taps farther from
+    // the light. (The disc is a special case: a projection is never farther from the epipole
+    // than the pixel.)
+    let (l, remarch) = if p.degenerate == 1 {
+        ((rect_max(desc).y - rect_min().y) / p.slices as f32, false)
+    } else {
+        let pr = |k: i32| projection(&c.lines[line_row(p, k) as usize], q);
+        let (pa, pb) = (pr(k0), pr(k0 + 1));
+        ((pa - pb).length(), near_epipole(p, q) || (near_epipole(p, pa) && near_epipole(p, pb)))
+    };
+    if remarch {
         return (
             {
                 let (m, policy) = pixel_march(p);
@@ -726,13 +722,6 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
             true,
         );
     }
-    let k0 = line_position(desc, p, q).floor() as i32;
-    let l = if p.degenerate == 1 {
-        (rect_max(desc).y - rect_min().y) / p.slices as f32
-    } else {
-        let pr = |k: i32| projection(&c.lines[line_row(p, k) as usize], q);
-        (pr(k0) - pr(k0 + 1)).length()
-    };
     let n = p.samples as usize;
     let taps = |row: u32| {
         let r = row as usize;

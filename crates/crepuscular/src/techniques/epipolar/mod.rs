@@ -220,7 +220,7 @@ pub struct EpipolarParams {
     /// Re-march radius around the epipole, pixels; the refinement breaks the lines at the
     /// disc's edge, the upsampling's taps skip the texels inside it and the lines on which
     /// the pixel's own point lies inside it (cpu.rs `refine_texel`, `line_taps`,
-    /// `remarched_near_epipole`).
+    /// `upsample_pixel`).
     pub epipole_radius: f32,
     /// Padding.
     pub _pad: [u32; 3],

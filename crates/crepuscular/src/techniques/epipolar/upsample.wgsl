@@ -2,7 +2,7 @@
 // §4.3, Fig. 5, §5.3, Fig. 8). One thread per pixel P:
 // - a spot light's pixel whose own ray misses the cone before its surface gets 0 (exact);
 // - a pixel within `epipole_radius` of the epipole, or whose points on both lines around it lie
-//   within it (`remarched_near_epipole`: near the epipole the lines fan out), is re-marched
+//   within it (near the epipole the lines fan out), is re-marched
 //   (the in-scattering may peak at the light's own pixel — 1/d² of a point or spot light seen
 //   directly, a g → 1 phase function around the sun — which linear interpolation along the
 //   lines, all of which start there, would smear over their first initial segment);
@@ -112,19 +112,6 @@ fn line_taps(row: u32, q: vec2<f32>, s: f32, l: f32) -> Taps {
     return r;
 }
 
-// Within `epipole_radius` of the epipole, or both of q's points on the lines around it are
-// (cpu.rs `remarched_near_epipole`).
-fn remarched_near_epipole(q: vec2<f32>) -> bool {
-    if near_epipole(q) {
-        return true;
-    }
-    if params.degenerate == 1u {
-        return false;
-    }
-    let k0 = i32(floor(line_position(frame, q)));
-    return near_epipole(projection(u32(line_row(k0)), q)) && near_epipole(projection(u32(line_row(k0 + 1)), q));
-}
-
 struct Upsampled {
     radiance: vec3<f32>,
     remarched: bool,
@@ -143,18 +130,25 @@ fn upsample_pixel(px: vec2<u32>) -> Upsampled {
         }
     }
     let q = vec2<f32>(px) + 0.5;
-    if remarched_near_epipole(q) {
-        out.radiance = march_ray(px, dir, s);
-        out.remarched = true;
-        return out;
-    }
     let pos = line_position(frame, q);
     let k0 = i32(floor(pos));
+    // q's points on lines k0 and k0 + 1: their distance is the tap spacing l; within the
+    // epipole's disc, or both points inside it, the pixel is re-marched (cpu.rs
+    // `upsample_pixel`: near the epipole the lines fan out).
     var l: f32;
+    var remarch = false;
     if params.degenerate == 1u {
         l = (rect_max(frame).y - rect_min().y) / f32(params.slices);
     } else {
-        l = length(projection(u32(line_row(k0)), q) - projection(u32(line_row(k0 + 1)), q));
+        let pa = projection(u32(line_row(k0)), q);
+        let pb = projection(u32(line_row(k0 + 1)), q);
+        l = length(pa - pb);
+        remarch = near_epipole(q) || (near_epipole(pa) && near_epipole(pb));
+    }
+    if remarch {
+        out.radiance = march_ray(px, dir, s);
+        out.remarched = true;
+        return out;
     }
     var nearest = vec3<f32>(0.0);
     var nearest_diff = 3.0e38;

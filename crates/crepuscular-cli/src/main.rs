@@ -156,7 +156,7 @@ struct AnimateArgs {
     /// A temporal-stage setting, `key=value` (with --temporal), e.g. `--temporal-set
     /// history_weight=0.8`; repeatable. Keys: history_weight, clip, clip_sigma,
     /// depth_tolerance, light_jump_degrees, history_filter ("bilinear" or "catmull-rom"),
-    /// adaptive_weight, young_frames, light_disc_radius (docs/MODEL.md §7).
+    /// adaptive_weight, young_frames, light_disc_radius, scattering_distance (docs/MODEL.md §7).
     #[arg(long = "temporal-set", value_name = "KEY=VALUE")]
     temporal_set: Vec<String>,
     /// Write the run's report (settings, per-frame times, flicker, the temporal stage's
@@ -392,7 +392,11 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
     output::write_png_rgb8(&a.output, scene.render.width, scene.render.height, &rgb)?;
     eprintln!("wrote {}", a.output.display());
     if let Some(exr) = &a.exr {
-        output::write_exr(exr, &out.inscatter)?;
+        // Opaque, as an image viewer expects: the technique's alpha is the temporal stage's
+        // (brute-force's scattering distance), not coverage.
+        let mut inscatter = out.inscatter.clone();
+        inscatter.pixels.iter_mut().for_each(|p| p[3] = 1.0);
+        output::write_exr(exr, &inscatter)?;
         let fin = exr_final_path(exr);
         output::write_exr(&fin, &out.final_radiance)?;
         eprintln!("wrote {} (in-scattering) and {} (final radiance)", exr.display(), fin.display());

@@ -311,7 +311,7 @@ fn temporal_uniforms_match_their_wgsl_layout() {
             ("young_frames", offset_of!(T, young_frames)),
             ("lamp_count", offset_of!(T, lamp_count)),
             ("lamp_radius", offset_of!(T, lamp_radius)),
-            ("_pad0", offset_of!(T, _pad0)),
+            ("scattering", offset_of!(T, scattering)),
             ("lamps", offset_of!(T, lamps)),
         ],
         std::mem::size_of::<T>(),

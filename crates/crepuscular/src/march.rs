@@ -15,7 +15,7 @@ use crate::frame::{CpuFrame, FrameDesc};
 use crate::integrand::inscatter_density;
 use crate::model::Light;
 use crate::model::segment_transmittance;
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use serde::{Deserialize, Serialize};
 
 /// How the N steps of a ray are placed for a spot light (`spot_steps` in every ray-marching
@@ -645,7 +645,7 @@ pub fn march_steps(
     first: u32,
     stride: u32,
     j: f32,
-) -> Vec3 {
+) -> Vec4 {
     let desc = frame.desc;
     let o = desc.camera.position;
     march_samples(desc, steps, first, stride, j, |t| march_density(frame, lights, which, dir, o + dir * t))
@@ -653,8 +653,10 @@ pub fn march_steps(
 
 /// The loop of [`march_steps`] for any integrand `density(t)` (σs·p·L_in·V at distance t):
 /// Σᵢ density(tᵢ + offset)·scaleᵢ·e^(−σt·tᵢ)·∫₀^{tᵢ₊₁−tᵢ} e^(−σt·u) du over i = first,
-/// first + stride, … < N ([`Steps::step`]; the scale is 1 for uniform steps). A uniform layout's
-/// step length, offset and step transmittance are found once.
+/// first + stride, … < N ([`Steps::step`]; the scale is 1 for uniform steps), in xyz; in w the
+/// same sum of each term's luminance times its sample's distance, from which
+/// [`scattering_distance`] finds where along the ray the light scattered (docs/MODEL.md §7).
+/// A uniform layout's step length, offset and step transmittance are found once.
 pub fn march_samples(
     desc: &FrameDesc,
     steps: &Steps,
@@ -662,53 +664,78 @@ pub fn march_samples(
     stride: u32,
     j: f32,
     mut density: impl FnMut(f32) -> Vec3,
-) -> Vec3 {
+) -> Vec4 {
     let (a, b) = steps.iv;
     if b <= a {
-        return Vec3::ZERO;
+        return Vec4::ZERO;
     }
     let sigma = desc.medium.extinction();
     let uni = steps.uniform_step(sigma, j);
-    let mut sum = Vec3::ZERO;
+    let mut sum = Vec4::ZERO;
     let mut i = first;
     while i < steps.n {
         let step = steps.step(i, sigma, j, &uni);
         // One loop over the samples; every selected light at each (docs/MODEL.md §6): the
         // position and the transmittance are shared, the lights' densities summed.
-        sum += density(step.t0 + step.off) * step.scale * (-sigma * step.t0).exp() * step.seg;
+        let t = step.t0 + step.off;
+        let term = density(t) * step.scale * (-sigma * step.t0).exp() * step.seg;
+        sum += term.extend(luminance(term) * t);
         i += stride;
     }
     sum
+}
+
+/// Rec. 709 luminance of linear RGB, the weight of [`scattering_distance`]. Mirrors
+/// `luminance` in common.wgsl.
+pub fn luminance(c: Vec3) -> f32 {
+    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
+}
+
+/// A view ray's *scattering distance* (docs/MODEL.md §7, step 1): where along the ray the
+/// light of its point and spot lights scattered — the luminance-weighted mean distance from the
+/// eye (m) of the terms of the marches over those lights' own intervals, Σ Y(term)·t / Σ Y(term)
+/// (`own`: their summed [`march_samples`]), where those lights give at least half the ray's
+/// in-scattering luminance (`total`); 0 elsewhere (the temporal stage then reprojects by the
+/// surface). A sun's light is left out: it scatters all along the ray, whose length the
+/// surface already carries (measured: reprojecting a sun's shafts by its scattering distance
+/// lost 1.4–2.8 dB, docs/RESULTS.md). Under the `fixed` step policy no light owns an interval,
+/// so it is 0. Mirrors `scattering_distance` in common.wgsl.
+pub fn scattering_distance(total: Vec3, own: Vec4) -> f32 {
+    let y = luminance(own.truncate());
+    if y > 0.0 && y >= 0.5 * luminance(total) { (own.w / y).max(0.0) } else { 0.0 }
 }
 
 /// Every light's in-scattering on one view ray of length `s` (docs/MODEL.md §6): one march
 /// over the shared interval for the lights that share it, plus one over its own interval for
 /// each light that owns one ([`MarchLights::owns_interval`], with [`MarchLights::own_steps`]);
 /// the steps i = first, first + stride, … < n of each. `march` runs one march (the lights of a
-/// set over a layout); [`march_lights`] passes [`march_steps`]. Mirrors `march_lights` in WGSL.
+/// set over a layout; its last argument true for a light's own interval); [`march_lights`]
+/// passes [`march_steps`]. Mirrors `march_lights` in WGSL.
 #[allow(clippy::too_many_arguments)]
-pub fn march_light_groups(
+pub fn march_light_groups<T: std::ops::Add<Output = T>>(
     o: Vec3,
     lights: &MarchLights,
     dir: Vec3,
     s: f32,
     n: u32,
     policy: StepPolicy,
-    mut march: impl FnMut(LightSet, &Steps) -> Vec3,
-) -> Vec3 {
+    mut march: impl FnMut(LightSet, &Steps, bool) -> T,
+) -> T {
     let (shared, set) = lights.shared_march(o, dir, s, policy);
-    let mut sum = march(set, &Steps::uniform(shared, n));
+    let mut sum = march(set, &Steps::uniform(shared, n), false);
     for i in 0..lights.indices.len() {
         if lights.owns_interval(i, policy) {
             let iv = lights.own_interval(i, o, dir, s, policy);
-            sum += march(LightSet::one(i), &lights.own_steps(i, iv, n, o, dir, policy));
+            sum = sum + march(LightSet::one(i), &lights.own_steps(i, iv, n, o, dir, policy), true);
         }
     }
     sum
 }
 
 /// [`march_light_groups`] with [`march_steps`]: every light's in-scattering on the view ray
-/// `dir` of length `s`, steps i = first, first + stride, … < n. Mirrors `march_lights` in WGSL.
+/// `dir` of length `s`, steps i = first, first + stride, … < n, in xyz; in w its
+/// [`scattering_distance`] from the marches of the lights that own their interval. Mirrors
+/// `march_lights` in WGSL.
 #[allow(clippy::too_many_arguments)]
 pub fn march_lights(
     frame: &CpuFrame,
@@ -720,11 +747,17 @@ pub fn march_lights(
     stride: u32,
     j: f32,
     policy: StepPolicy,
-) -> Vec3 {
+) -> Vec4 {
     let o = frame.desc.camera.position;
-    march_light_groups(o, lights, dir, s, n, policy, |set, steps| {
-        march_steps(frame, lights, set, dir, steps, first, stride, j)
-    })
+    let mut own = Vec4::ZERO;
+    let total = march_light_groups(o, lights, dir, s, n, policy, |set, steps, owned| {
+        let m = march_steps(frame, lights, set, dir, steps, first, stride, j);
+        if owned {
+            own += m;
+        }
+        m
+    });
+    total.truncate().extend(scattering_distance(total.truncate(), own))
 }
 
 /// How a ray-marching technique marches a view ray: the N steps of eq. 1 (Tóth & Umenhoffer
@@ -780,7 +813,7 @@ pub fn march_pixel(
     y: u32,
     dir: Vec3,
     s: f32,
-) -> Vec3 {
+) -> Vec4 {
     let j = if m.jitter { crate::shaders::pixel_jitter(x, y, m.frame_index) } else { 0.5 };
     march_lights(frame, lights, dir, s, m.steps, 0, 1, j, policy)
 }

@@ -152,6 +152,24 @@ pub struct TemporalSettings {
     /// light. Cost: per pixel a loop over the frame's point and spot lights (at most 16
     /// distance tests); the discs' pixels lose the stage's averaging.
     pub light_disc_radius: f32,
+    /// Reproject a pixel's history from where its in-scattering came from instead of from the
+    /// surface it shows, where the input says so: where the input's alpha is negative it is
+    /// minus the pixel's *scattering distance* (m); an alpha ≥ 0 (an opaque 1, as engines and
+    /// the other techniques write) gives none. `brute-force` writes it where point and spot
+    /// lights give at least half of a pixel's in-scattering (the luminance-weighted mean
+    /// distance from the eye of their light along the ray, from its march's own samples:
+    /// [`crate::march::scattering_distance`], 0 elsewhere); every other technique of the
+    /// library writes 1 ([`crate::TechniqueSettings::writes_scattering_distance`]). The point at that distance on
+    /// the pixel's ray is reprojected through the previous camera (not by motion vectors: the
+    /// medium does not move with the objects), and a history texel is kept where its own stored
+    /// distance matches that point's distance from the previous eye within `depth_tolerance`;
+    /// the other pixels use their surface, as with this off (docs/MODEL.md §7, step 1). A
+    /// spot's cone or a lamp's glow in front of a distant wall or the sky then moves with the
+    /// medium it lies in, not with the wall. Turn it off when feeding the stage an
+    /// in-scattering whose alpha may be negative for another reason. Default true, measured (docs/RESULTS.md,
+    /// "Reprojection by the scattering distance": stained-glass +2.7 dB, cage's FLIP 0.0141 →
+    /// 0.0103; the sun scenes unchanged). No cost (the alpha is read with the colour).
+    pub scattering_distance: bool,
 }
 
 impl Default for TemporalSettings {
@@ -166,6 +184,7 @@ impl Default for TemporalSettings {
             adaptive_weight: true,
             young_frames: 8,
             light_disc_radius: 0.09,
+            scattering_distance: true,
         }
     }
 }
@@ -293,8 +312,9 @@ pub struct TemporalUniforms {
     pub lamp_count: u32,
     /// [`TemporalSettings::light_disc_radius`] in pixels (times the image height; 0: no discs).
     pub lamp_radius: f32,
-    /// Padding.
-    pub _pad0: u32,
+    /// 1 to reproject by the input's scattering distance where its alpha is negative (minus
+    /// that distance; [`TemporalSettings::scattering_distance`]).
+    pub scattering: u32,
     /// The point and spot lights in front of the eye ([`lamp_discs`]): (x, y) their projection
     /// in pixels (the image's top-left corner at 0, pixel centres at +0.5), z their distance from
     /// the eye, w unused.
@@ -352,7 +372,7 @@ fn uniforms(s: &TemporalSettings, prev: Option<&Previous>, motion: bool, desc: &
         young_frames: s.young_frames as f32,
         lamp_count,
         lamp_radius: s.light_disc_radius * desc.height as f32,
-        _pad0: 0,
+        scattering: s.scattering_distance as u32,
         lamps,
     }
 }
@@ -453,12 +473,18 @@ pub fn resolve_pixel(
 
     let dir = desc.pixel_ray(x, y);
     let dist = distances[at(x as i32, y as i32)];
-    let sky = dist < 0.0;
+    // The distance the history is reprojected from (and stored for the next frame): the
+    // input's scattering distance where it gives one, else the surface's (-1: sky, a
+    // direction).
+    let alpha = current.pixels[at(x as i32, y as i32)][3];
+    let scattered = u.scattering == 1 && alpha < 0.0;
+    let rdist = if scattered { -alpha } else { dist };
+    let sky = rdist < 0.0;
     // Within the disc of a light seen directly: the current frame as it is, and a history that
     // starts again from it.
     if in_lamp_disc(u, x, y, dist) {
         let xs = c.max_element();
-        return (c.to_array(), [c.x, c.y, c.z, 1.0], 0.0, [dist, xs, 0.0, 0.0]);
+        return (c.to_array(), [c.x, c.y, c.z, 1.0], 0.0, [rdist, xs, 0.0, 0.0]);
     }
 
     let mut w = 0.0f32;
@@ -467,12 +493,13 @@ pub fn resolve_pixel(
     // The reprojected statistics: the input's largest channel and the moments of its change.
     let mut hs = Vec3::ZERO;
     if u.valid == 1 {
-        let x4 = if sky { dir.extend(0.0) } else { (desc.camera.position + dir * dist).extend(1.0) };
+        let x4 = if sky { dir.extend(0.0) } else { (desc.camera.position + dir * rdist).extend(1.0) };
         // Where the previous frame saw it: by the motion vector where one is given for a drawn
-        // pixel, else through the previous camera; outside the previous image, nowhere.
+        // pixel reprojected by its surface, else through the previous camera; outside the
+        // previous image, nowhere.
         let mut q = glam::Vec2::ZERO;
         let mut seen = false;
-        if u.motion == 1 && !sky {
+        if u.motion == 1 && !sky && !scattered {
             q = motion_source(x, y, desc.width, desc.height, motion[at(x as i32, y as i32)]);
             let hi = glam::Vec2::new(w_px as f32 - 0.5, h_px as f32 - 0.5);
             seen = q.cmpge(glam::Vec2::splat(-0.5)).all() && q.cmple(hi).all();
@@ -586,7 +613,7 @@ pub fn resolve_pixel(
     // The running mean, kept as the history; shown through the neighbourhood's mean while young.
     let res = c + w * (h - c);
     let out = if young { mean + (youth - 1.0) / (u.young_frames - 1.0) * (res - mean) } else { res };
-    (out.to_array(), [res.x, res.y, res.z, (n + 1.0).min(MAX_FRAMES)], w, [dist, xs, m1, m2])
+    (out.to_array(), [res.x, res.y, res.z, (n + 1.0).min(MAX_FRAMES)], w, [rdist, xs, m1, m2])
 }
 
 /// The temporal stage on the CPU: the mirror of [`Temporal`].
@@ -612,7 +639,9 @@ impl CpuTemporal {
         self.history = None;
     }
 
-    /// Resolves `current` (the technique's in-scattering of `desc`, its depth `depth`) against
+    /// Resolves `current` (the technique's in-scattering of `desc`, a negative alpha minus the
+    /// pixel's scattering distance, [`TemporalSettings::scattering_distance`]; its depth
+    /// `depth`) against
     /// the history and keeps the result as the next frame's history. `motion`: the frame's
     /// motion vectors, row-major, one per pixel (the convention of [`motion_source`]), or `None` to reproject
     /// every pixel through the camera (right for a static scene).
@@ -756,7 +785,8 @@ impl Temporal {
     }
 
     /// Records the resolve of `current` (the technique's output for `desc`, a `D2` view of an
-    /// `Rgba32Float` or `Rgba16Float` texture of the frame's size) with the frame's `depth` into
+    /// `Rgba32Float` or `Rgba16Float` texture of the frame's size; a negative alpha is minus
+    /// the pixel's scattering distance, [`TemporalSettings::scattering_distance`]) with the frame's `depth` into
     /// `output` (a `STORAGE_BINDING` view of the frame's size, `Rgba32Float` or `Rgba16Float`)
     /// in the caller's `encoder`. No submit, no wait. `current` and `output` must be different
     /// textures. `motion`: the engine's motion vectors ([`motion_source`] says what they hold; a view of the

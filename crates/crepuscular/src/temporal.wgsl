@@ -36,7 +36,9 @@ struct Temporal {
     // TemporalSettings::light_disc_radius).
     lamp_count: u32,
     lamp_radius: f32,
-    _pad0: u32,
+    // 1 to reproject by the input's scattering distance where its alpha is negative (minus
+    // that distance; temporal.rs TemporalSettings::scattering_distance).
+    scattering: u32,
     // The point and spot lights in front of the eye: their projection in pixels (xy) and their
     // distance from the eye (z) (temporal.rs lamp_discs).
     lamps: array<vec4<f32>, MAX_LIGHTS>,
@@ -148,11 +150,16 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
     // This frame's view distance (negative: nothing drawn), stored for the next frame.
     let dir = pixel_ray(frame, gid.xy);
     let dist = current_distance(gid.xy);
-    let sky = dist < 0.0;
+    // The distance the history is reprojected from (and stored for the next frame): the
+    // input's scattering distance where it gives one, else the surface's (-1: sky, a
+    // direction).
+    let scattered = params.scattering == 1u && cur.a < 0.0;
+    let rdist = select(dist, -cur.a, scattered);
+    let sky = rdist < 0.0;
     // Within the disc of a light seen directly: the current frame as it is, and a history that
     // starts again from it.
     if in_lamp_disc(gid.xy, dist) {
-        textureStore(stats_out, px, vec4<f32>(dist, max(c.r, max(c.g, c.b)), 0.0, 0.0));
+        textureStore(stats_out, px, vec4<f32>(rdist, max(c.r, max(c.g, c.b)), 0.0, 0.0));
         textureStore(out_tex, px, cur);
         textureStore(history_out, px, vec4<f32>(c, 1.0));
         textureStore(weight_out, px, vec4<f32>(0.0));
@@ -168,14 +175,14 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
         // The point (or direction) in the previous frame.
         var x4 = vec4<f32>(dir, 0.0);
         if !sky {
-            x4 = vec4<f32>(frame.camera_pos.xyz + dir * dist, 1.0);
+            x4 = vec4<f32>(frame.camera_pos.xyz + dir * rdist, 1.0);
         }
-        // Where the previous frame saw it: by the motion vector for a drawn pixel when they are
-        // given (temporal.rs motion_source), else through the previous camera; outside the
-        // previous image, nowhere.
+        // Where the previous frame saw it: by the motion vector for a drawn pixel reprojected
+        // by its surface when they are given (temporal.rs motion_source), else through the
+        // previous camera; outside the previous image, nowhere.
         var q = vec2<f32>(0.0);
         var seen = false;
-        if params.motion == 1u && !sky {
+        if params.motion == 1u && !sky && !scattered {
             let mv = textureLoad(motion_tex, px, 0).xy;
             q = vec2<f32>(f32(px.x) - mv.x * f32(size.x), f32(px.y) - mv.y * f32(size.y));
             seen = all(q >= vec2<f32>(-0.5)) && all(q <= vec2<f32>(size) - 0.5);
@@ -256,7 +263,7 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
             w = adapted_weight(w, m1, m2, a, xs);
         }
     }
-    textureStore(stats_out, px, vec4<f32>(dist, xs, m1, m2));
+    textureStore(stats_out, px, vec4<f32>(rdist, xs, m1, m2));
     // The current frame's 3×3 neighbourhood on the same surface (the pixels whose view distance
     // is within the tolerance of this one's, or sky with sky): its spread clips the history,
     // its mean stands in for a young history (temporal.rs TemporalSettings::young_frames).

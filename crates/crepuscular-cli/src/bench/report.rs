@@ -101,7 +101,7 @@ fn temporal_table(r: &BenchReport) -> String {
          frame (the ones before it are its history), flicker (%) over all of them. \"as configured\" is the row \
          itself; \"jitter + stage\" the row with `jitter=true` (where it has the setting; †: it has none) and \
          `frame_index` advanced per frame, followed by the temporal stage (`history_weight` {}, `clip_sigma` {}, \
-         `history_filter` {}, `adaptive_weight` {}, `young_frames` {}, `light_disc_radius` {}). Stage ms: its wall clock per frame.\n\n\
+         `history_filter` {}, `adaptive_weight` {}, `young_frames` {}, `light_disc_radius` {}, `scattering_distance` {}). Stage ms: its wall clock per frame.\n\n\
          | scene | configuration | as configured PSNR / FLIP / flicker | jitter + stage PSNR / FLIP / flicker | ΔPSNR dB | flicker × | stage ms |\n\
          |---|---|---|---|---|---|---|\n",
         r.temporal_frames,
@@ -112,6 +112,7 @@ fn temporal_table(r: &BenchReport) -> String {
         t.adaptive_weight,
         t.young_frames,
         t.light_disc_radius,
+        t.scattering_distance,
     );
     for x in &r.records {
         let Some(c) = &x.temporal else { continue };

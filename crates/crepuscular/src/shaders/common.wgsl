@@ -790,24 +790,44 @@ fn march_steps(
     stride: u32,
     j: f32,
     mask: u32,
-) -> vec3<f32> {
+) -> vec4<f32> {
     if st.iv.y <= st.iv.x {
-        return vec3<f32>(0.0);
+        return vec4<f32>(0.0);
     }
     let sigma = extinction(f);
     let uni = uniform_step(st, sigma, j);
-    var sum = vec3<f32>(0.0);
+    var sum = vec4<f32>(0.0);
     for (var i = first; i < st.n; i += stride) {
         let step = march_step(st, i, sigma, j, uni);
-        let p = f.camera_pos.xyz + dir * (step.t0 + step.off);
-        sum += march_density(f, shadow_map, spot_tex, dir, p, mask) * step.scale * exp(-sigma * step.t0) * step.seg;
+        let t = step.t0 + step.off;
+        let p = f.camera_pos.xyz + dir * t;
+        let term = march_density(f, shadow_map, spot_tex, dir, p, mask) * step.scale * exp(-sigma * step.t0) * step.seg;
+        sum += vec4<f32>(term, luminance(term) * t);
     }
     return sum;
 }
 
+// march.rs luminance: Rec. 709 luminance of linear RGB.
+fn luminance(c: vec3<f32>) -> f32 {
+    return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
+}
+
+// march.rs scattering_distance: the luminance-weighted mean distance of the terms of the
+// marches over the lights' own intervals (`own`: their in-scattering in xyz, the sum of each
+// term's luminance times its distance in w), where they give at least half of `total`'s
+// luminance; 0 elsewhere.
+fn scattering_distance(total: vec3<f32>, own: vec4<f32>) -> f32 {
+    let y = luminance(own.xyz);
+    if y > 0.0 && y >= 0.5 * luminance(total) {
+        return max(own.w / y, 0.0);
+    }
+    return 0.0;
+}
+
 // march.rs march_lights: every light's in-scattering on one view ray (docs/MODEL.md §6): one
 // march over the shared interval for the lights that share it, plus one over its own interval
-// (own_steps) for each light that owns one; the steps i = first, first + stride, … < n of each.
+// (own_steps) for each light that owns one; the steps i = first, first + stride, … < n of each;
+// in w the ray's scattering distance from the latter.
 fn march_lights(
     f: Frame,
     shadow_map: texture_2d_array<f32>,
@@ -820,19 +840,22 @@ fn march_lights(
     j: f32,
     policy: u32,
     denominator: f32,
-) -> vec3<f32> {
+) -> vec4<f32> {
     let o = f.camera_pos.xyz;
     let sm = shared_march(f, o, dir, s, policy, denominator);
-    var sum = march_steps(f, shadow_map, spot_tex, dir, uniform_steps(sm.iv, n), first, stride, j, sm.mask);
+    var sum = march_steps(f, shadow_map, spot_tex, dir, uniform_steps(sm.iv, n), first, stride, j, sm.mask).xyz;
+    var own = vec4<f32>(0.0);
     for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
         let l = lights.items[k];
         if own_interval(l, policy) {
             let iv = march_interval(f, l, o, dir, s, policy, denominator);
             let st = own_steps(l, iv, n, o, dir, policy);
-            sum += march_steps(f, shadow_map, spot_tex, dir, st, first, stride, j, 1u << k);
+            let m = march_steps(f, shadow_map, spot_tex, dir, st, first, stride, j, 1u << k);
+            sum += m.xyz;
+            own += m;
         }
     }
-    return sum;
+    return vec4<f32>(sum, scattering_distance(sum, own));
 }
 
 // march.rs march_pixel: eq. 1 for pixel px's own ray (brute-force; subsampled), N steps per
@@ -849,7 +872,7 @@ fn march_pixel(
     frame_index: u32,
     spot_steps: u32,
     spot_denominator: f32,
-) -> vec3<f32> {
+) -> vec4<f32> {
     var j = 0.5;
     if jitter == 1u {
         j = pixel_jitter(px, frame_index);

@@ -327,3 +327,18 @@ registry! {
 pub fn find(name: &str) -> Option<&'static TechniqueInfo> {
     TECHNIQUES.iter().find(|t| t.name == name)
 }
+
+impl TechniqueSettings {
+    /// Whether the technique's in-scattering carries, in alpha, minus each pixel's scattering
+    /// distance (the luminance-weighted mean distance from the eye of its point and spot
+    /// lights' light along its ray, [`crate::march::scattering_distance`]; 0 where they give
+    /// less than half of it), which
+    /// the temporal stage reprojects by under
+    /// [`crate::TemporalSettings::scattering_distance`]. Only `brute-force` writes it, from
+    /// its own march's samples; the other techniques write 1 there (their samples are not one
+    /// ray's march per pixel: interleaved's are split over a window, subsampled's and
+    /// epipolar's interpolated, prefiltered's and minmax's not point samples).
+    pub fn writes_scattering_distance(&self) -> bool {
+        matches!(self, Self::BruteForce(_))
+    }
+}

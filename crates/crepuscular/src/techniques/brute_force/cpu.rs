@@ -7,10 +7,11 @@ use crate::frame::CpuFrame;
 use crate::image::Image;
 use crate::march::{MarchLights, march_pixel};
 use crate::stats::{PassTime, TechniqueStats};
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 
-/// Mirrors `march_ray` in march.wgsl. `lights` is [`MarchLights::of`] the frame.
+/// Mirrors `march_ray` in march.wgsl: the in-scattering in xyz, and in w the ray's
+/// [`crate::march::scattering_distance`]. `lights` is [`MarchLights::of`] the frame.
 pub fn march_ray(
     frame: &CpuFrame,
     settings: &BruteForceSettings,
@@ -19,7 +20,7 @@ pub fn march_ray(
     y: u32,
     dir: Vec3,
     s: f32,
-) -> Vec3 {
+) -> Vec4 {
     march_pixel(frame, lights, &settings.ray_march, settings.policy, x, y, dir, s)
 }
 
@@ -36,7 +37,9 @@ pub fn march(frame: &CpuFrame, settings: &BruteForceSettings) -> Result<(Image, 
             let dir = desc.pixel_ray(x, y);
             let s = desc.view_distance(frame.depth[(y * desc.width + x) as usize], dir);
             let l = march_ray(frame, settings, &lights, x, y, dir, s);
-            *px = [l.x, l.y, l.z, 1.0];
+            // alpha: minus the ray's scattering distance (0 where it has none), for the temporal
+            // stage (temporal.rs TemporalSettings::scattering_distance).
+            *px = [l.x, l.y, l.z, -l.w];
         }
     });
     let stats = TechniqueStats {

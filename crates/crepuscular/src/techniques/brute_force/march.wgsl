@@ -20,8 +20,9 @@ struct Params {
 @group(0) @binding(5) var out_tex: texture_storage_2d<rgba32float, write>;
 
 // Eq. 1 over the interval the spot-step policy picks ([0, s] for any light under "fixed"),
-// N steps, all evaluated by this pixel (march_pixel in common.wgsl).
-fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec3<f32> {
+// N steps, all evaluated by this pixel (march_pixel in common.wgsl): the in-scattering in xyz,
+// its scattering distance in w.
+fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec4<f32> {
     let p = params;
     return march_pixel(
         frame, shadow_map, spot_tex, px, dir, s, p.steps, p.jitter, p.frame_index, p.spot_steps, p.spot_denominator,
@@ -37,5 +38,8 @@ fn march(@builtin(global_invocation_id) gid: vec3<u32>) {
     let dir = pixel_ray(frame, px);
     let d = textureLoad(depth_tex, vec2<i32>(px), 0).r;
     let s = view_distance(frame, d, dir);
-    textureStore(out_tex, vec2<i32>(px), vec4<f32>(march_ray(px, dir, s), 1.0));
+    // alpha: minus the ray's scattering distance (0 where it has none), for the temporal stage
+    // (temporal.rs TemporalSettings::scattering_distance).
+    let m = march_ray(px, dir, s);
+    textureStore(out_tex, vec2<i32>(px), vec4<f32>(m.xyz, -m.w));
 }

@@ -717,7 +717,7 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
         return (
             {
                 let (m, policy) = pixel_march(p);
-                march_pixel(c.frame, &c.lights, &m, policy, x, y, dir, s)
+                march_pixel(c.frame, &c.lights, &m, policy, x, y, dir, s).truncate()
             },
             true,
         );
@@ -738,7 +738,7 @@ fn upsample_pixel(c: &Ctx, x: u32, y: u32) -> (Vec3, bool) {
         (None, None) if p.fallback_remarch == 1 => (
             {
                 let (m, policy) = pixel_march(p);
-                march_pixel(c.frame, &c.lights, &m, policy, x, y, dir, s)
+                march_pixel(c.frame, &c.lights, &m, policy, x, y, dir, s).truncate()
             },
             true,
         ),

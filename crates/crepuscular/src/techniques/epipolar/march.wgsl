@@ -33,6 +33,6 @@ fn march(
     let p = params;
     let l = march_pixel(
         frame, shadow_map, spot_tex, px, dir, s, p.steps, p.jitter, p.frame_index, p.spot_steps, p.spot_denominator,
-    );
+    ).xyz;
     textureStore(marched_tex, vec2<i32>(px), vec4<f32>(l, s));
 }

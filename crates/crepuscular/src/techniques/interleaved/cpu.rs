@@ -60,6 +60,7 @@ pub fn march_steps_lut(
     march_samples(frame.desc, steps, first, stride, j, |t| {
         which.iter().map(|l| density_lut(frame, lut, lights.indices[l], dir, o + dir * t)).sum()
     })
+    .truncate()
 }
 
 /// Mirrors `march_lights_lut` in march.wgsl: [`crate::march::march_lights`] with the phase table.
@@ -76,7 +77,7 @@ fn march_lights_lut(
     j: f32,
 ) -> Vec3 {
     let o = frame.desc.camera.position;
-    march_light_groups(o, lights, dir, dist, s.ray_march.steps, s.policy, |set, steps| {
+    march_light_groups(o, lights, dir, dist, s.ray_march.steps, s.policy, |set, steps, _| {
         march_steps_lut(frame, lights, set, lut, dir, steps, first, stride, j)
     })
 }
@@ -100,7 +101,7 @@ pub fn march_ray(
     let k = block_offset(s, x, y);
     match lut {
         Some(lut) => march_lights_lut(frame, lights, s, lut, dir, dist, k, stride, j),
-        None => march_lights(frame, lights, dir, dist, s.ray_march.steps, k, stride, j, s.policy),
+        None => march_lights(frame, lights, dir, dist, s.ray_march.steps, k, stride, j, s.policy).truncate(),
     }
 }
 

@@ -110,7 +110,7 @@ fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec3<f32> {
     }
     return march_lights(
         frame, shadow_map, spot_tex, dir, s, params.steps, k, stride, j, params.spot_steps, params.spot_denominator,
-    );
+    ).xyz;
 }
 
 @compute @workgroup_size(8, 8)

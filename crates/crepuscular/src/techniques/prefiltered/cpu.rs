@@ -339,6 +339,7 @@ pub fn unoccluded_inscatter(desc: &FrameDesc, settings: &PrefilteredSettings, di
         let (l, wl) = light_incident(fl, &desc.medium, o + dir * t);
         ss * desc.medium.phase.eval(wl.dot(-dir)) * l
     })
+    .truncate()
 }
 
 /// The prefiltered visibility of a view ray (unit `dir`) ending at `pt`, per colour channel:

@@ -21,6 +21,6 @@ fn epipole(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let dir = pixel_ray(frame, px);
     let s = view_distance(frame, textureLoad(depth_tex, vec2<i32>(px), 0).r, dir);
-    let l = march_pixel(frame, shadow_map, spot_tex, px, dir, s, params.epipole_steps, 0u, 0u, params.spot_steps, params.epipole.w);
+    let l = march_pixel(frame, shadow_map, spot_tex, px, dir, s, params.epipole_steps, 0u, 0u, params.spot_steps, params.epipole.w).xyz;
     textureStore(out_tex, vec2<i32>(px), vec4<f32>(l, 1.0));
 }

@@ -28,7 +28,7 @@ pub fn march_ray(
     dir: Vec3,
     s: f32,
 ) -> Vec3 {
-    march_pixel(frame, lights, &settings.ray_march, settings.policy, x, y, dir, s)
+    march_pixel(frame, lights, &settings.ray_march, settings.policy, x, y, dir, s).truncate()
 }
 
 /// Mirrors `struct Bracket` in upsample.wgsl: the grid samples i0 ≤ i1 whose source pixels

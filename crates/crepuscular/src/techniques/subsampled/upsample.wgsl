@@ -48,7 +48,7 @@ fn march_ray(px: vec2<u32>, dir: vec3<f32>, s: f32) -> vec3<f32> {
     let p = params;
     return march_pixel(
         frame, shadow_map, spot_tex, px, dir, s, p.steps, p.jitter, p.frame_index, p.spot_steps, p.spot_denominator,
-    );
+    ).xyz;
 }
 
 // The grid samples i0 ≤ i1 whose source pixels bracket pixel x along one axis, and the

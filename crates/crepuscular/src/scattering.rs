@@ -285,6 +285,9 @@ impl Scattering {
     /// pass and leaves `encoder` empty). Submit the encoder, then call
     /// [`Scattering::end_frame`]. Inputs that do not match the frame (sizes, formats, layer
     /// counts) are an [`Error::Invalid`] naming them; validation errors an [`Error::Gpu`].
+    /// The in-scattering is in rgb; alpha is 1, except for `brute-force`, which writes minus each
+    /// pixel's scattering distance there (0 where it has none) for the temporal stage
+    /// ([`crate::TemporalSettings::scattering_distance`]): composite from rgb.
     pub fn encode(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,

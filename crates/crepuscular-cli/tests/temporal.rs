@@ -871,3 +871,29 @@ fn the_scattering_distance_reprojects_light_scattered_in_front_of_the_surface() 
     );
     assert!(off50 > 10.0 * on50, "the move is too small to tell the two apart: {off50} against {on50}");
 }
+
+#[test]
+fn each_technique_writes_a_scattering_distance_exactly_when_it_says_so() {
+    // stained-glass (a spot through a window) at 48×27 on the CPU: a technique that says it
+    // writes the distance gives a negative alpha where the spot's light dominates the ray and
+    // never a positive one; the others write 1 everywhere (none).
+    let mut s = crepuscular_cli::render::load_scene("stained-glass").unwrap();
+    (s.render.width, s.render.height) = (48, 27);
+    s.render.shadow.size = 256;
+    for t in crepuscular::techniques::TECHNIQUES {
+        let technique = crepuscular_cli::render::parse_technique(t.name, &s, &[]).unwrap();
+        let writes = technique.writes_scattering_distance();
+        let opts = crepuscular_cli::render::RenderOptions { technique, progress: &|_, _| {} };
+        let out = crepuscular_cli::render::render(&s, None, &opts).unwrap();
+        let alphas: Vec<f32> = out.inscatter.pixels.iter().map(|p| p[3]).collect();
+        let given = alphas.iter().filter(|&&a| a < 0.0).count();
+        eprintln!("{}: writes_scattering_distance {writes}, {given} of {} pixels give one", t.name, alphas.len());
+        if writes {
+            // Measured: brute-force 169 of 1296 (the spot's cone through the window).
+            assert!(given * 20 > alphas.len(), "{}: only {given} pixels give a scattering distance", t.name);
+            assert!(alphas.iter().all(|&a| a <= 0.0), "{}: a positive alpha", t.name);
+        } else {
+            assert!(alphas.iter().all(|&a| a == 1.0), "{}: an alpha other than 1", t.name);
+        }
+    }
+}

@@ -698,8 +698,10 @@ pub fn luminance(c: Vec3) -> f32 {
 /// in-scattering luminance (`total`); 0 elsewhere (the temporal stage then reprojects by the
 /// surface). A sun's light is left out: it scatters all along the ray, whose length the
 /// surface already carries (measured: reprojecting a sun's shafts by its scattering distance
-/// lost 1.4–2.8 dB, docs/RESULTS.md). Under the `fixed` step policy no light owns an interval,
-/// so it is 0. Mirrors `scattering_distance` in common.wgsl.
+/// lost 1.4–2.8 dB, docs/RESULTS.md). Which lights own an interval ([`MarchLights::owns_interval`]):
+/// every point and spot light under the default `local_steps = "equiangular"`; under
+/// `"uniform"`, spots under a cone `spot_steps` policy; with neither, none, and the distance is
+/// always 0. Mirrors `scattering_distance` in common.wgsl.
 pub fn scattering_distance(total: Vec3, own: Vec4) -> f32 {
     let y = luminance(own.truncate());
     if y > 0.0 && y >= 0.5 * luminance(total) { (own.w / y).max(0.0) } else { 0.0 }

@@ -12,7 +12,9 @@
 //! resolved last and reprojects through it; [`Temporal::reset`] forgets it (a camera cut, a
 //! teleport). An engine that renders motion vectors passes them too ([`Temporal::encode`]'s
 //! `motion`, [`CpuTemporal::resolve`]'s): the drawn pixels are then reprojected by them, so
-//! the history follows moving objects as well as the camera. A new size, another set of lights (count, kinds, scattering scales), another
+//! the history follows moving objects as well as the camera (except the pixels reprojected by
+//! their scattering distance, [`TemporalSettings::scattering_distance`], whose light belongs to
+//! the medium, not to the objects). A new size, another set of lights (count, kinds, scattering scales), another
 //! medium, or a light that jumps ([`TemporalSettings::light_jump_degrees`]) resets it by itself.
 
 use crate::error::Error;
@@ -72,7 +74,8 @@ pub enum HistoryFilter {
 /// The temporal stage's settings. Cost of the stage: one full-screen compute pass reading, per
 /// pixel, 4 history texels and their 4 stored statistics (16 with the Catmull-Rom read), and
 /// (where the history is clipped or young) 9 current texels and their depths; 68 bytes of
-/// history per pixel (two RGBA32F images, two RGBA32F statistics — view distance and the
+/// history per pixel (two RGBA32F images, two RGBA32F statistics — the distance the pixel was
+/// reprojected from (its surface's, or its scattering distance) and the
 /// moments [`TemporalSettings::adaptive_weight`] reads —, one R32F weight).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -155,8 +158,10 @@ pub struct TemporalSettings {
     /// Reproject a pixel's history from where its in-scattering came from instead of from the
     /// surface it shows, where the input says so: where the input's alpha is negative it is
     /// minus the pixel's *scattering distance* (m); an alpha ≥ 0 (an opaque 1, as engines and
-    /// the other techniques write) gives none. `brute-force` writes it where point and spot
-    /// lights give at least half of a pixel's in-scattering (the luminance-weighted mean
+    /// the other techniques write) gives none. `brute-force` writes it where the point and spot
+    /// lights that march their own interval (every one under the default `local_steps =
+    /// "equiangular"`; under `"uniform"`, spots under a cone `spot_steps` policy) give at least
+    /// half of a pixel's in-scattering (the luminance-weighted mean
     /// distance from the eye of their light along the ray, from its march's own samples:
     /// [`crate::march::scattering_distance`], 0 elsewhere); every other technique of the
     /// library writes 1 ([`crate::TechniqueSettings::writes_scattering_distance`]). The point at that distance on
@@ -168,7 +173,10 @@ pub struct TemporalSettings {
     /// medium it lies in, not with the wall. Turn it off when feeding the stage an
     /// in-scattering whose alpha may be negative for another reason. Default true, measured (docs/RESULTS.md,
     /// "Reprojection by the scattering distance": stained-glass +2.7 dB, cage's FLIP 0.0141 →
-    /// 0.0103; the sun scenes unchanged). No cost (the alpha is read with the colour).
+    /// 0.0103; atrium −0.36 dB; the sun scenes unchanged). No cost in the stage (the alpha is
+    /// read with the colour); `brute-force` pays a luminance and a multiply-add per march step
+    /// for it. A pixel that crosses the half-share threshold between frames changes anchor, and
+    /// its history restarts there (its stored distance is of the other kind).
     pub scattering_distance: bool,
 }
 
@@ -451,7 +459,8 @@ pub fn adapted_weight(w: f32, m1: f32, m2: f32, a: f32, x: f32) -> f32 {
 
 /// One pixel's resolve: (output rgb, history rgba, weight, statistics). `distances`: this
 /// frame's ([`view_distances`]); `history` and `history_stats`: the previous frame's (read only
-/// when `u.valid`; statistics: view distance, the input's largest channel, and the running
+/// when `u.valid`; statistics: the distance the pixel was reprojected from (its view distance,
+/// or its scattering distance), the input's largest channel, and the running
 /// moments of its change, [`TemporalSettings::adaptive_weight`]); `motion`: the frame's motion
 /// vectors (read only when `u.motion`). Mirrors `resolve` in temporal.wgsl.
 #[allow(clippy::too_many_arguments)]
@@ -621,7 +630,7 @@ pub fn resolve_pixel(
 pub struct CpuTemporal {
     /// The settings.
     pub settings: TemporalSettings,
-    /// The last frame's resolve, its statistics per pixel (view distance, the input's largest
+    /// The last frame's resolve, its statistics per pixel (the distance it was reprojected from, the input's largest
     /// channel, the moments of its change) and its camera.
     history: Option<(Image, Vec<[f32; 4]>, Previous)>,
     weights: Vec<f32>,
@@ -644,7 +653,8 @@ impl CpuTemporal {
     /// `depth`) against
     /// the history and keeps the result as the next frame's history. `motion`: the frame's
     /// motion vectors, row-major, one per pixel (the convention of [`motion_source`]), or `None` to reproject
-    /// every pixel through the camera (right for a static scene).
+    /// every pixel through the camera (right for a static scene). The output's alpha is
+    /// `current`'s, passed through.
     pub fn resolve(
         &mut self,
         desc: &FrameDesc,
@@ -792,7 +802,8 @@ impl Temporal {
     /// textures. `motion`: the engine's motion vectors ([`motion_source`] says what they hold; a view of the
     /// frame's size, `Rg16Float`, `Rg32Float`, `Rgba16Float` or `Rgba32Float`, x and y in the
     /// first two channels), or `None` to reproject every pixel through the camera (right for a
-    /// static scene). Errors name an input whose size or format does not fit.
+    /// static scene). Errors name an input whose size or format does not fit. The output's
+    /// alpha is `current`'s, passed through.
     pub fn encode(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,

@@ -1,6 +1,7 @@
 // Temporal accumulation after any technique (docs/MODEL.md §7; temporal.rs, whose `resolve_pixel`
 // is this pass's CPU mirror, line for line). Per pixel: the current in-scattering c; the
-// surface point (or, where nothing was drawn, the view direction) reprojected into the previous
+// point at its scattering distance where the input gives one (a negative alpha, minus that
+// distance), else the surface point (or, where nothing was drawn, the view direction) reprojected into the previous
 // frame through its view-projection; the history there read (bilinear, or Catmull-Rom where all
 // 16 texels agree) from the texels where
 // the previous frame saw the same surface (its stored view distance within the tolerance of the
@@ -108,8 +109,9 @@ fn adapted_weight(w: f32, m1: f32, m2: f32, a: f32, x: f32) -> f32 {
 @group(0) @binding(2) var depth_tex: texture_2d<f32>;
 @group(0) @binding(3) var current_tex: texture_2d<f32>;
 @group(0) @binding(4) var history_tex: texture_2d<f32>;
-// Per pixel of the previous frame: its view distance, its input's largest channel, and the
-// running moments (mean, mean square) of that channel's frame-to-frame change.
+// Per pixel of the previous frame: the distance it was reprojected from (its view distance, or
+// its scattering distance), its input's largest channel, and the running moments (mean, mean
+// square) of that channel's frame-to-frame change.
 @group(0) @binding(5) var stats_tex: texture_2d<f32>;
 @group(0) @binding(6) var out_tex: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(7) var history_out: texture_storage_2d<rgba32float, write>;
@@ -147,7 +149,7 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
     let cur = textureLoad(current_tex, px, 0);
     let c = cur.rgb;
 
-    // This frame's view distance (negative: nothing drawn), stored for the next frame.
+    // This frame's view distance (negative: nothing drawn).
     let dir = pixel_ray(frame, gid.xy);
     let dist = current_distance(gid.xy);
     // The distance the history is reprojected from (and stored for the next frame): the

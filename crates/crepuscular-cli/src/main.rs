@@ -385,7 +385,7 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
         bar.set_position(done);
     };
     let debug_technique = a.debug.map(|_| technique.clone());
-    let out = render::render(&scene, gpu.as_ref(), &RenderOptions { technique, progress: &progress })?;
+    let mut out = render::render(&scene, gpu.as_ref(), &RenderOptions { technique, progress: &progress })?;
     bar.finish_and_clear();
     let tone = ToneMap::new(scene.render.exposure);
     let rgb = tone.to_rgb8(&out.final_radiance);
@@ -394,9 +394,8 @@ fn cmd_render(a: RenderArgs) -> Result<()> {
     if let Some(exr) = &a.exr {
         // Opaque, as an image viewer expects: the technique's alpha is the temporal stage's
         // (brute-force's scattering distance), not coverage.
-        let mut inscatter = out.inscatter.clone();
-        inscatter.pixels.iter_mut().for_each(|p| p[3] = 1.0);
-        output::write_exr(exr, &inscatter)?;
+        out.inscatter.pixels.iter_mut().for_each(|p| p[3] = 1.0);
+        output::write_exr(exr, &out.inscatter)?;
         let fin = exr_final_path(exr);
         output::write_exr(&fin, &out.final_radiance)?;
         eprintln!("wrote {} (in-scattering) and {} (final radiance)", exr.display(), fin.display());

@@ -222,6 +222,17 @@ fn world_pattern(desc: &FrameDesc, depth: &[f32], k: f32) -> Image {
     img
 }
 
+/// The relative error of `got` against `cur` (the largest over rgb) at each pixel where the
+/// history was kept (`weights` > 0), in ascending order.
+fn kept_errors(got: &Image, cur: &Image, weights: &[f32]) -> Vec<f32> {
+    let mut errs: Vec<f32> = (0..weights.len())
+        .filter(|&i| weights[i] > 0.0)
+        .map(|i| (0..3).map(|c| (got.pixels[i][c] - cur.pixels[i][c]).abs() / cur.pixels[i][c]).fold(0.0, f32::max))
+        .collect();
+    errs.sort_by(f32::total_cmp);
+    errs
+}
+
 #[test]
 fn a_camera_move_reprojects_the_history_and_rejects_what_it_uncovers() {
     let sc = scene();
@@ -239,11 +250,7 @@ fn a_camera_move_reprojects_the_history_and_rejects_what_it_uncovers() {
     // Where the history was kept it holds the same world points: the output equals the
     // current frame up to bilinear interpolation of the smooth pattern (and the pixels whose
     // bilinear footprint straddles an edge).
-    let mut errs: Vec<f32> = (0..n)
-        .filter(|&i| weights[i] > 0.0)
-        .map(|i| (0..3).map(|c| (got.pixels[i][c] - cur.pixels[i][c]).abs() / cur.pixels[i][c]).fold(0.0, f32::max))
-        .collect();
-    errs.sort_by(f32::total_cmp);
+    let errs = kept_errors(&got, &cur, &weights);
     let (p50, p80) = (errs[errs.len() / 2], errs[errs.len() * 8 / 10]);
     // Reprojecting through no motion instead (the history at the same pixel): the previous
     // image there shows other world points.
@@ -310,11 +317,7 @@ fn the_catmull_rom_history_read_is_closer_than_bilinear_through_a_camera_move() 
         t.resolve(&d0, &z0, &world_pattern(&d0, &z0, K), None).unwrap();
         let got = t.resolve(&d1, &z1, &cur, None).unwrap();
         // The output is (c + h)/2 on the second frame: its error is half the history's.
-        let mut errs: Vec<f32> = (0..got.pixels.len())
-            .filter(|&i| t.weights()[i] > 0.0)
-            .map(|i| (0..3).map(|c| (got.pixels[i][c] - cur.pixels[i][c]).abs() / cur.pixels[i][c]).fold(0.0, f32::max))
-            .collect();
-        errs.sort_by(f32::total_cmp);
+        let errs = kept_errors(&got, &cur, t.weights());
         (errs[errs.len() / 2], errs[errs.len() * 8 / 10], errs.len())
     };
     let (b50, b80, bn) = errors(HistoryFilter::Bilinear);
@@ -405,12 +408,7 @@ fn motion_vectors_follow_a_moving_scene_that_the_camera_reprojection_cannot() {
         t.resolve(&d0, &z0, &world_anchored(&d0, &z0), None).unwrap();
         // The stage sees the unchanged camera d0 with the moved scene's depth.
         let got = t.resolve(&d0, &z1, &cur, motion).unwrap();
-        let w = t.weights().to_vec();
-        let mut errs: Vec<f32> = (0..w.len())
-            .filter(|&i| w[i] > 0.0)
-            .map(|i| (0..3).map(|c| (got.pixels[i][c] - cur.pixels[i][c]).abs() / cur.pixels[i][c]).fold(0.0, f32::max))
-            .collect();
-        errs.sort_by(f32::total_cmp);
+        let errs = kept_errors(&got, &cur, t.weights());
         (errs.len(), errs[errs.len() / 2], errs[errs.len() * 8 / 10])
     };
     let n = (W * H) as usize;
@@ -845,14 +843,9 @@ fn the_scattering_distance_reprojects_light_scattered_in_front_of_the_surface() 
         let mut t = CpuTemporal::new(TemporalSettings { scattering_distance, ..no_clip() }).unwrap();
         t.resolve(&d0, &z0, &sheet_pattern(&d0, origin, normal), None).unwrap();
         let got = t.resolve(&d1, &z1, &cur, None).unwrap();
-        let kept = t.weights().iter().filter(|&&w| w > 0.0).count();
         // The output is (c + h)/2 on the second frame: its error is half the history's.
-        let mut errs: Vec<f32> = (0..got.pixels.len())
-            .filter(|&i| t.weights()[i] > 0.0)
-            .map(|i| (0..3).map(|c| (got.pixels[i][c] - cur.pixels[i][c]).abs() / cur.pixels[i][c]).fold(0.0, f32::max))
-            .collect();
-        errs.sort_by(f32::total_cmp);
-        (errs[errs.len() / 2], errs[errs.len() * 9 / 10], kept)
+        let errs = kept_errors(&got, &cur, t.weights());
+        (errs[errs.len() / 2], errs[errs.len() * 9 / 10], errs.len())
     };
     let (on50, on90, on_kept) = errors(true);
     let (off50, off90, off_kept) = errors(false);

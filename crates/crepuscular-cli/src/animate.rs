@@ -697,6 +697,14 @@ pub struct AnimateOptions {
     /// --flicker` the report gives the frames the stage takes to recover. Not with
     /// `light_jump`.
     pub occluder_jump: Option<u32>,
+    /// Write each frame's images into this directory (created if missing): the technique's
+    /// in-scattering (`NNNN-technique.exr`, linear, and `.png`, the final image tone-mapped),
+    /// with `temporal` the stage's output (`NNNN-temporal.exr`/`.png`) and its history weight
+    /// per pixel (`NNNN-weight.png`), with `flicker` the reference (`NNNN-reference.exr`/`.png`)
+    /// and the error maps against it (`NNNN-error-technique.png`, `NNNN-error-temporal.png`; the
+    /// ramp's top at [`DUMP_ERROR_FULL_SCALE`] of the reference's peak).
+    /// Cost: two or three image writes per frame (a few ms at 320×180).
+    pub dump_frames: Option<PathBuf>,
     /// The GIF.
     pub output: PathBuf,
 }
@@ -750,6 +758,12 @@ impl AnimateOptions {
         }
         if self.light_jump.is_some() && self.occluder_jump.is_some() {
             bail!("--light-jump and --occluder-jump: give one at a time (each recovery is measured alone)");
+        }
+        if let Some(d) = &self.dump_frames
+            && d.exists()
+            && !d.is_dir()
+        {
+            bail!("--dump-frames {}: exists and is not a directory", d.display());
         }
         let parent = match self.output.parent() {
             Some(p) if !p.as_os_str().is_empty() => p,
@@ -935,15 +949,15 @@ impl Stage {
 
     /// Resolves one frame: `img` is the technique's in-scattering on `frame`, which on the GPU
     /// is still in `gpu_output` (read there, with the host's depth, not uploaded again).
-    /// Returns the output and the mean history weight.
+    /// Returns the output and the history weight per pixel (row-major; 0 where the history was
+    /// rejected).
     pub(crate) fn resolve(
         &mut self,
         gpu: Option<&GpuContext>,
         frame: &HostFrame,
         gpu_output: Option<&wgpu::Texture>,
         img: &Image,
-    ) -> Result<(Image, f64)> {
-        let mean = |w: &[f32]| w.iter().map(|&x| x as f64).sum::<f64>() / w.len().max(1) as f64;
+    ) -> Result<(Image, Vec<f32>)> {
         match (self, gpu, gpu_output, &frame.textures) {
             (Stage::Gpu(t), Some(g), Some(current), Some(host)) => {
                 let (w, h) = (frame.desc.width, frame.desc.height);
@@ -955,16 +969,61 @@ impl Stage {
                 g.queue.submit([enc.finish()]);
                 let img = g.read_image(&out)?;
                 let w = g.read_texture_f32(t.weights().context("temporal weights")?, 0)?;
-                Ok((img, mean(&w)))
+                Ok((img, w))
             }
             (Stage::Cpu(t), ..) => {
                 let img = t.resolve(&frame.desc, &frame.depth, img, frame.motion.as_deref())?;
-                Ok((img, mean(t.weights())))
+                Ok((img, t.weights().to_vec()))
             }
             (Stage::Gpu(_), ..) => {
                 bail!("the GPU temporal stage needs the frame and the technique on the GPU (internal error)")
             }
         }
+    }
+}
+
+/// The error, as a fraction of the reference's peak, at the top of the ramp of
+/// `--dump-frames`' error maps: 5 % (an image whose every pixel were that far off would read
+/// 26 dB), so that the errors of frames between 30 and 50 dB show.
+pub const DUMP_ERROR_FULL_SCALE: f64 = 0.05;
+
+/// One frame's images for `--dump-frames DIR` ([`AnimateOptions::dump_frames`]), named
+/// `NNNN-WHAT.EXT` with NNNN the frame's index (four digits), each written atomically.
+struct FrameDump<'a> {
+    dir: &'a Path,
+    index: u32,
+    tone: ToneMap,
+}
+
+impl FrameDump<'_> {
+    fn path(&self, what: &str, ext: &str) -> PathBuf {
+        self.dir.join(format!("{:04}-{what}.{ext}", self.index))
+    }
+
+    /// `NNNN-WHAT.exr`: the linear in-scattering as it is (alpha included: minus the scattering
+    /// distance where the technique wrote one); `NNNN-WHAT.png`: the final image (the frame's
+    /// surface and this in-scattering), tone-mapped as the GIF's frames.
+    fn images(&self, frame: &HostFrame, what: &str, inscatter: &Image) -> Result<()> {
+        crate::output::write_exr(&self.path(what, "exr"), inscatter)?;
+        let (w, h) = (inscatter.width, inscatter.height);
+        let rgb = self.tone.to_rgb8(&frame.final_radiance(inscatter));
+        crate::output::write_png_rgb8(&self.path(what, "png"), w, h, &rgb)
+    }
+
+    /// `NNNN-weight.png`: the temporal stage's history weight per pixel on the magma ramp
+    /// (black: 0, the history rejected or the current frame shown as it is; pale yellow: 1).
+    fn weights(&self, frame: &HostFrame, weights: &[f32]) -> Result<()> {
+        let rgb: Vec<u8> = weights.iter().flat_map(|&w| crate::metrics::magma_ramp(w.clamp(0.0, 1.0))).collect();
+        crate::output::write_png_rgb8(&self.path("weight", "png"), frame.desc.width, frame.desc.height, &rgb)
+    }
+
+    /// `NNNN-error-WHAT.png`: the absolute error of the in-scattering against the frame's
+    /// reference ([`crate::metrics::abs_error_heatmap`]: luminance of the per-channel error on
+    /// the magma ramp, its top at [`DUMP_ERROR_FULL_SCALE`] of the reference's peak).
+    fn error(&self, what: &str, reference: &Image, inscatter: &Image) -> Result<()> {
+        let rgb = crate::metrics::abs_error_heatmap(reference, inscatter, DUMP_ERROR_FULL_SCALE)?;
+        let (w, h) = (inscatter.width, inscatter.height);
+        crate::output::write_png_rgb8(&self.path(&format!("error-{what}"), "png"), w, h, &rgb)
     }
 }
 
@@ -1047,6 +1106,9 @@ pub fn run(
         renderer.add_occluder(o.clone());
     }
     let jump = opts.light_jump.or(opts.occluder_jump);
+    if let Some(d) = &opts.dump_frames {
+        std::fs::create_dir_all(d).with_context(|| format!("--dump-frames {}: cannot create it", d.display()))?;
+    }
     let mut previous_reference: Option<Image> = None;
     let mut region: Option<Vec<bool>> = None;
     let (w, h) = opts.size;
@@ -1072,18 +1134,34 @@ pub fn run(
                 let mut frame = renderer.frame(t)?;
                 let (raw, stats) = technique.render(gpu, &mut frame, i, rows)?;
                 technique_ms.push(stats.total_ms());
-                let (img, weight) = match &mut stage {
+                let (img, weights) = match &mut stage {
                     Some(st) => {
                         let start = std::time::Instant::now();
                         let r = st.resolve(gpu, &frame, technique.gpu_output(), &raw)?;
                         stage_ms.push(start.elapsed().as_secs_f64() * 1e3);
                         r
                     }
-                    None => (raw.clone(), 0.0),
+                    None => (raw.clone(), Vec::new()),
                 };
+                let weight = weights.iter().map(|&x| x as f64).sum::<f64>() / weights.len().max(1) as f64;
+                let dump = opts.dump_frames.as_deref().map(|dir| FrameDump { dir, index: i, tone });
+                if let Some(d) = &dump {
+                    d.images(&frame, "technique", &raw)?;
+                    if stage.is_some() {
+                        d.images(&frame, "temporal", &img)?;
+                        d.weights(&frame, &weights)?;
+                    }
+                }
                 if let Some(r) = &mut reference {
                     progress(i, rendered, &format!("frame {}/{}: reference", i + 1, rendered));
                     let (ri, _) = r.render(gpu, &mut frame, 0, rows)?;
+                    if let Some(d) = &dump {
+                        d.images(&frame, "reference", &ri)?;
+                        d.error("technique", &ri, &raw)?;
+                        if stage.is_some() {
+                            d.error("temporal", &ri, &img)?;
+                        }
+                    }
                     meter.push(&img, &ri)?;
                     if jump == Some(i)
                         && let Some(before) = &previous_reference

@@ -163,6 +163,13 @@ struct AnimateArgs {
     /// per-frame quality) as JSON to this file.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Write every frame's images into DIR (created if missing): NNNN-technique.exr (linear
+    /// in-scattering) and .png (final image); with --temporal NNNN-temporal.exr/.png and
+    /// NNNN-weight.png (history weight per pixel); with --flicker NNNN-reference.exr/.png and
+    /// NNNN-error-technique.png / NNNN-error-temporal.png (error maps against the reference,
+    /// the ramp's top at 5 % of its peak).
+    #[arg(long, value_name = "DIR")]
+    dump_frames: Option<PathBuf>,
     /// The animated GIF (loops forever).
     #[arg(long, short, default_value = "crepuscular.gif")]
     output: PathBuf,
@@ -626,6 +633,7 @@ fn cmd_animate(a: AnimateArgs) -> Result<()> {
         stop_after: a.stop_after,
         light_jump: a.light_jump,
         occluder_jump: a.occluder_jump,
+        dump_frames: a.dump_frames.clone(),
         output: a.output.clone(),
     };
     animate::check(&opts)?;

@@ -192,14 +192,20 @@ pub fn flip_heatmap(reference: &Image, test: &Image, tone: &ToneMap) -> Result<(
 }
 
 /// Per-pixel absolute error heat map: the Rec. 709 luminance of the per-channel `|reference −
-/// test|` (so opposite-signed channel errors do not cancel), divided by the reference peak (as
-/// for PSNR), clamped to `[0, 1]` and coloured with a magma-like ramp (black → purple → orange
-/// → pale yellow). NaN or infinite differences show as the top of the ramp.
+/// test|` (so opposite-signed channel errors do not cancel), divided by `full_scale` times the
+/// reference peak (the peak as for PSNR; `full_scale` 1: an error as large as the peak is the
+/// ramp's top, 0.05: 5 % of it is), clamped to `[0, 1]` and coloured with a magma-like ramp
+/// (black → purple → orange → pale yellow). NaN or infinite differences show as the top of the
+/// ramp.
 ///
-/// Returns tightly packed 8-bit RGB of the images' size. Errors when the sizes differ.
-pub fn abs_error_heatmap(reference: &Image, test: &Image) -> Result<Vec<u8>> {
+/// Returns tightly packed 8-bit RGB of the images' size. Errors when the sizes differ or
+/// `full_scale` is not finite and positive.
+pub fn abs_error_heatmap(reference: &Image, test: &Image, full_scale: f64) -> Result<Vec<u8>> {
     check_sizes(reference, test)?;
-    let peak = reference_peak(reference);
+    if !(full_scale.is_finite() && full_scale > 0.0) {
+        bail!("error heat map: full scale {full_scale} must be finite and > 0");
+    }
+    let peak = reference_peak(reference) * full_scale;
     let mut out = vec![0u8; reference.pixels.len() * 3];
     out.par_chunks_mut(3).zip(reference.pixels.par_iter().zip(test.pixels.par_iter())).for_each(|(dst, (r, t))| {
         let d = |c: usize| (r[c] as f64 - t[c] as f64).abs();
@@ -296,7 +302,7 @@ mod tests {
         let msg = compare(&a, &b, &ToneMap::default()).unwrap_err().to_string();
         assert!(msg.contains("8x4") && msg.contains("4x8"), "{msg}");
         assert!(flip_heatmap(&a, &b, &ToneMap::default()).is_err());
-        assert!(abs_error_heatmap(&a, &b).is_err());
+        assert!(abs_error_heatmap(&a, &b, 1.0).is_err());
     }
 
     #[test]
@@ -328,12 +334,12 @@ mod tests {
         assert_eq!((w, h, rgb.len()), (20, 10, 600));
         let lut0 = nv_flip::magma_lut().to_vec();
         assert!(rgb.chunks(3).all(|p| p == &lut0[..3]));
-        let abs = abs_error_heatmap(&img, &img).unwrap();
+        let abs = abs_error_heatmap(&img, &img, 1.0).unwrap();
         assert_eq!(abs.len(), 600);
         assert!(abs.chunks(3).all(|p| p == [0, 0, 4]));
         let mut test = img.clone();
         test.pixels[0] = [1.0e9, 1.0e9, 1.0e9, 1.0];
-        let abs = abs_error_heatmap(&img, &test).unwrap();
+        let abs = abs_error_heatmap(&img, &test, 1.0).unwrap();
         assert_eq!(&abs[..3], &[252, 253, 191]);
     }
 

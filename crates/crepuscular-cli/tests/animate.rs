@@ -386,10 +386,11 @@ fn bad_animate_input_fails_with_one_line_and_leaves_the_output_alone() {
         (vec!["--size", "32x18", "--frames", "4", "--occluder-jump", "0"], "--occluder-jump"),
         (vec!["--size", "32x18", "--frames", "4", "--occluder-jump", "4"], "--occluder-jump"),
         (vec!["--size", "32x18", "--frames", "9", "--light-jump", "2", "--occluder-jump", "3"], "one at a time"),
+        (vec!["--size", "32x18", "--dump-frames", "KEEP"], "--dump-frames"),
     ] {
         let out = bin()
             .args(["animate", "cage", "--backend", "cpu"])
-            .args(&args)
+            .args(args.iter().map(|a| if *a == "KEEP" { keep.as_os_str() } else { std::ffi::OsStr::new(a) }))
             .arg("--output")
             .arg(&keep)
             .output()
@@ -596,4 +597,59 @@ fn animate_occluder_jump_runs_on_the_cpu_with_the_hosts_motion_vectors() {
     assert!(o["half_size"].as_f64().unwrap() > 0.0 && c.is_array() && j.is_array(), "{o}");
     assert!(t["region"]["pixels"].as_u64().unwrap() > 0, "{t}");
     assert!(t["frames"][11]["region_psnr_db"].as_f64().is_some(), "{t}");
+}
+
+/// `animate --dump-frames DIR` writes every frame's images, and they are the frames measured:
+/// with the flicker's own reference as the technique, the dumped technique equals the dumped
+/// reference bit for bit and its error map is black (the ramp's 0) everywhere; the first frame's
+/// history weights are 0 (no history yet) and a later frame's are not; the PSNR of each dumped
+/// temporal frame against its dumped reference is the one the report gives.
+#[test]
+fn animate_dump_frames_writes_the_measured_frames() {
+    let d = tmp("dump");
+    let (dump, report) = (d.join("frames"), d.join("report.json"));
+    let out = bin()
+        .args(["animate", "stained-glass", "--backend", "cpu", "--frames", "24", "--stop-after", "3"])
+        .args(["--size", "48x27", "--shadow-map-size", "256", "--flicker", "--reference-steps", "16"])
+        .args(["-t", "reference", "--set", "steps=16", "--set", "seed=1", "--temporal", "--output"])
+        .arg(d.join("a.gif"))
+        .arg("--report")
+        .arg(&report)
+        .arg("--dump-frames")
+        .arg(&dump)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let kinds = [
+        "error-technique.png",
+        "error-temporal.png",
+        "reference.exr",
+        "reference.png",
+        "technique.exr",
+        "technique.png",
+        "temporal.exr",
+        "temporal.png",
+        "weight.png",
+    ];
+    let expected: Vec<String> = (0..3).flat_map(|i| kinds.iter().map(move |k| format!("{i:04}-{k}"))).collect();
+    assert_eq!(entries(&dump), expected);
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let black = crepuscular::debug::magma_ramp(0.0);
+    let tone = crepuscular::tonemap::ToneMap::new(1.0);
+    let png = |name: String| image::open(dump.join(name)).unwrap().into_rgb8();
+    let exr = |name: String| crepuscular_cli::output::read_exr(&dump.join(name)).unwrap();
+    for i in 0..3 {
+        let (technique, reference) = (exr(format!("{i:04}-technique.exr")), exr(format!("{i:04}-reference.exr")));
+        assert_eq!((technique.width, technique.height), (48, 27));
+        assert_eq!(technique, reference, "frame {i}: the technique is the reference");
+        let err = png(format!("{i:04}-error-technique.png"));
+        assert!(err.pixels().all(|p| p.0 == black), "frame {i}: an exact frame's error map is not black");
+        let weights = png(format!("{i:04}-weight.png"));
+        assert_eq!(weights.pixels().all(|p| p.0 == black), i == 0, "frame {i}: history weights");
+        let temporal = exr(format!("{i:04}-temporal.exr"));
+        let psnr = crepuscular_cli::metrics::compare(&reference, &temporal, &tone).unwrap().psnr_db;
+        let reported = report["temporal"]["frames"][i]["psnr_db"].as_f64().unwrap_or(f64::INFINITY);
+        assert!((psnr - reported).abs() < 1e-9 || psnr == reported, "frame {i}: {psnr} dB dumped, {reported} reported");
+        assert!(psnr.is_finite(), "frame {i}: the stage's output must differ somewhere (its young mean)");
+    }
 }

@@ -60,8 +60,11 @@ pub struct MotionPath {
 }
 
 impl MotionPath {
-    /// The path of a built-in scene (by the name it was loaded with), else [`MotionPath::generic`].
+    /// The path of a built-in scene (by the name it was loaded with, options such as
+    /// `:shadow_filter=bilinear` aside: [`crate::render::scene_base`]), else
+    /// [`MotionPath::generic`].
     pub fn for_scene(name_or_path: &str, scene: &Scene) -> Self {
+        let name_or_path = crate::render::scene_base(name_or_path);
         let p = |orbit_degrees, dolly, light_yaw_degrees, light_pitch_degrees, point_offset| MotionPath {
             orbit_degrees,
             dolly,
@@ -1293,6 +1296,14 @@ mod tests {
         // A scene from a file (any name that is not built in) gets the generic path.
         let s = builtin::builtin("cage").unwrap();
         assert_eq!(MotionPath::for_scene("my-cage.toml", &s), MotionPath::generic(&s));
+        // Options after a built-in name keep its path (they once fell back to the generic one,
+        // so `animate colonnade:shadow_filter=bilinear` moved unlike `animate colonnade`).
+        let s = builtin::builtin("colonnade").unwrap();
+        let own = MotionPath::for_scene("colonnade", &s);
+        for name in ["colonnade:shadow_filter=bilinear", "colonnade:lights=1", "colonnade:lights=1:shadow_filter=nearest"] {
+            assert_eq!(MotionPath::for_scene(name, &s), own, "{name}");
+        }
+        assert_eq!(crate::render::scene_base("my:scene.toml"), "my:scene.toml");
     }
 
     #[test]

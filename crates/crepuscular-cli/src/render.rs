@@ -25,6 +25,18 @@ pub enum Backend {
     Cpu,
 }
 
+/// The scene's name or path without the options [`load_scene`] reads after it
+/// (`colonnade:shadow_filter=bilinear` → `colonnade`): what a built-in scene is known by, for
+/// lookups by name such as its `animate` path.
+pub fn scene_base(name_or_path: &str) -> &str {
+    match name_or_path.rsplit_once(':') {
+        Some((base, option)) if option.starts_with("lights=") || option.starts_with("shadow_filter=") => {
+            scene_base(base)
+        }
+        _ => name_or_path,
+    }
+}
+
 /// Loads a built-in scene by name or a scene file by path, with options after it, each
 /// `:key=value`, in any order:
 ///

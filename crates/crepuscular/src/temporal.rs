@@ -77,6 +77,11 @@ pub enum HistoryFilter {
 /// history per pixel (two RGBA32F images, two RGBA32F statistics — the distance the pixel was
 /// reprojected from (its surface's, or its scattering distance) and the
 /// moments [`TemporalSettings::adaptive_weight`] reads —, one R32F weight).
+///
+/// Feed it a jittered march whose lights read their shadow maps with
+/// [`crate::ShadowFilter::Bilinear`]: at the march's cost, brute-force with the stage then
+/// reaches 40 dB after 8 frames of a slow move on every built-in scene (forest 41.4 dB against
+/// 39.0 with nearest lookups; docs/RESULTS.md "The stage with the bilinear shadow filter").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TemporalSettings {

@@ -90,10 +90,13 @@ fn a_still_camera_gives_the_running_mean_then_the_exponential_average() {
 
 #[test]
 fn a_young_history_leans_on_the_same_surface_mean_of_the_frame() {
-    // A still camera, no clip, no adaptation, young_frames N = 4: frame k (k = 1 on the first)
-    // shows M + (k − 1)/(N − 1)·(T − M), T the running mean of the frames so far (what the
-    // history keeps), M the mean of the current frame over the 3×3 pixels (clamped at the
-    // border) on the same surface; from the fourth frame on, T. After a reset, M again.
+    // A still camera, no clip, no adaptation, young_frames N = 4: the first frame shows M, the
+    // mean of the current frame over the 3×3 pixels (clamped at the border) on the same
+    // surface; frame k = 2, 3 shows T + m·(M − T), T the running mean of the frames so far
+    // (what the history keeps), m = min(s / (s + b²), (N − k)/(N − 1)) with s = ½·q/k·(1 +
+    // 2/(k − 1)), q the mean square of the pixel's k − 1 frame-to-frame changes of its largest
+    // channel and b = max(M) − max(T) (docs/MODEL.md §7 step 4); from the fourth frame on, T.
+    // After a reset, M again.
     let (desc, depth, _) = posed(&scene(), Vec3::ZERO);
     let settings = TemporalSettings { young_frames: 4, ..no_clip() };
     let mut t = CpuTemporal::new(settings).unwrap();
@@ -116,8 +119,11 @@ fn a_young_history_leans_on_the_same_surface_mean_of_the_frame() {
         }
         sum.map(|v| v / count)
     };
+    let largest = |v: [f64; 3]| v[0].max(v[1]).max(v[2]);
     let mut running = vec![[0.0f64; 3]; n];
-    let mut worst = 0.0f64;
+    let mut previous = vec![0.0f64; n];
+    let mut squares = vec![0.0f64; n];
+    let (mut worst, mut leaned, mut kept) = (0.0f64, 0usize, 0usize);
     for k in 0..6usize {
         let f = noise(40 + k as u32);
         let got = t.resolve(&desc, &depth, &f, None).unwrap();
@@ -125,15 +131,38 @@ fn a_young_history_leans_on_the_same_surface_mean_of_the_frame() {
         let youth = (k + 1) as f64;
         for i in 0..n {
             let m = neighbourhood_mean(&f, i);
+            let cur = [0, 1, 2].map(|c| f.pixels[i][c] as f64);
             for c in 0..3 {
-                let cur = f.pixels[i][c] as f64;
-                running[i][c] = cur + wk * (running[i][c] - cur);
-                let want =
-                    if youth < 4.0 { m[c] + (youth - 1.0) / 3.0 * (running[i][c] - m[c]) } else { running[i][c] };
+                running[i][c] = cur[c] + wk * (running[i][c] - cur[c]);
+            }
+            if k > 0 {
+                squares[i] += (largest(cur) - previous[i]).powi(2);
+            }
+            previous[i] = largest(cur);
+            let weight = if youth == 1.0 {
+                1.0
+            } else {
+                let s = 0.5 * squares[i] / k as f64 / youth * (1.0 + 2.0 / (youth - 1.0));
+                let b = largest(m) - largest(running[i]);
+                (s / (s + b * b)).min((4.0 - youth) / 3.0)
+            };
+            if youth < 4.0 && youth > 1.0 {
+                if weight > 0.5 {
+                    leaned += 1;
+                } else {
+                    kept += 1;
+                }
+            }
+            for c in 0..3 {
+                let want = if youth < 4.0 { running[i][c] + weight * (m[c] - running[i][c]) } else { running[i][c] };
                 worst = worst.max((got.pixels[i][c] as f64 - want).abs() / want);
             }
         }
     }
+    // Both sides of the rule are exercised: pixels whose changes are large against M − T lean
+    // on M, the others keep T.
+    eprintln!("young frames 2 and 3: {leaned} pixel-frames leaned on M, {kept} kept T");
+    assert!(leaned > n / 20 && kept > n / 20, "the noise frames exercise one side only: {leaned} / {kept}");
     t.reset();
     let f = noise(99);
     let got = t.resolve(&desc, &depth, &f, None).unwrap();
@@ -144,7 +173,11 @@ fn a_young_history_leans_on_the_same_surface_mean_of_the_frame() {
         }
     }
     eprintln!("young history, 6 frames and a reset: worst relative difference {worst:.2e}");
-    assert!(worst < 1e-4, "the young history's output is not the documented blend: {worst}");
+    // 1.1e-4 measured: the stage reads the previous frame's largest channel through a
+    // reprojection ~1e-4 px off the texel centre, in f32, and M's weight is a ratio of
+    // squares of small differences. The previous rule, the fixed ramp (N − k)/(N − 1), misses by
+    // 0.43 here.
+    assert!(worst < 5e-4, "the young history's output is not the documented blend: {worst}");
 }
 
 #[test]

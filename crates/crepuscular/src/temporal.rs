@@ -134,14 +134,19 @@ pub struct TemporalSettings {
     pub adaptive_weight: bool,
     /// While a pixel's history holds fewer than this many frames (k, counting this one: 1 on
     /// the first frame, after a reset or a light jump, and where the history was rejected),
-    /// its output leans on the current frame's 3×3 same-surface mean M: out = M + (k − 1)/(N − 1)
-    /// ·(T − M), T the running mean (which is what the history keeps). A jittered input's
-    /// first frames are then a spatial average instead of one noisy sample (colonnade,
-    /// brute-force: the frame of a light jump 35.3 → 43.9 dB), at the cost of a 3×3 blur of those
-    /// frames (an exact technique's first frame: minmax on terrain 64.9 → 57.1 dB). 0 or 1:
-    /// off (a new or rejected history shows the current frame). Default 8, measured
-    /// (docs/RESULTS.md, "Temporal accumulation"). Cost: the neighbourhood's 9 reads on those
-    /// frames (the clip reads them anyway).
+    /// its output leans on the current frame's 3×3 same-surface mean M: the first frame shows
+    /// M, and frame k ≥ 2 shows T + m·(M − T), T the running mean (which is what the history
+    /// keeps) and m the weight [`young_mean_weight`] gives M: large where the pixel's own
+    /// frame-to-frame changes say T is still noisy, small where M differs from T by more than
+    /// that noise (M blurs an edge of a clean input), and never above (N − k)/(N − 1). A
+    /// jittered input's first frames are then a spatial average instead of one noisy sample
+    /// (colonnade, brute-force: the frame of a light jump 35.3 → 43.9 dB), and a clean one's
+    /// second frame is its own again (stained-glass and terrain recover from a light jump in 1
+    /// frame, not 6). The first frame is a 3×3 blur whatever the input (an exact technique's:
+    /// minmax on terrain 64.9 → 57.1 dB). 0 or 1: off (a new or rejected history shows the
+    /// current frame). Default 8, measured (docs/RESULTS.md, "Temporal accumulation" and "A
+    /// young history that weighs its own noise"). Cost: the neighbourhood's 9 reads on those
+    /// frames (the clip reads them anyway) and a few ALU operations.
     pub young_frames: u32,
     /// Radius of the disc around each point or spot light seen in the frame (its position
     /// projected, nearer than the surface behind it) whose pixels show the current frame as it
@@ -462,6 +467,31 @@ pub fn adapted_weight(w: f32, m1: f32, m2: f32, a: f32, x: f32) -> f32 {
     lo
 }
 
+/// The margin by which a young history's noise estimate is widened
+/// ([`young_mean_weight`]; `YOUNG_NOISE_MARGIN` in temporal.wgsl): with k frames held, the
+/// mean square of the k − 1 changes is taken as (1 + 2/(k − 1)) times itself, 3× on the
+/// second frame, where it rests on one change. A single change is often small by chance, and
+/// then the young mean would be dropped on a noisy pixel. Measured (docs/RESULTS.md, "A young
+/// history that weighs its own noise"), colonnade's second frame: 46.3 dB with no margin,
+/// 47.1 with 2, 47.4 with 6; with 6, stained-glass's light jump took 5 frames to recover, not 1.
+pub const YOUNG_NOISE_MARGIN: f32 = 2.0;
+
+/// The weight of the frame's 3×3 same-surface mean M in a young history's output
+/// ([`TemporalSettings::young_frames`], docs/MODEL.md §7 step 4): out = T + m·(M − T), T the
+/// running mean of the k frames the history holds (k ≥ 2; the first frame shows M). The
+/// noise left in T is about σ²/k, σ² = m2/2 from the mean square `m2` of the pixel's
+/// frame-to-frame changes (widened by [`YOUNG_NOISE_MARGIN`]), and `bias` = max(M) − max(T)
+/// (largest channels, as the moments are) measures what the 3×3 mean blurs (an edge) as
+/// well as T's noise. The weight σ²/k / (σ²/k + bias²) leans on M where T is noisy and on T
+/// where M blurs a sharp input, capped by the ramp (N − k)/(N − 1) of N = `young_frames`, so
+/// that M's share still falls to 0 at k = N. Mirrors `young_mean_weight` in temporal.wgsl.
+pub fn young_mean_weight(m2: f32, youth: f32, bias: f32, young_frames: f32) -> f32 {
+    let noise = 0.5 * m2 / youth * (1.0 + YOUNG_NOISE_MARGIN / (youth - 1.0));
+    let total = noise + bias * bias;
+    let m = if total > 0.0 { noise / total } else { 0.0 };
+    m.min((young_frames - youth) / (young_frames - 1.0))
+}
+
 /// One pixel's resolve: (output rgb, history rgba, weight, statistics). `distances`: this
 /// frame's ([`view_distances`]); `history` and `history_stats`: the previous frame's (read only
 /// when `u.valid`; statistics: the distance the pixel was reprojected from (its view distance,
@@ -624,9 +654,14 @@ pub fn resolve_pixel(
             h = h.clamp(box_lo, box_hi);
         }
     }
-    // The running mean, kept as the history; shown through the neighbourhood's mean while young.
     let res = c + w * (h - c);
-    let out = if young { mean + (youth - 1.0) / (u.young_frames - 1.0) * (res - mean) } else { res };
+    // The running mean, kept as the history; shown through the neighbourhood's mean while young.
+    let out = if young {
+        let m = if w > 0.0 { young_mean_weight(m2, youth, mean.max_element() - res.max_element(), u.young_frames) } else { 1.0 };
+        res + m * (mean - res)
+    } else {
+        res
+    };
     (out.to_array(), [res.x, res.y, res.z, (n + 1.0).min(MAX_FRAMES)], w, [rdist, xs, m1, m2])
 }
 

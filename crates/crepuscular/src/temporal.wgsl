@@ -12,7 +12,8 @@
 // w = min(history_weight, n / (n + 1)), n the frames the history holds: the plain mean of the
 // first frames, then an exponential average, its weight lowered where the pixel's input drifts
 // more than its noise explains (adapted_weight). While a history holds fewer than young_frames
-// frames (1 where it starts: a reset, a rejection), the output leans on the neighbourhood's mean.
+// frames (1 where it starts: a reset, a rejection), the output leans on the neighbourhood's mean
+// as far as the pixel's own changes say its running mean is still noisy (young_mean_weight).
 
 struct Temporal {
     prev_view_proj: mat4x4<f32>,
@@ -75,6 +76,22 @@ const MOMENT_WEIGHT: f32 = 0.8;
 const ADAPT_AFTER: f32 = 4.5;
 // temporal.rs NOISE_FLOOR: the least noise assumed, relative to the pixel's value.
 const NOISE_FLOOR: f32 = 0.00390625;
+
+// temporal.rs YOUNG_NOISE_MARGIN: how much a young history's noise estimate is widened.
+const YOUNG_NOISE_MARGIN: f32 = 2.0;
+
+// temporal.rs young_mean_weight: the weight of the frame's 3×3 same-surface mean in a young
+// history's output (k = youth ≥ 2 frames held): the noise T keeps, m2/2/k widened by
+// YOUNG_NOISE_MARGIN, against it plus the squared bias between M and T; at most (N − k)/(N − 1).
+fn young_mean_weight(m2: f32, youth: f32, bias: f32, young_frames: f32) -> f32 {
+    let noise = 0.5 * m2 / youth * (1.0 + YOUNG_NOISE_MARGIN / (youth - 1.0));
+    let total = noise + bias * bias;
+    var m = 0.0;
+    if total > 0.0 {
+        m = noise / total;
+    }
+    return min(m, (young_frames - youth) / (young_frames - 1.0));
+}
 
 // temporal.rs adapted_weight: the weight where the squared error of the noise the average
 // leaves, σ²·(1 − w)/(1 + w) (σ² at least (NOISE_FLOOR·x)²), plus that of its lag behind the
@@ -303,7 +320,11 @@ fn resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
     let res = c + w * (h - c);
     var out = res;
     if young {
-        out = mean + (youth - 1.0) / (params.young_frames - 1.0) * (res - mean);
+        var m = 1.0;
+        if w > 0.0 {
+            m = young_mean_weight(m2, youth, max(mean.r, max(mean.g, mean.b)) - max(res.r, max(res.g, res.b)), params.young_frames);
+        }
+        out = res + m * (mean - res);
     }
     textureStore(out_tex, px, vec4<f32>(out, cur.a));
     textureStore(history_out, px, vec4<f32>(res, min(n + 1.0, MAX_FRAMES)));

@@ -1300,7 +1300,9 @@ mod tests {
         // so `animate colonnade:shadow_filter=bilinear` moved unlike `animate colonnade`).
         let s = builtin::builtin("colonnade").unwrap();
         let own = MotionPath::for_scene("colonnade", &s);
-        for name in ["colonnade:shadow_filter=bilinear", "colonnade:lights=1", "colonnade:lights=1:shadow_filter=nearest"] {
+        for name in
+            ["colonnade:shadow_filter=bilinear", "colonnade:lights=1", "colonnade:lights=1:shadow_filter=nearest"]
+        {
             assert_eq!(MotionPath::for_scene(name, &s), own, "{name}");
         }
         assert_eq!(crate::render::scene_base("my:scene.toml"), "my:scene.toml");

@@ -25,15 +25,24 @@ pub enum Backend {
     Cpu,
 }
 
+/// The options [`load_scene`] reads after a scene's name, each `:key=value`.
+const SCENE_OPTIONS: [&str; 2] = ["lights", "shadow_filter"];
+
+/// The last option after a scene's name, as (the name before it, key, value), where the text
+/// after the last `:` is `key=value` with a key of [`SCENE_OPTIONS`].
+fn last_option(name_or_path: &str) -> Option<(&str, &str, &str)> {
+    let (base, option) = name_or_path.rsplit_once(':')?;
+    let (key, value) = option.split_once('=')?;
+    SCENE_OPTIONS.contains(&key).then_some((base, key, value))
+}
+
 /// The scene's name or path without the options [`load_scene`] reads after it
 /// (`colonnade:shadow_filter=bilinear` → `colonnade`): what a built-in scene is known by, for
 /// lookups by name such as its `animate` path.
 pub fn scene_base(name_or_path: &str) -> &str {
-    match name_or_path.rsplit_once(':') {
-        Some((base, option)) if option.starts_with("lights=") || option.starts_with("shadow_filter=") => {
-            scene_base(base)
-        }
-        _ => name_or_path,
+    match last_option(name_or_path) {
+        Some((base, _, _)) => scene_base(base),
+        None => name_or_path,
     }
 }
 
@@ -46,9 +55,10 @@ pub fn scene_base(name_or_path: &str) -> &str {
 /// - `NAME:shadow_filter=bilinear` (or `nearest`) reads every light's shadow map with that
 ///   filter (the scene file's `render.shadow_filter`; `crepuscular::ShadowFilter`).
 pub fn load_scene(name_or_path: &str) -> Result<Scene> {
-    if let Some((base, option)) = name_or_path.rsplit_once(':') {
-        if let Some(n) = option.strip_prefix("lights=") {
-            let n: usize = n.parse().with_context(|| format!("{name_or_path}: `lights=` takes a count, not `{n}`"))?;
+    if let Some((base, key, value)) = last_option(name_or_path) {
+        if key == "lights" {
+            let n: usize =
+                value.parse().with_context(|| format!("{name_or_path}: `lights=` takes a count, not `{value}`"))?;
             let mut scene = load_scene(base)?;
             if n > scene.lights.len() {
                 bail!(
@@ -64,13 +74,12 @@ pub fn load_scene(name_or_path: &str) -> Result<Scene> {
             scene.name = format!("{}:lights={n}", scene.name);
             return Ok(scene);
         }
-        if let Some(f) = option.strip_prefix("shadow_filter=") {
-            let filter = crepuscular::ShadowFilter::parse(f).map_err(|e| anyhow::anyhow!("{name_or_path}: {e}"))?;
-            let mut scene = load_scene(base)?;
-            scene.render.shadow.filter = filter;
-            scene.name = format!("{}:shadow_filter={}", scene.name, filter.name());
-            return Ok(scene);
-        }
+        // The other key of SCENE_OPTIONS: shadow_filter.
+        let filter = crepuscular::ShadowFilter::parse(value).map_err(|e| anyhow::anyhow!("{name_or_path}: {e}"))?;
+        let mut scene = load_scene(base)?;
+        scene.render.shadow.filter = filter;
+        scene.name = format!("{}:shadow_filter={}", scene.name, filter.name());
+        return Ok(scene);
     }
     if let Some(s) = builtin::builtin(name_or_path) {
         return Ok(s);

@@ -80,8 +80,8 @@ pub enum HistoryFilter {
 ///
 /// Feed it a jittered march whose lights read their shadow maps with
 /// [`crate::ShadowFilter::Bilinear`]: at the march's cost, brute-force with the stage then
-/// reaches 40 dB after 8 frames of a slow move on every built-in scene (forest 41.4 dB against
-/// 39.0 with nearest lookups; docs/RESULTS.md "The stage with the bilinear shadow filter").
+/// reaches 40 dB after 8 frames of a slow move on every built-in scene (forest 41.1 dB against
+/// 38.7 with nearest lookups; docs/RESULTS.md "The stage with the bilinear shadow filter").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TemporalSettings {
@@ -657,7 +657,11 @@ pub fn resolve_pixel(
     let res = c + w * (h - c);
     // The running mean, kept as the history; shown through the neighbourhood's mean while young.
     let out = if young {
-        let m = if w > 0.0 { young_mean_weight(m2, youth, mean.max_element() - res.max_element(), u.young_frames) } else { 1.0 };
+        let m = if w > 0.0 {
+            young_mean_weight(m2, youth, mean.max_element() - res.max_element(), u.young_frames)
+        } else {
+            1.0
+        };
         res + m * (mean - res)
     } else {
         res

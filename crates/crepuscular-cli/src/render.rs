@@ -61,11 +61,8 @@ pub fn load_scene(name_or_path: &str) -> Result<Scene> {
                 value.parse().with_context(|| format!("{name_or_path}: `lights=` takes a count, not `{value}`"))?;
             let mut scene = load_scene(base)?;
             if n > scene.lights.len() {
-                bail!(
-                    "{name_or_path}: lights={n}: `{}` has {} light(s); keep 0 to {0}",
-                    scene.name,
-                    scene.lights.len()
-                );
+                let count = scene.lights.len();
+                bail!("{name_or_path}: lights={n}: `{}` has {count} light(s); keep 0 to {count}", scene.name);
             }
             scene.lights.truncate(n.max(1));
             if n == 0 {

@@ -397,4 +397,9 @@ fn scene_options_combine_and_bad_ones_are_named() {
     assert!(e.contains("night-street:shadow_filter=pcf") && e.contains("\"pcf\"") && e.contains("bilinear"), "{e}");
     let e = load_scene("night-street:lights=x").unwrap_err().to_string();
     assert!(e.contains("lights=") && e.contains("`x`"), "{e}");
+    // Too many lights: the error gives the range to keep (it once printed the scene's name
+    // where the count belongs).
+    let n = plain.lights.len();
+    let e = load_scene(&format!("night-street:lights={}", n + 1)).unwrap_err().to_string();
+    assert!(e.contains(&format!("has {n} light(s); keep 0 to {n}")), "{e}");
 }

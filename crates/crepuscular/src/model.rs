@@ -299,6 +299,40 @@ pub fn segment_transmittance(sigma_t: Vec3, delta: f32) -> Vec3 {
     Vec3::new(f(sigma_t.x), f(sigma_t.y), f(sigma_t.z))
 }
 
+/// ∫₀^Δ q(t)·exp(−σt·t) dt, per channel, for the quadratic q through `v` = [q(0), q(Δ/2), q(Δ)]:
+/// the transmittance integral of a visibility that ramps along the span (`minmax`'s mixed texels
+/// under the bilinear shadow filter, docs/MODEL.md §8). With r = t/Δ, q = v₀ + c₁·r + c₂·r² and
+/// the integral is Δ·(v₀·J₀ + c₁·J₁ + c₂·J₂), J_k(x) = ∫₀¹ r^k·e^(−x·r) dr at x = σt·Δ: by its
+/// power series below x = 1 (ten terms, stable as σt → 0), in closed form above. A constant q
+/// (all three equal) gives v₀·[`segment_transmittance`] exactly. Mirrors `ramp_transmittance`
+/// in walk.wgsl.
+pub fn ramp_transmittance(sigma_t: Vec3, delta: f32, v: [f32; 3]) -> Vec3 {
+    let [v0, vm, v1] = v;
+    let c1 = 4.0 * (vm - v0) - (v1 - v0);
+    let c2 = 2.0 * (v1 - v0) - 4.0 * (vm - v0);
+    let base = segment_transmittance(sigma_t, delta) * v0;
+    if c1 == 0.0 && c2 == 0.0 {
+        return base;
+    }
+    let f = |s: f32| {
+        let x = s * delta;
+        let (j1, j2) = if x < 1.0 {
+            let (mut j1, mut j2, mut term) = (0.0f32, 0.0f32, 1.0f32);
+            for m in 0..10 {
+                j1 += term / (m as f32 + 2.0);
+                j2 += term / (m as f32 + 3.0);
+                term *= -x / (m as f32 + 1.0);
+            }
+            (j1, j2)
+        } else {
+            let e = (-x).exp();
+            ((1.0 - e * (1.0 + x)) / (x * x), (2.0 - e * (2.0 + x * (2.0 + x))) / (x * x * x))
+        };
+        delta * (c1 * j1 + c2 * j2)
+    };
+    base + Vec3::new(f(sigma_t.x), f(sigma_t.y), f(sigma_t.z))
+}
+
 /// An RGB texture in linear colour, row-major from the top-left texel, used as a spot light's
 /// projected "gobo" (stained glass).
 #[derive(Clone, Debug, PartialEq)]
@@ -477,6 +511,35 @@ impl Light {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The ramp's integral against a fine midpoint rule in f64, on both sides of the series'
+    /// switch (x = σt·Δ = 1), as σt → 0 and deep into the medium; a constant ramp is exactly
+    /// the constant times the plain transmittance integral.
+    #[test]
+    fn ramp_transmittance_is_the_integral_of_its_quadratic() {
+        let delta = 2.0f32;
+        for st in [0.0f32, 1e-6, 0.01, 0.4999, 0.5001, 3.0, 40.0] {
+            for v in [[0.0f32, 0.25, 1.0], [1.0, 0.5, 0.0], [0.2, 0.9, 0.4], [0.0, 1.0, 0.0]] {
+                let [v0, vm, v1] = v.map(|x| x as f64);
+                let (c1, c2) = (4.0 * vm - 3.0 * v0 - v1, 2.0 * v0 + 2.0 * v1 - 4.0 * vm);
+                let n = 200_000;
+                let d = delta as f64 / n as f64;
+                let exact: f64 = (0..n)
+                    .map(|i| {
+                        let t = (i as f64 + 0.5) * d;
+                        let r = t / delta as f64;
+                        (v0 + c1 * r + c2 * r * r) * (-(st as f64) * t).exp() * d
+                    })
+                    .sum();
+                let got = ramp_transmittance(Vec3::splat(st), delta, v).x as f64;
+                let scale =
+                    delta as f64 * (-(st as f64) * delta as f64).exp().max(1.0 / (1.0 + st as f64 * delta as f64));
+                assert!((got - exact).abs() < 2e-6 * scale.max(1e-3), "σt {st}, v {v:?}: {got} against {exact}");
+            }
+            let c = ramp_transmittance(Vec3::splat(st), delta, [0.7; 3]);
+            assert_eq!(c, segment_transmittance(Vec3::splat(st), delta) * 0.7, "σt {st}");
+        }
+    }
 
     /// ∫ p dω over the sphere by a fine midpoint rule in cos θ (p depends on θ only).
     fn integrate(p: &Phase) -> Vec3 {

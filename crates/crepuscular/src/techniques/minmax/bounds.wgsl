@@ -62,8 +62,16 @@ fn texel_bounds(p: Params, l: Light, col: u32, row: u32) -> vec2<f32> {
     var far = -3.0e38;
     var open = lo.x < 0.0 || lo.y < 0.0 || hi.x > n || hi.y > n;
     if !(hi.x < 0.0 || hi.y < 0.0 || lo.x >= n || lo.y >= n) {
-        let t0 = vec2<u32>(clamp(floor(lo), vec2<f32>(0.0), vec2<f32>(n - 1.0)));
-        let t1 = vec2<u32>(clamp(floor(hi), vec2<f32>(0.0), vec2<f32>(n - 1.0)));
+        // The texels a lookup inside the box can read: the one it falls in (nearest), or the
+        // 2×2 around it (bilinear).
+        var reach = 0.0;
+        var extra = 0.0;
+        if l.shadow_filter == SHADOW_FILTER_BILINEAR {
+            reach = 0.5;
+            extra = 1.0;
+        }
+        let t0 = vec2<u32>(clamp(floor(lo - reach), vec2<f32>(0.0), vec2<f32>(n - 1.0)));
+        let t1 = vec2<u32>(clamp(floor(hi - reach) + extra, vec2<f32>(0.0), vec2<f32>(n - 1.0)));
         if (t1.x - t0.x + 1u) * (t1.y - t0.y + 1u) > MAX_FOOTPRINT {
             return UNBOUNDED;
         }

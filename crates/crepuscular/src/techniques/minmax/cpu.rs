@@ -8,8 +8,8 @@ use crate::frame::{CpuFrame, FrameDesc};
 use crate::image::Image;
 use crate::integrand::{light_incident, light_position};
 use crate::march::{Step, Steps, light_reach, local_position, march_interval};
-use crate::model::segment_transmittance;
-use crate::shadow::{ShadowMap, cube_face};
+use crate::model::ramp_transmittance;
+use crate::shadow::{ShadowFilter, ShadowMap, bilinear_footprint, cube_face};
 use crate::stats::{PassTime, TechniqueStats};
 use crate::techniques::prefiltered::cpu::{in_epipole_disc, march_epipole, texel_depth};
 use crate::techniques::prefiltered::rectify::{Mode, Rectification, angle_between};
@@ -56,12 +56,15 @@ pub const MIXED: f32 = -1.0;
 /// nine lines. A ray whose depth is at most the minimum is lit at every standard texel it
 /// crosses inside the texel, one above the maximum shadowed at every one — up to the
 /// curvature of the rectified depth across one texel between the nine lines (docs/MODEL.md
-/// §8). Mirrors `texel_bounds` in bounds.wgsl.
+/// §8). Under the bilinear `filter` a point reads the 2×2 texels around it, so the box grows
+/// by one texel's reach (the texels from ⌊lo − ½⌋ to ⌊hi − ½⌋ + 1). Mirrors `texel_bounds` in
+/// bounds.wgsl.
 pub fn texel_bounds(
     rect: &Rectification,
     shadow: &ShadowMap,
     light_pos: Vec3,
     bias: f32,
+    filter: ShadowFilter,
     col: u32,
     row: u32,
 ) -> [f32; 2] {
@@ -91,8 +94,11 @@ pub fn texel_bounds(
     let (mut near, mut far) = (f32::MAX, f32::MIN);
     let mut open = lo.x < 0.0 || lo.y < 0.0 || hi.x > n || hi.y > n;
     if !(hi.x < 0.0 || hi.y < 0.0 || lo.x >= n || lo.y >= n) {
-        let [x0, y0] = [lo.x, lo.y].map(|v| v.floor().clamp(0.0, n - 1.0) as u32);
-        let [x1, y1] = [hi.x, hi.y].map(|v| v.floor().clamp(0.0, n - 1.0) as u32);
+        // The texels a lookup inside the box can read: the one it falls in (nearest), or the
+        // 2×2 around it (bilinear).
+        let (reach, extra) = if filter == ShadowFilter::Bilinear { (0.5, 1.0) } else { (0.0, 0.0) };
+        let [x0, y0] = [lo.x, lo.y].map(|v| (v - reach).floor().clamp(0.0, n - 1.0) as u32);
+        let [x1, y1] = [hi.x, hi.y].map(|v| ((v - reach).floor() + extra).clamp(0.0, n - 1.0) as u32);
         if (x1 - x0 + 1) * (y1 - y0 + 1) > MAX_FOOTPRINT {
             return UNBOUNDED;
         }
@@ -146,7 +152,7 @@ pub fn build(frame: &CpuFrame, rect: &Rectification, host_depth: Option<&[f32]>,
         None => {
             let (shadow, light_pos) = (&frame.shadow_maps[0], light_position(&fl.light));
             build_rows(rect.width, rect.height, levels, |row, c| {
-                texel_bounds(rect, shadow, light_pos, fl.shadow_bias, c as u32, row as u32)
+                texel_bounds(rect, shadow, light_pos, fl.shadow_bias, fl.shadow_filter, c as u32, row as u32)
             })
         }
     }
@@ -366,9 +372,16 @@ impl<'a> Spans<'a> {
 
     /// Adds the span [t0, t1] (distances along the ray) with visibility `v`.
     pub fn add(&mut self, t0: f32, t1: f32, v: f32) {
+        self.add_ramp(t0, t1, [v; 3]);
+    }
+
+    /// Adds the span [t0, t1] whose visibility is the quadratic in t through `v` = its values
+    /// at t0, the middle and t1 (a mixed texel under the bilinear filter, [`resolve_mixed`]),
+    /// integrated against the transmittance exactly ([`ramp_transmittance`]).
+    pub fn add_ramp(&mut self, t0: f32, t1: f32, v: [f32; 3]) {
         if let Some(c) = self.constant {
             if t1 > t0 {
-                self.sum += c * v * (-self.st * t0).exp() * segment_transmittance(self.st, t1 - t0);
+                self.sum += c * (-self.st * t0).exp() * ramp_transmittance(self.st, t1 - t0, v);
             }
             return;
         }
@@ -377,12 +390,21 @@ impl<'a> Spans<'a> {
         if !(b > a) || !(self.segments.delta > 0.0) {
             return;
         }
+        // The quadratic at t, from its three values over [t0, t1].
+        let [v0, vm, v1] = v;
+        let (c1, c2) = (4.0 * (vm - v0) - (v1 - v0), 2.0 * (v1 - v0) - 4.0 * (vm - v0));
+        let q = |t: f32| {
+            let r = (t - t0) / (t1 - t0);
+            v0 + r * (c1 + r * c2)
+        };
+        let constant = c1 == 0.0 && c2 == 0.0;
         let mut k = self.segments.index_of(a);
         while a < b {
             let end = b.min(self.segments.boundary(k + 1));
             if end > a {
                 let f = self.segment_light(k);
-                self.sum += f * v * (-self.st * a).exp() * segment_transmittance(self.st, end - a);
+                let va = if constant { v } else { [q(a), q(0.5 * (a + end)), q(end)] };
+                self.sum += f * (-self.st * a).exp() * ramp_transmittance(self.st, end - a, va);
             }
             a = a.max(end);
             k += 1;
@@ -508,21 +530,56 @@ pub fn span_breaks(shadow: &ShadowMap, light_pos: Vec3, o: Vec3, dir: Vec3, t0: 
     (out, n)
 }
 
+/// The next texel edge after `u` (texel coordinates, u·n) in direction `s` (±1) along one
+/// axis: where the lookup's texels change. Nearest: the texel edges 0, 1, …, n. Bilinear: the
+/// lines between texel centres k + ½ (where the 2×2 footprint moves on), and the map's own
+/// edges 0 and n (outside it every point is lit). Past the last edge it returns one beyond
+/// the map (> n or < 0). Mirrors `next_edge` in walk.wgsl.
+pub fn next_edge(u: f32, s: f32, size: f32, filter: ShadowFilter) -> f32 {
+    let bilinear = filter == ShadowFilter::Bilinear;
+    if s > 0.0 {
+        if !bilinear {
+            return (u.floor() + 1.0).max(0.0);
+        }
+        if u < 0.0 {
+            return 0.0;
+        }
+        let e = (u - 0.5).floor() + 1.5;
+        if e > size && u < size { size } else { e }
+    } else {
+        if !bilinear {
+            return (u.ceil() - 1.0).min(size);
+        }
+        if u > size {
+            return size;
+        }
+        let e = (u - 0.5).ceil() - 0.5;
+        if e < 0.0 && u > 0.0 { 0.0 } else { e }
+    }
+}
+
 /// The exact visibility of a mixed texel's span [t0, t1] of the ray from `origin` along `dir`
 /// (distances) against the standard shadow map, the test the reference makes at every point
-/// (`ShadowMap::visibility`: the texel the point falls in, lit where its light depth is at most
-/// the texel's plus the bias; outside the map lit). The span is cut where its lookup can change
-/// face or validity ([`span_breaks`]) and where it crosses a texel edge (the texel column and
-/// row are monotonic in t between breaks, each edge x = k solved in clip space, linear in t);
-/// in each piece the texel is fixed and the light depth linear in t, so its lit part is one
-/// interval, found in closed form, and added to `spans` exactly. At most [`MAX_PIECES`] edge
-/// steps per texel of the run (`texels`). Mirrors `resolve_mixed` in walk.wgsl.
+/// (`ShadowMap::visibility` under the light's `filter`; outside the map lit). The span is cut
+/// where its lookup can change face or validity ([`span_breaks`]) and where it crosses a
+/// texel edge ([`next_edge`]; the texel column and row are monotonic in t between breaks,
+/// each edge x = k solved in clip space, linear in t). In each piece the texels are fixed and
+/// the light depth linear in t, so each texel's lit part is one interval, found in closed
+/// form. Nearest: the piece's one texel decides, and its lit part is added exactly. Bilinear:
+/// the four texels' lit parts cut the piece further; on each part the visibility is the sum
+/// of the bilinear weights of the texels lit there, a product of two coordinates linear in t
+/// under an orthographic map (a quadratic in t, which its values at both ends and the middle
+/// give exactly, [`Spans::add_ramp`]) and ratios of linear functions under a perspective one
+/// (where that quadratic is a fit, off by the weights' curvature across one texel,
+/// docs/MODEL.md §8). At most [`MAX_PIECES`] edge steps per texel of the run (`texels`).
+/// Mirrors `resolve_mixed` in walk.wgsl.
 #[allow(clippy::too_many_arguments)]
 pub fn resolve_mixed(
     spans: &mut Spans,
     shadow: &ShadowMap,
     light_pos: Vec3,
     bias: f32,
+    filter: ShadowFilter,
     origin: Vec3,
     dir: Vec3,
     t0: f32,
@@ -540,13 +597,9 @@ pub fn resolve_mixed(
     let mut steps = 0u32;
     // Lit parts that touch are integrated as one span: fewer exponentials, the same integral.
     let mut run = LitRun::default();
-    // One piece [a, b] of fixed texel on face `layer` (clip line c + t·d): its lit part. The
-    // texel is the one at the piece's midpoint (ShadowMap::clip_coord, on the clip line).
-    let piece = |a: f32, b: f32, layer: u32, c: Vec4, d: Vec4| -> (f32, f32) {
-        let Some(sc) = shadow.clip_coord(layer, c + d * (0.5 * (a + b))) else {
-            return (a, b);
-        };
-        let stored = shadow.texel(layer, sc.texel.x, sc.texel.y);
+    // The lit part of [a, b] at texel (x, y) on face `layer` (clip line c + t·d).
+    let lit_part = |x: u32, y: u32, a: f32, b: f32, layer: u32, c: Vec4, d: Vec4| -> (f32, f32) {
+        let stored = shadow.texel(layer, x, y);
         // An empty texel lights the whole piece, beyond the far plane too (clip_coord).
         if pr.is_empty(stored) {
             return (a, b);
@@ -587,15 +640,67 @@ pub fn resolve_mixed(
             let q = c + d * t;
             Vec2::new(size * (q.x / q.w * 0.5 + 0.5), size * (0.5 - q.y / q.w * 0.5))
         };
-        let edge_x = |k: f32| root(c.x - (2.0 * k / size - 1.0) * c.w, d.x - (2.0 * k / size - 1.0) * d.w);
-        let edge_y = |k: f32| root(c.y - (1.0 - 2.0 * k / size) * c.w, d.y - (1.0 - 2.0 * k / size) * d.w);
+        // One piece [p0, p1] of fixed texels: its lit parts into `run` and `spans`. The texels
+        // are those at the piece's midpoint (ShadowMap::clip_coord, on the clip line).
+        let piece = |p0: f32, p1: f32, run: &mut LitRun, spans: &mut Spans| {
+            let Some(sc) = shadow.clip_coord(layer, c + d * (0.5 * (p0 + p1))) else {
+                run.add(spans, p0, p1);
+                return;
+            };
+            if filter != ShadowFilter::Bilinear {
+                let (la, lb) = lit_part(sc.texel.x, sc.texel.y, p0, p1, layer, c, d);
+                run.add(spans, la, lb);
+                return;
+            }
+            let ([x0, y0, x1, y1], _) = bilinear_footprint(sc.uv, pr.size);
+            // The weights of x1 and y1 along the piece, from its fixed footprint corner.
+            let corner = (sc.uv * size - 0.5).floor();
+            let weights = |t: f32| (xy(t) - 0.5 - corner).clamp(Vec2::ZERO, Vec2::ONE);
+            let texels = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)];
+            let lit = texels.map(|(x, y)| lit_part(x, y, p0, p1, layer, c, d));
+            // The parts between the ends of the four lit parts, each lit at a fixed set.
+            let mut cuts = [p0; 10];
+            let mut n = 1;
+            for &(la, lb) in &lit {
+                if lb > la {
+                    cuts[n] = la;
+                    cuts[n + 1] = lb;
+                    n += 2;
+                }
+            }
+            cuts[n] = p1;
+            n += 1;
+            let cuts = &mut cuts[..n];
+            cuts.sort_by(f32::total_cmp);
+            for w in cuts.windows(2) {
+                let (s0, s1) = (w[0], w[1]);
+                if !(s1 > s0) {
+                    continue;
+                }
+                let sm = 0.5 * (s0 + s1);
+                let on = lit.map(|(la, lb)| lb > la && la <= sm && sm <= lb);
+                if on.iter().all(|&o| o) {
+                    run.add(spans, s0, s1);
+                } else if on.iter().any(|&o| o) {
+                    // The bilinear blend of the lit texels' tests (ShadowMap::visibility).
+                    let v = |t: f32| {
+                        let w = weights(t);
+                        let m = on.map(|o| o as u32 as f32);
+                        let top = m[0] + (m[1] - m[0]) * w.x;
+                        let bottom = m[2] + (m[3] - m[2]) * w.x;
+                        top + (bottom - top) * w.y
+                    };
+                    spans.add_ramp(s0, s1, [v(s0), v(sm), v(s1)]);
+                }
+            }
+        };
         let (pa, pb) = (xy(a), xy(b));
         // The next edge after the start in each axis, and its step.
+        let (sx, sy) = (if pb.x > pa.x { 1.0 } else { -1.0 }, if pb.y > pa.y { 1.0 } else { -1.0 });
+        let (mut kx, mut ky) = (next_edge(pa.x, sx, size, filter), next_edge(pa.y, sy, size, filter));
+        let edge_x = |k: f32| root(c.x - (2.0 * k / size - 1.0) * c.w, d.x - (2.0 * k / size - 1.0) * d.w);
+        let edge_y = |k: f32| root(c.y - (1.0 - 2.0 * k / size) * c.w, d.y - (1.0 - 2.0 * k / size) * d.w);
         // Only the edges 0..=n matter: outside the map every point is lit.
-        let first =
-            |u: f32, v: f32| if v > u { ((u.floor() + 1.0).max(0.0), 1.0) } else { ((u.ceil() - 1.0).min(size), -1.0) };
-        let (mut kx, sx) = first(pa.x, pb.x);
-        let (mut ky, sy) = first(pa.y, pb.y);
         let past = |k: f32, s: f32, end: f32| if s > 0.0 { k >= end || k > size } else { k <= end || k < 0.0 };
         let mut t = a;
         loop {
@@ -611,17 +716,16 @@ pub fn resolve_mixed(
                 e = b;
             }
             if e > t {
-                let (la, lb) = piece(t, e, layer, c, d);
-                run.add(spans, la, lb);
+                piece(t, e, &mut run, spans);
                 t = e;
             }
             if t >= b {
                 break;
             }
             if tx <= ty {
-                kx += sx;
+                kx = next_edge(kx, sx, size, filter);
             } else {
-                ky += sy;
+                ky = next_edge(ky, sy, size, filter);
             }
         }
         a = b;
@@ -682,7 +786,7 @@ pub fn shade(
         if v == MIXED {
             // A run of level-0 texels: whole columns, the last one cut at c_b.
             let texels = (c1.ceil() - c0.floor()).max(1.0) as u32;
-            resolve_mixed(spans, shadow, light_pos, fl.shadow_bias, origin, dir, t0, t1, texels);
+            resolve_mixed(spans, shadow, light_pos, fl.shadow_bias, fl.shadow_filter, origin, dir, t0, t1, texels);
         } else {
             spans.add(t0, t1, v);
         }
@@ -823,7 +927,7 @@ pub fn passes(
     };
     let t = std::time::Instant::now();
     let rect = Rectification::new(desc, &settings.rectify_options());
-    let host = host_depth.filter(|_| rect.mode == Mode::Projective);
+    let host = host_depth.filter(|_| super::reads_host_raster(desc, &rect));
     if let Some(d) = host
         && d.len() != (rect.width * rect.height) as usize
     {
@@ -854,7 +958,7 @@ pub fn render_with(
     let settings = &settings.for_frame(frame.desc);
     let (p, times) = passes(frame, settings, host_depth)?;
     let epipole = epipole_pixel(frame.desc, settings.epipole_radius);
-    let host = host_depth.is_some() && p.rect.mode == Mode::Projective;
+    let host = host_depth.is_some() && super::reads_host_raster(frame.desc, &p.rect);
     let stats = TechniqueStats {
         technique: "minmax".into(),
         backend: "cpu".into(),

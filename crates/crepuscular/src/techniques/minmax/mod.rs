@@ -201,7 +201,7 @@ impl TreeBuilder {
         let desc = frame.desc;
         let [w, h] = s.map_size;
         let rect = Rectification::new(desc, &s.rectify_options());
-        let host = frame.rectified_shadow_map().filter(|_| host_raster && rect.mode == Mode::Projective);
+        let host = frame.rectified_shadow_map().filter(|_| host_raster && reads_host_raster(desc, &rect));
         if let Some(view) = host {
             let size = view.texture().size();
             if [size.width, size.height] != [w, h] {
@@ -443,8 +443,21 @@ impl crate::techniques::Technique for MinmaxSettings {
         cpu::render_with(frame, self, rectified)
     }
     fn raster_request(&self, desc: &crate::frame::FrameDesc) -> Option<RectifiedRaster> {
-        Rectification::new(desc, &self.rectify_options()).raster()
+        let rect = Rectification::new(desc, &self.rectify_options());
+        if !reads_host_raster(desc, &rect) {
+            return None;
+        }
+        rect.raster()
     }
+}
+
+/// Whether level 0 of the tree comes from a rectified map the host rasterized, where one is
+/// given: a projective rectification under the nearest shadow filter. That raster is one
+/// depth per rectified texel, the shadow test itself at the rectified map's resolution; the
+/// bilinear filter's answer blends the standard map's texels, so under it level 0 always
+/// bounds the standard map and mixed texels are resolved there (docs/MODEL.md §8).
+pub(crate) fn reads_host_raster(desc: &crate::frame::FrameDesc, rect: &Rectification) -> bool {
+    rect.mode == Mode::Projective && desc.lights[0].shadow_filter == crate::shadow::ShadowFilter::Nearest
 }
 
 gpu_technique!(MinMax, MinmaxSettings);

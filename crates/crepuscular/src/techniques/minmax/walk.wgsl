@@ -88,11 +88,48 @@ fn segment_light(f: Frame, sp: ptr<function, Spans>, k: u32) -> vec3<f32> {
     return l;
 }
 
-fn spans_add(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, v: f32) {
+// model.rs ramp_transmittance: ∫₀^Δ q(t)·exp(−σt·t) dt for the quadratic q through
+// v = (q(0), q(Δ/2), q(Δ)); J₁ and J₂ by their power series below x = 1, in closed form above.
+fn ramp_moment(s: f32, delta: f32, c1: f32, c2: f32) -> f32 {
+    let x = s * delta;
+    var j1 = 0.0;
+    var j2 = 0.0;
+    if x < 1.0 {
+        var term = 1.0;
+        for (var m = 0u; m < 10u; m++) {
+            j1 += term / (f32(m) + 2.0);
+            j2 += term / (f32(m) + 3.0);
+            term *= -x / (f32(m) + 1.0);
+        }
+    } else {
+        let e = exp(-x);
+        j1 = (1.0 - e * (1.0 + x)) / (x * x);
+        j2 = (2.0 - e * (2.0 + x * (2.0 + x))) / (x * x * x);
+    }
+    return delta * (c1 * j1 + c2 * j2);
+}
+
+fn ramp_transmittance(st: vec3<f32>, delta: f32, v: vec3<f32>) -> vec3<f32> {
+    let c1 = 4.0 * (v.y - v.x) - (v.z - v.x);
+    let c2 = 2.0 * (v.z - v.x) - 4.0 * (v.y - v.x);
+    let base = segment_transmittance(st, delta) * v.x;
+    if c1 == 0.0 && c2 == 0.0 {
+        return base;
+    }
+    return base + vec3<f32>(
+        ramp_moment(st.x, delta, c1, c2),
+        ramp_moment(st.y, delta, c1, c2),
+        ramp_moment(st.z, delta, c1, c2),
+    );
+}
+
+// cpu.rs Spans::add_ramp: the span [t0, t1] whose visibility is the quadratic through v (its
+// values at t0, the middle and t1).
+fn spans_add_ramp(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, v: vec3<f32>) {
     let st = extinction(f);
     if (*sp).directional {
         if t1 > t0 {
-            (*sp).sum += (*sp).constant * v * exp(-st * t0) * segment_transmittance(st, t1 - t0);
+            (*sp).sum += (*sp).constant * exp(-st * t0) * ramp_transmittance(st, t1 - t0, v);
         }
         return;
     }
@@ -102,6 +139,9 @@ fn spans_add(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, v:
     if !(b > a) || !(segs.delta > 0.0) {
         return;
     }
+    let c1 = 4.0 * (v.y - v.x) - (v.z - v.x);
+    let c2 = 2.0 * (v.z - v.x) - 4.0 * (v.y - v.x);
+    let constant = c1 == 0.0 && c2 == 0.0;
     let steps = segs.n;
     var k = step_index(segs, a);
     loop {
@@ -111,7 +151,12 @@ fn spans_add(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, v:
         let end = min(b, step_boundary(segs, k + 1u));
         if end > a {
             let l = segment_light(f, sp, k);
-            (*sp).sum += l * v * exp(-st * a) * segment_transmittance(st, end - a);
+            var va = v;
+            if !constant {
+                let r = (vec3<f32>(a, 0.5 * (a + end), end) - t0) / (t1 - t0);
+                va = v.x + r * (c1 + r * c2);
+            }
+            (*sp).sum += l * exp(-st * a) * ramp_transmittance(st, end - a, va);
         }
         a = max(a, end);
         k += 1u;
@@ -119,6 +164,10 @@ fn spans_add(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, v:
             break;
         }
     }
+}
+
+fn spans_add(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32, v: f32) {
+    spans_add_ramp(f, p, sp, t0, t1, vec3<f32>(v));
 }
 
 // cpu.rs MAX_PIECES: the most texel-edge steps per mixed texel of a run.
@@ -176,16 +225,11 @@ fn span_breaks(l: Light, o: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32) -> Brea
     return br;
 }
 
-// cpu.rs resolve_mixed's `piece`: the lit part of [a, b], one texel throughout, on face `layer`
-// (clip line c + t·d); the texel is the one at the piece's midpoint (shadow_coord_clip on the
-// line).
-fn resolve_piece(l: Light, a: f32, b: f32, layer: u32, c: vec4<f32>, d: vec4<f32>) -> vec2<f32> {
-    let sc = shadow_coord_clip(l, layer, c + d * (0.5 * (a + b)));
-    if !sc.valid {
-        return vec2<f32>(a, b);
-    }
+// cpu.rs resolve_mixed's `lit_part`: the lit part of [a, b] at texel `texel` on face `layer`
+// (clip line c + t·d).
+fn lit_part(l: Light, texel: vec2<u32>, a: f32, b: f32, layer: u32, c: vec4<f32>, d: vec4<f32>) -> vec2<f32> {
     // An empty texel lights the whole piece, beyond the far plane too (shadow_coord_clip).
-    let raw = textureLoad(shadow_map, vec2<i32>(sc.texel), i32(l.shadow_first_layer + layer), 0).r;
+    let raw = textureLoad(shadow_map, vec2<i32>(texel), i32(l.shadow_first_layer + layer), 0).r;
     if (l.shadow_clear == 1.0 && raw >= 1.0) || (l.shadow_clear == 0.0 && raw <= 0.0) {
         return vec2<f32>(a, b);
     }
@@ -208,6 +252,41 @@ fn resolve_piece(l: Light, a: f32, b: f32, layer: u32, c: vec4<f32>, d: vec4<f32
     return vec2<f32>(b, b);
 }
 
+// cpu.rs next_edge: the next texel edge after u in direction s along one axis (nearest: the
+// texel edges; bilinear: the lines between texel centres and the map's own edges).
+fn next_edge(u: f32, s: f32, size: f32, bilinear: bool) -> f32 {
+    if s > 0.0 {
+        if !bilinear {
+            return max(floor(u) + 1.0, 0.0);
+        }
+        if u < 0.0 {
+            return 0.0;
+        }
+        let e = floor(u - 0.5) + 1.5;
+        if e > size && u < size {
+            return size;
+        }
+        return e;
+    }
+    if !bilinear {
+        return min(ceil(u) - 1.0, size);
+    }
+    if u > size {
+        return size;
+    }
+    let e = ceil(u - 0.5) - 0.5;
+    if e < 0.0 && u > 0.0 {
+        return 0.0;
+    }
+    return e;
+}
+
+// cpu.rs texel coordinates (X, Y) = n·(x/w·½ + ½, ½ − y/w·½) of the clip line c + t·d.
+fn line_texel(c: vec4<f32>, d: vec4<f32>, t: f32, size: f32) -> vec2<f32> {
+    let q = c + d * t;
+    return vec2<f32>(size * (q.x / q.w * 0.5 + 0.5), size * (0.5 - q.y / q.w * 0.5));
+}
+
 // cpu.rs LitRun: the pending lit span (x, y) of resolve_mixed; a lit part (a, b) that starts
 // where it ends extends it, any other is integrated.
 fn lit_run_add(f: Frame, p: Params, sp: ptr<function, Spans>, run: ptr<function, vec2<f32>>, a: f32, b: f32) {
@@ -224,6 +303,81 @@ fn lit_run_add(f: Frame, p: Params, sp: ptr<function, Spans>, run: ptr<function,
     *run = vec2<f32>(a, b);
 }
 
+// cpu.rs resolve_mixed's `piece`: the lit parts of [p0, p1], its texels fixed (those at its
+// midpoint), into `run` and `sp`; under the bilinear filter the four texels' lit parts cut it
+// further and each part adds the bilinear blend of the texels lit there as a quadratic ramp.
+fn resolve_piece(f: Frame, p: Params, sp: ptr<function, Spans>, run: ptr<function, vec2<f32>>, p0: f32, p1: f32, layer: u32, c: vec4<f32>, d: vec4<f32>) {
+    let l = lights.items[0];
+    let sc = shadow_coord_clip(l, layer, c + d * (0.5 * (p0 + p1)));
+    if !sc.valid {
+        lit_run_add(f, p, sp, run, p0, p1);
+        return;
+    }
+    if l.shadow_filter != SHADOW_FILTER_BILINEAR {
+        let lit = lit_part(l, sc.texel, p0, p1, layer, c, d);
+        lit_run_add(f, p, sp, run, lit.x, lit.y);
+        return;
+    }
+    let size = f32(l.shadow_size);
+    let fp = bilinear_footprint(sc.uv, l.shadow_size);
+    let q = fp.corner;
+    let corner = floor(sc.uv * size - 0.5);
+    var lit: array<vec2<f32>, 4>;
+    lit[0] = lit_part(l, q.xy, p0, p1, layer, c, d);
+    lit[1] = lit_part(l, q.zy, p0, p1, layer, c, d);
+    lit[2] = lit_part(l, q.xw, p0, p1, layer, c, d);
+    lit[3] = lit_part(l, q.zw, p0, p1, layer, c, d);
+    var cuts: array<f32, 10>;
+    cuts[0] = p0;
+    var n = 1u;
+    for (var i = 0u; i < 4u; i++) {
+        if lit[i].y > lit[i].x {
+            cuts[n] = lit[i].x;
+            cuts[n + 1u] = lit[i].y;
+            n += 2u;
+        }
+    }
+    cuts[n] = p1;
+    n += 1u;
+    for (var i = 1u; i < n; i++) {
+        var k = i;
+        while k > 0u && cuts[k - 1u] > cuts[k] {
+            let x = cuts[k];
+            cuts[k] = cuts[k - 1u];
+            cuts[k - 1u] = x;
+            k -= 1u;
+        }
+    }
+    for (var i = 0u; i + 1u < n; i++) {
+        let s0 = cuts[i];
+        let s1 = cuts[i + 1u];
+        if !(s1 > s0) {
+            continue;
+        }
+        let sm = 0.5 * (s0 + s1);
+        var m = vec4<f32>(0.0);
+        for (var j = 0u; j < 4u; j++) {
+            if lit[j].y > lit[j].x && lit[j].x <= sm && sm <= lit[j].y {
+                m[j] = 1.0;
+            }
+        }
+        if all(m == vec4<f32>(1.0)) {
+            lit_run_add(f, p, sp, run, s0, s1);
+        } else if any(m != vec4<f32>(0.0)) {
+            // The bilinear blend of the lit texels' tests (shadow_visibility), at s0, sm, s1.
+            var v = vec3<f32>(0.0);
+            for (var j = 0u; j < 3u; j++) {
+                let t = select(select(s1, sm, j == 1u), s0, j == 0u);
+                let w = clamp(line_texel(c, d, t, size) - 0.5 - corner, vec2<f32>(0.0), vec2<f32>(1.0));
+                let top = m.x + (m.y - m.x) * w.x;
+                let bottom = m.z + (m.w - m.z) * w.x;
+                v[j] = top + (bottom - top) * w.y;
+            }
+            spans_add_ramp(f, p, sp, s0, s1, v);
+        }
+    }
+}
+
 // cpu.rs resolve_mixed: the exact visibility of a mixed texel's span [t0, t1] against the
 // standard shadow map, piece by piece between texel edges; at most MAX_PIECES edge steps per
 // texel of the run (`texels`).
@@ -235,6 +389,7 @@ fn resolve_mixed(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32
     let o = f.camera_pos.xyz;
     let dir = (*sp).dir;
     let size = f32(l.shadow_size);
+    let bilinear = l.shadow_filter == SHADOW_FILTER_BILINEAR;
     let br = span_breaks(l, o, dir, t0, t1);
     let max_steps = MAX_PIECES * max(texels, 1u);
     var steps = 0u;
@@ -262,23 +417,13 @@ fn resolve_mixed(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32
             a = b;
             continue;
         }
-        let qa = c + d * a;
-        let qb = c + d * b;
-        let pa = vec2<f32>(size * (qa.x / qa.w * 0.5 + 0.5), size * (0.5 - qa.y / qa.w * 0.5));
-        let pb = vec2<f32>(size * (qb.x / qb.w * 0.5 + 0.5), size * (0.5 - qb.y / qb.w * 0.5));
+        let pa = line_texel(c, d, a, size);
+        let pb = line_texel(c, d, b, size);
         // Only the edges 0..=n matter: outside the map every point is lit.
-        var kx = min(ceil(pa.x) - 1.0, size);
-        var sx = -1.0;
-        if pb.x > pa.x {
-            kx = max(floor(pa.x) + 1.0, 0.0);
-            sx = 1.0;
-        }
-        var ky = min(ceil(pa.y) - 1.0, size);
-        var sy = -1.0;
-        if pb.y > pa.y {
-            ky = max(floor(pa.y) + 1.0, 0.0);
-            sy = 1.0;
-        }
+        let sx = select(-1.0, 1.0, pb.x > pa.x);
+        let sy = select(-1.0, 1.0, pb.y > pa.y);
+        var kx = next_edge(pa.x, sx, size, bilinear);
+        var ky = next_edge(pa.y, sy, size, bilinear);
         var t = a;
         loop {
             var tx = INF;
@@ -300,17 +445,16 @@ fn resolve_mixed(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f32
                 e = b;
             }
             if e > t {
-                let lit = resolve_piece(l, t, e, layer, c, d);
-                lit_run_add(f, p, sp, &run, lit.x, lit.y);
+                resolve_piece(f, p, sp, &run, t, e, layer, c, d);
                 t = e;
             }
             if t >= b {
                 break;
             }
             if tx <= ty {
-                kx += sx;
+                kx = next_edge(kx, sx, size, bilinear);
             } else {
-                ky += sy;
+                ky = next_edge(ky, sy, size, bilinear);
             }
         }
         a = b;

@@ -154,8 +154,8 @@ pub struct FrameLight {
     /// How the in-scattering reads this light's shadow map: the nearest texel (binary
     /// visibility) or a 2×2 bilinear percentage-closer filter (four reads per sample instead
     /// of one; docs/MODEL.md §1 "Visibility"). Read by the reference and every step-by-step
-    /// march ([`ShadowFilter`] lists them); `minmax`'s walk and `prefiltered`'s filtered maps
-    /// keep their own visibility outside the epipole disc. Default [`ShadowFilter::Nearest`].
+    /// march ([`ShadowFilter`] lists them) and by `minmax`'s walk; `prefiltered`'s filtered
+    /// maps keep their own visibility outside the epipole disc. Default [`ShadowFilter::Nearest`].
     pub shadow_filter: ShadowFilter,
     /// First layer of this light's shadow map in the frame's shadow-map array
     /// ([`GpuFrame::shadow_maps`]); the map takes `shadow.layers` layers from there. Default 0.

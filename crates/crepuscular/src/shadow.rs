@@ -71,10 +71,10 @@ impl Default for ShadowSettings {
 /// How the in-scattering reads a light's shadow map at a sample point: the visibility V of
 /// docs/MODEL.md §1 ("Visibility"), for the reference and every step-by-step march
 /// (brute-force, interleaved, subsampled, epipolar's stepped samples and re-marched pixels, and
-/// the ray-marched epipole disc of `minmax` and `prefiltered`). `minmax`'s walk (and epipolar's
-/// `march = "minmax"`) always tests the nearest texel (the walk is exact for that step
-/// function, docs/MODEL.md §8) and `prefiltered` has its own filtered visibility (Klehm et al.
-/// 2014 §3): outside the epipole disc those two ignore this setting.
+/// the ray-marched epipole disc of `minmax` and `prefiltered`), and `minmax`'s walk (and
+/// epipolar's `march = "minmax"`), which integrates either filter exactly in its mixed texels
+/// (docs/MODEL.md §8). `prefiltered` has its own filtered visibility (Klehm et al. 2014 §3):
+/// outside the epipole disc it ignores this setting.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ShadowFilter {
@@ -86,7 +86,9 @@ pub enum ShadowFilter {
     /// results weighted by the point's bilinear position between their centres (what a
     /// comparison sampler with linear filtering returns in an engine's own lookups, Bevy's
     /// and Unreal's). V ramps across one texel instead of stepping, so a march's samples
-    /// alias less on shaft edges. Cost: four texture reads per sample instead of one.
+    /// alias less on shaft edges. Cost: four texture reads per sample instead of one; for
+    /// `minmax`, more mixed texels and four reads per piece of each (docs/RESULTS.md,
+    /// "minmax under the bilinear filter").
     Bilinear,
 }
 

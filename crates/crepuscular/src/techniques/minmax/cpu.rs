@@ -658,6 +658,14 @@ pub fn resolve_mixed(
             let weights = |t: f32| (xy(t) - 0.5 - corner).clamp(Vec2::ZERO, Vec2::ONE);
             let texels = [(x0, y0), (x1, y0), (x0, y1), (x1, y1)];
             let lit = texels.map(|(x, y)| lit_part(x, y, p0, p1, layer, c, d));
+            // Most pieces of a mixed texel are lit or shadowed by all four texels throughout.
+            if lit.iter().all(|&(la, lb)| la == p0 && lb == p1) {
+                run.add(spans, p0, p1);
+                return;
+            }
+            if lit.iter().all(|&(la, lb)| !(lb > la)) {
+                return;
+            }
             // The parts between the ends of the four lit parts, each lit at a fixed set.
             let mut cuts = [p0; 10];
             let mut n = 1;

@@ -666,21 +666,22 @@ pub fn resolve_mixed(
             if lit.iter().all(|&(la, lb)| !(lb > la)) {
                 return;
             }
-            // The parts between the ends of the four lit parts, each lit at a fixed set.
-            let mut cuts = [p0; 10];
-            let mut n = 1;
-            for &(la, lb) in &lit {
-                if lb > la {
-                    cuts[n] = la;
-                    cuts[n + 1] = lb;
-                    n += 2;
+            // Each lit part starts at p0 or ends at p1 (`lit_part`), so it has at most one end
+            // inside the piece: four cuts (p1 where a part has none), sorted. Between two
+            // cuts the set of lit texels is fixed.
+            let inner_end = |(la, lb): (f32, f32)| {
+                if lb > la && la > p0 {
+                    la
+                } else if lb > la && lb < p1 {
+                    lb
+                } else {
+                    p1
                 }
-            }
-            cuts[n] = p1;
-            n += 1;
-            let cuts = &mut cuts[..n];
-            cuts.sort_by(f32::total_cmp);
-            for w in cuts.windows(2) {
+            };
+            let mut k = lit.map(inner_end);
+            k.sort_by(f32::total_cmp);
+            let ends = [p0, k[0], k[1], k[2], k[3], p1];
+            for w in ends.windows(2) {
                 let (s0, s1) = (w[0], w[1]);
                 if !(s1 > s0) {
                     continue;

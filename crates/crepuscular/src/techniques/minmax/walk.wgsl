@@ -303,6 +303,20 @@ fn lit_run_add(f: Frame, p: Params, sp: ptr<function, Spans>, run: ptr<function,
     *run = vec2<f32>(a, b);
 }
 
+// 1 where the lit part `lit` (x, y) holds t, else 0.
+fn lit_at(lit: vec2<f32>, t: f32) -> f32 {
+    return select(0.0, 1.0, lit.y > lit.x && lit.x <= t && t <= lit.y);
+}
+
+// The bilinear blend of the four texels' tests m at weights w (clamped to [0, 1]), as
+// shadow_visibility writes it.
+fn blend(m: vec4<f32>, w_raw: vec2<f32>) -> f32 {
+    let w = clamp(w_raw, vec2<f32>(0.0), vec2<f32>(1.0));
+    let top = m.x + (m.y - m.x) * w.x;
+    let bottom = m.z + (m.w - m.z) * w.x;
+    return top + (bottom - top) * w.y;
+}
+
 // cpu.rs resolve_mixed's `piece`: the lit parts of [p0, p1], its texels fixed (those at its
 // midpoint), into `run` and `sp`; under the bilinear filter the four texels' lit parts cut it
 // further and each part adds the bilinear blend of the texels lit there as a quadratic ramp.
@@ -341,54 +355,49 @@ fn resolve_piece(f: Frame, p: Params, sp: ptr<function, Spans>, run: ptr<functio
     if none == 4u {
         return;
     }
-    var cuts: array<f32, 10>;
-    cuts[0] = p0;
-    var n = 1u;
-    for (var i = 0u; i < 4u; i++) {
-        if lit[i].y > lit[i].x {
-            cuts[n] = lit[i].x;
-            cuts[n + 1u] = lit[i].y;
-            n += 2u;
-        }
+    // Each lit part starts at p0 or ends at p1 (lit_part), so it has at most one end inside
+    // the piece: four cuts (p1 where a part has none), sorted by a network of five
+    // compare-exchanges.
+    var k = vec4<f32>(inner_end(lit[0], p0, p1), inner_end(lit[1], p0, p1), inner_end(lit[2], p0, p1), inner_end(lit[3], p0, p1));
+    k = vec4<f32>(min(k.x, k.y), max(k.x, k.y), min(k.z, k.w), max(k.z, k.w));
+    k = vec4<f32>(min(k.x, k.z), min(k.y, k.w), max(k.x, k.z), max(k.y, k.w));
+    k = vec4<f32>(k.x, min(k.y, k.z), max(k.y, k.z), k.w);
+    resolve_part(f, p, sp, run, p0, k.x, lit, corner, c, d, size);
+    resolve_part(f, p, sp, run, k.x, k.y, lit, corner, c, d, size);
+    resolve_part(f, p, sp, run, k.y, k.z, lit, corner, c, d, size);
+    resolve_part(f, p, sp, run, k.z, k.w, lit, corner, c, d, size);
+    resolve_part(f, p, sp, run, k.w, p1, lit, corner, c, d, size);
+}
+
+// cpu.rs resolve_mixed's `inner_end`: the end of lit part `lit` strictly inside (p0, p1), or p1.
+fn inner_end(lit: vec2<f32>, p0: f32, p1: f32) -> f32 {
+    if lit.y > lit.x && lit.x > p0 {
+        return lit.x;
     }
-    cuts[n] = p1;
-    n += 1u;
-    for (var i = 1u; i < n; i++) {
-        var k = i;
-        while k > 0u && cuts[k - 1u] > cuts[k] {
-            let x = cuts[k];
-            cuts[k] = cuts[k - 1u];
-            cuts[k - 1u] = x;
-            k -= 1u;
-        }
+    if lit.y > lit.x && lit.y < p1 {
+        return lit.y;
     }
-    for (var i = 0u; i + 1u < n; i++) {
-        let s0 = cuts[i];
-        let s1 = cuts[i + 1u];
-        if !(s1 > s0) {
-            continue;
-        }
-        let sm = 0.5 * (s0 + s1);
-        var m = vec4<f32>(0.0);
-        for (var j = 0u; j < 4u; j++) {
-            if lit[j].y > lit[j].x && lit[j].x <= sm && sm <= lit[j].y {
-                m[j] = 1.0;
-            }
-        }
-        if all(m == vec4<f32>(1.0)) {
-            lit_run_add(f, p, sp, run, s0, s1);
-        } else if any(m != vec4<f32>(0.0)) {
-            // The bilinear blend of the lit texels' tests (shadow_visibility), at s0, sm, s1.
-            var v = vec3<f32>(0.0);
-            for (var j = 0u; j < 3u; j++) {
-                let t = select(select(s1, sm, j == 1u), s0, j == 0u);
-                let w = clamp(line_texel(c, d, t, size) - 0.5 - corner, vec2<f32>(0.0), vec2<f32>(1.0));
-                let top = m.x + (m.y - m.x) * w.x;
-                let bottom = m.z + (m.w - m.z) * w.x;
-                v[j] = top + (bottom - top) * w.y;
-            }
-            spans_add_ramp(f, p, sp, s0, s1, v);
-        }
+    return p1;
+}
+
+// One part [s0, s1] of a piece under the bilinear filter, its lit texels fixed: lit by all
+// four, by none, or the blend of those lit as a quadratic ramp.
+fn resolve_part(f: Frame, p: Params, sp: ptr<function, Spans>, run: ptr<function, vec2<f32>>, s0: f32, s1: f32, lit: array<vec2<f32>, 4>, corner: vec2<f32>, c: vec4<f32>, d: vec4<f32>, size: f32) {
+    if !(s1 > s0) {
+        return;
+    }
+    let sm = 0.5 * (s0 + s1);
+    let m = vec4<f32>(lit_at(lit[0], sm), lit_at(lit[1], sm), lit_at(lit[2], sm), lit_at(lit[3], sm));
+    if all(m == vec4<f32>(1.0)) {
+        lit_run_add(f, p, sp, run, s0, s1);
+    } else if any(m != vec4<f32>(0.0)) {
+        // The bilinear blend of the lit texels' tests (shadow_visibility), at s0, sm, s1.
+        let v = vec3<f32>(
+            blend(m, line_texel(c, d, s0, size) - 0.5 - corner),
+            blend(m, line_texel(c, d, sm, size) - 0.5 - corner),
+            blend(m, line_texel(c, d, s1, size) - 0.5 - corner),
+        );
+        spans_add_ramp(f, p, sp, s0, s1, v);
     }
 }
 

@@ -299,6 +299,14 @@ pub fn segment_transmittance(sigma_t: Vec3, delta: f32) -> Vec3 {
     Vec3::new(f(sigma_t.x), f(sigma_t.y), f(sigma_t.z))
 }
 
+/// (c₁, c₂) of the quadratic q(r) = v₀ + c₁·r + c₂·r² on r ∈ [0, 1] through `v` = [q(0),
+/// q(½), q(1)]; both exactly 0 where the three values are equal. Mirrors `ramp_coefficients`
+/// in walk.wgsl.
+pub fn ramp_coefficients(v: [f32; 3]) -> (f32, f32) {
+    let [v0, vm, v1] = v;
+    (4.0 * (vm - v0) - (v1 - v0), 2.0 * (v1 - v0) - 4.0 * (vm - v0))
+}
+
 /// ∫₀^Δ q(t)·exp(−σt·t) dt, per channel, for the quadratic q through `v` = [q(0), q(Δ/2), q(Δ)]:
 /// the transmittance integral of a visibility that ramps along the span (`minmax`'s mixed texels
 /// under the bilinear shadow filter, docs/MODEL.md §8). With r = t/Δ, q = v₀ + c₁·r + c₂·r² and
@@ -307,9 +315,8 @@ pub fn segment_transmittance(sigma_t: Vec3, delta: f32) -> Vec3 {
 /// (all three equal) gives v₀·[`segment_transmittance`] exactly. Mirrors `ramp_transmittance`
 /// in walk.wgsl.
 pub fn ramp_transmittance(sigma_t: Vec3, delta: f32, v: [f32; 3]) -> Vec3 {
-    let [v0, vm, v1] = v;
-    let c1 = 4.0 * (vm - v0) - (v1 - v0);
-    let c2 = 2.0 * (v1 - v0) - 4.0 * (vm - v0);
+    let [v0, ..] = v;
+    let (c1, c2) = ramp_coefficients(v);
     let base = segment_transmittance(sigma_t, delta) * v0;
     if c1 == 0.0 && c2 == 0.0 {
         return base;

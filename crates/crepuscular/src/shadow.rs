@@ -436,12 +436,19 @@ impl ShadowMap {
             ShadowFilter::Bilinear => {
                 let (corner, w) = bilinear_footprint(sc.uv, pr.size);
                 let [x0, y0, x1, y1] = corner;
-                let top = lit(x0, y0) + (lit(x1, y0) - lit(x0, y0)) * w.x;
-                let bottom = lit(x0, y1) + (lit(x1, y1) - lit(x0, y1)) * w.x;
-                top + (bottom - top) * w.y
+                bilinear_blend([lit(x0, y0), lit(x1, y0), lit(x0, y1), lit(x1, y1)], w)
             }
         }
     }
+}
+
+/// The bilinear blend of the 2×2 texels' tests `v` = [v00, v10, v01, v11] (in the order of
+/// [`bilinear_footprint`]'s corners) at the weights `w` of x1 and y1: a + (b − a)·w along x,
+/// then along y. Mirrors `bilinear_blend` in common.wgsl.
+pub fn bilinear_blend(v: [f32; 4], w: Vec2) -> f32 {
+    let top = v[0] + (v[1] - v[0]) * w.x;
+    let bottom = v[2] + (v[3] - v[2]) * w.x;
+    top + (bottom - top) * w.y
 }
 
 /// The 2×2 texels around `uv` in a `size`² map and the bilinear weights between their centres:

@@ -299,10 +299,16 @@ fn shadow_visibility(l: Light, shadow_map: texture_2d_array<f32>, p: vec3<f32>) 
     let v10 = shadow_lit(l, shadow_map, c.zy, sc.layer, sc.depth);
     let v01 = shadow_lit(l, shadow_map, c.xw, sc.layer, sc.depth);
     let v11 = shadow_lit(l, shadow_map, c.zw, sc.layer, sc.depth);
-    // a + (b − a)·w, as the Rust twin writes it (not mix(), whose rounding is the driver's).
-    let top = v00 + (v10 - v00) * fp.w.x;
-    let bottom = v01 + (v11 - v01) * fp.w.x;
-    return top + (bottom - top) * fp.w.y;
+    return bilinear_blend(vec4<f32>(v00, v10, v01, v11), fp.w);
+}
+
+// shadow.rs bilinear_blend: the 2×2 texels' tests v = (v00, v10, v01, v11) blended at the
+// weights w of x1 and y1; a + (b − a)·w, as the Rust twin writes it (not mix(), whose rounding
+// is the driver's).
+fn bilinear_blend(v: vec4<f32>, w: vec2<f32>) -> f32 {
+    let top = v.x + (v.y - v.x) * w.x;
+    let bottom = v.z + (v.w - v.z) * w.x;
+    return top + (bottom - top) * w.y;
 }
 
 // model.rs RgbTexture::sample: bilinear, clamp to edge, four loads, in the top-left `size`

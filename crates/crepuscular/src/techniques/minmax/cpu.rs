@@ -8,8 +8,8 @@ use crate::frame::{CpuFrame, FrameDesc};
 use crate::image::Image;
 use crate::integrand::{light_incident, light_position};
 use crate::march::{Step, Steps, light_reach, local_position, march_interval};
-use crate::model::ramp_transmittance;
-use crate::shadow::{ShadowFilter, ShadowMap, bilinear_footprint, cube_face};
+use crate::model::{ramp_coefficients, ramp_transmittance};
+use crate::shadow::{ShadowFilter, ShadowMap, bilinear_blend, bilinear_footprint, cube_face};
 use crate::stats::{PassTime, TechniqueStats};
 use crate::techniques::prefiltered::cpu::{in_epipole_disc, march_epipole, texel_depth};
 use crate::techniques::prefiltered::rectify::{Mode, Rectification, angle_between};
@@ -391,8 +391,8 @@ impl<'a> Spans<'a> {
             return;
         }
         // The quadratic at t, from its three values over [t0, t1].
-        let [v0, vm, v1] = v;
-        let (c1, c2) = (4.0 * (vm - v0) - (v1 - v0), 2.0 * (v1 - v0) - 4.0 * (vm - v0));
+        let [v0, ..] = v;
+        let (c1, c2) = ramp_coefficients(v);
         let q = |t: f32| {
             let r = (t - t0) / (t1 - t0);
             v0 + r * (c1 + r * c2)
@@ -692,13 +692,7 @@ pub fn resolve_mixed(
                     run.add(spans, s0, s1);
                 } else if on.iter().any(|&o| o) {
                     // The bilinear blend of the lit texels' tests (ShadowMap::visibility).
-                    let v = |t: f32| {
-                        let w = weights(t);
-                        let m = on.map(|o| o as u32 as f32);
-                        let top = m[0] + (m[1] - m[0]) * w.x;
-                        let bottom = m[2] + (m[3] - m[2]) * w.x;
-                        top + (bottom - top) * w.y
-                    };
+                    let v = |t: f32| bilinear_blend(on.map(|o| o as u32 as f32), weights(t));
                     spans.add_ramp(s0, s1, [v(s0), v(sm), v(s1)]);
                 }
             }

@@ -109,9 +109,15 @@ fn ramp_moment(s: f32, delta: f32, c1: f32, c2: f32) -> f32 {
     return delta * (c1 * j1 + c2 * j2);
 }
 
+// model.rs ramp_coefficients: (c₁, c₂) of the quadratic through v = (q(0), q(½), q(1)).
+fn ramp_coefficients(v: vec3<f32>) -> vec2<f32> {
+    return vec2<f32>(4.0 * (v.y - v.x) - (v.z - v.x), 2.0 * (v.z - v.x) - 4.0 * (v.y - v.x));
+}
+
 fn ramp_transmittance(st: vec3<f32>, delta: f32, v: vec3<f32>) -> vec3<f32> {
-    let c1 = 4.0 * (v.y - v.x) - (v.z - v.x);
-    let c2 = 2.0 * (v.z - v.x) - 4.0 * (v.y - v.x);
+    let coef = ramp_coefficients(v);
+    let c1 = coef.x;
+    let c2 = coef.y;
     let base = segment_transmittance(st, delta) * v.x;
     if c1 == 0.0 && c2 == 0.0 {
         return base;
@@ -139,8 +145,9 @@ fn spans_add_ramp(f: Frame, p: Params, sp: ptr<function, Spans>, t0: f32, t1: f3
     if !(b > a) || !(segs.delta > 0.0) {
         return;
     }
-    let c1 = 4.0 * (v.y - v.x) - (v.z - v.x);
-    let c2 = 2.0 * (v.z - v.x) - 4.0 * (v.y - v.x);
+    let coef = ramp_coefficients(v);
+    let c1 = coef.x;
+    let c2 = coef.y;
     let constant = c1 == 0.0 && c2 == 0.0;
     let steps = segs.n;
     var k = step_index(segs, a);
@@ -308,13 +315,10 @@ fn lit_at(lit: vec2<f32>, t: f32) -> f32 {
     return select(0.0, 1.0, lit.y > lit.x && lit.x <= t && t <= lit.y);
 }
 
-// The bilinear blend of the four texels' tests m at weights w (clamped to [0, 1]), as
-// shadow_visibility writes it.
-fn blend(m: vec4<f32>, w_raw: vec2<f32>) -> f32 {
-    let w = clamp(w_raw, vec2<f32>(0.0), vec2<f32>(1.0));
-    let top = m.x + (m.y - m.x) * w.x;
-    let bottom = m.z + (m.w - m.z) * w.x;
-    return top + (bottom - top) * w.y;
+// cpu.rs resolve_mixed's `weights`: the bilinear weights of x1 and y1 at t, from the piece's
+// fixed footprint corner, clamped to [0, 1].
+fn piece_weights(c: vec4<f32>, d: vec4<f32>, t: f32, size: f32, corner: vec2<f32>) -> vec2<f32> {
+    return clamp(line_texel(c, d, t, size) - 0.5 - corner, vec2<f32>(0.0), vec2<f32>(1.0));
 }
 
 // cpu.rs resolve_mixed's `piece`: the lit parts of [p0, p1], its texels fixed (those at its
@@ -393,9 +397,9 @@ fn resolve_part(f: Frame, p: Params, sp: ptr<function, Spans>, run: ptr<function
     } else if any(m != vec4<f32>(0.0)) {
         // The bilinear blend of the lit texels' tests (shadow_visibility), at s0, sm, s1.
         let v = vec3<f32>(
-            blend(m, line_texel(c, d, s0, size) - 0.5 - corner),
-            blend(m, line_texel(c, d, sm, size) - 0.5 - corner),
-            blend(m, line_texel(c, d, s1, size) - 0.5 - corner),
+            bilinear_blend(m, piece_weights(c, d, s0, size, corner)),
+            bilinear_blend(m, piece_weights(c, d, sm, size, corner)),
+            bilinear_blend(m, piece_weights(c, d, s1, size, corner)),
         );
         spans_add_ramp(f, p, sp, s0, s1, v);
     }

@@ -48,8 +48,9 @@ struct Args {
     #[arg(long, value_delimiter = ',')]
     techniques: Vec<String>,
     /// How the plugin's lights read Bevy's shadow maps (`CrepuscularLight::shadow_filter`):
-    /// nearest (one texel) or bilinear (2×2 percentage-closer, as Bevy's own lookups).
-    #[arg(long, default_value = "nearest", value_parser = crepuscular::ShadowFilter::parse)]
+    /// bilinear (2×2 percentage-closer, as Bevy's own lookups; the plugin's default) or nearest
+    /// (one texel).
+    #[arg(long, default_value = "bilinear", value_parser = crepuscular::ShadowFilter::parse)]
     shadow_filter: crepuscular::ShadowFilter,
     /// Output folder.
     #[arg(long, default_value = "bevy-versus")]
@@ -114,7 +115,7 @@ fn run(args: Args) -> Result<(), String> {
     ));
     // The plugin's rows name a non-default shadow filter, so tables of both can be merged.
     let filter = match args.shadow_filter {
-        crepuscular::ShadowFilter::Nearest => String::new(),
+        crepuscular::ShadowFilter::Bilinear => String::new(),
         f => format!(", {} shadow filter", f.name()),
     };
     let mut converged = crepuscular::techniques::presets::Preset::ReferenceLike.brute_force();

@@ -45,7 +45,8 @@ pub struct DemoOptions {
     /// Side of Bevy's directional (and spot) shadow maps, texels. Default 1024.
     pub shadow_map_size: usize,
     /// How the plugin's lights read those maps ([`CrepuscularLight::shadow_filter`]). Default
-    /// `Nearest`; `Bilinear` costs four reads per march sample instead of one.
+    /// `Bilinear` (what Bevy's own lookups return); `Nearest` costs one read per march sample
+    /// instead of four.
     pub shadow_filter: crepuscular::ShadowFilter,
     /// Installs Bevy's `LogPlugin` (a process-wide logger: tests that build several apps in one
     /// process turn it off). Default true.
@@ -60,7 +61,7 @@ impl Default for DemoOptions {
             effect: Effect::Crepuscular(Crepuscular::default()),
             lamps: false,
             shadow_map_size: 1024,
-            shadow_filter: crepuscular::ShadowFilter::Nearest,
+            shadow_filter: crepuscular::ShadowFilter::Bilinear,
             log: true,
         }
     }

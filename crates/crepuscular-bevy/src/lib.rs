@@ -145,9 +145,9 @@ pub struct CrepuscularLight {
     /// `FrameLight::shadow_filter`, docs/MODEL.md §1 "Visibility"): `Nearest`, one texel's
     /// test, or `Bilinear`, the 2×2 percentage-closer filter — what Bevy's own lookups into the
     /// same map return through their comparison sampler, so shaft edges step less; four
-    /// texture reads per sample instead of one. Read by the marching techniques (and the
-    /// epipole disc of `minmax` and `prefiltered`, which otherwise keep their own visibility).
-    /// Default `Nearest`.
+    /// texture reads per sample instead of one. Read by the marching techniques and `minmax`'s
+    /// walk (exactly, docs/MODEL.md §8); `prefiltered` keeps its own filtered visibility outside
+    /// its epipole disc. Default `Bilinear`.
     pub shadow_filter: crepuscular::ShadowFilter,
     /// A spot light's projected texture ("gobo", stained glass): a Bevy image, mapped over the
     /// spot's square shadow frustum, its RGB multiplying the light (linear; an sRGB image is
@@ -159,7 +159,7 @@ pub struct CrepuscularLight {
 
 impl Default for CrepuscularLight {
     fn default() -> Self {
-        Self { scattering: 1.0, shadow_bias: 0.02, shadow_filter: crepuscular::ShadowFilter::Nearest, texture: None }
+        Self { scattering: 1.0, shadow_bias: 0.02, shadow_filter: crepuscular::ShadowFilter::Bilinear, texture: None }
     }
 }
 

@@ -334,31 +334,32 @@ fn every_technique_in_bevy_equals_the_library_on_the_same_maps() {
         );
         assert!(diff <= 1e-5 * peak, "{}: plugin and library differ by {diff} (peak {peak})", technique.name());
     }
-    // Every light's shadow filter switched to bilinear at run time, through the light
-    // component: it reaches the frame, the plugin still equals the library, and the picture
-    // of a march changes.
+    // Every light's shadow filter switched from the default (bilinear) to nearest at run time,
+    // through the light component: it reaches the frame, the plugin still equals the library,
+    // and the picture of a march changes.
     let brute = TechniqueSettings::named("brute-force").unwrap();
     let mut q = app.world_mut().query::<&mut Crepuscular>();
     for mut cam in q.iter_mut(app.world_mut()) {
         cam.technique = brute.clone();
     }
     app.update();
-    let nearest = take_capture(&mut app);
-    let nearest = gpu.read_image(&nearest.inscatter).expect("readback");
+    let bilinear = take_capture(&mut app);
+    assert!(bilinear.desc.lights.iter().all(|l| l.shadow_filter == crepuscular::ShadowFilter::Bilinear), "the default");
+    let bilinear = gpu.read_image(&bilinear.inscatter).expect("readback");
     let mut q = app.world_mut().query::<&mut crepuscular_bevy::CrepuscularLight>();
     for mut l in q.iter_mut(app.world_mut()) {
-        l.shadow_filter = crepuscular::ShadowFilter::Bilinear;
+        l.shadow_filter = crepuscular::ShadowFilter::Nearest;
     }
     app.update();
     let c = take_capture(&mut app);
     assert_eq!(c.desc.lights.len(), 3, "the sun and both lamps");
-    assert!(c.desc.lights.iter().all(|l| l.shadow_filter == crepuscular::ShadowFilter::Bilinear));
+    assert!(c.desc.lights.iter().all(|l| l.shadow_filter == crepuscular::ShadowFilter::Nearest));
     let plugin = gpu.read_image(&c.inscatter).expect("readback");
     let (diff, peak) = max_abs_diff(&plugin, &library_result(&gpu, &c, &c.shadow_maps));
-    eprintln!("brute-force, bilinear shadow filter: plugin vs library max |Δ| = {diff:e} (peak {peak:.4})");
-    assert!(diff <= 1e-5 * peak, "bilinear: plugin and library differ by {diff} (peak {peak})");
-    let (change, _) = max_abs_diff(&plugin, &nearest);
-    assert!(change > 1e-3 * peak, "the bilinear filter changes nothing in the plugin ({change}, peak {peak})");
+    eprintln!("brute-force, nearest shadow filter: plugin vs library max |Δ| = {diff:e} (peak {peak:.4})");
+    assert!(diff <= 1e-5 * peak, "nearest: plugin and library differ by {diff} (peak {peak})");
+    let (change, _) = max_abs_diff(&plugin, &bilinear);
+    assert!(change > 1e-3 * peak, "the shadow filter changes nothing in the plugin ({change}, peak {peak})");
 }
 
 #[test]

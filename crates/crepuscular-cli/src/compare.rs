@@ -204,6 +204,7 @@ pub fn run(
         repeat: a.repeat.max(1),
         warmup: 1,
         reference_steps: a.reference_steps,
+        shadow_filter: None,
     };
     if a.reference_steps < 2 || a.reference_steps % 2 != 0 {
         bail!("--reference-steps {}: must be even and ≥ 2", a.reference_steps);

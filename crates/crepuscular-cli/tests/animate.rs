@@ -550,8 +550,10 @@ fn occluder_jump_report(backend: &str, size: &str, frames: &str) -> serde_json::
 /// `animate --occluder-jump`: a box crossing a shaft moves the shaft where no surface moves.
 /// The jump's region (the pixels whose reference changed) is a part of the frame, not all of
 /// it; the stage drops the history the box uncovered and keeps the box's own by the motion
-/// vectors, so over that region its output is better than the technique's own frame from the
-/// jump on (no ghost worse than the frame) and it settles within a few frames.
+/// vectors, so from the jump on its output over that region is as good as over the rest of
+/// its frame (no ghost: one kept would put the region far under the frame), from two frames
+/// after the jump better than the technique's own frame there, and it settles within a few
+/// frames.
 #[test]
 fn animate_occluder_jump_leaves_no_ghost_worse_than_the_frame() {
     let test = "animate_occluder_jump_leaves_no_ghost_worse_than_the_frame";
@@ -568,21 +570,39 @@ fn animate_occluder_jump_leaves_no_ghost_worse_than_the_frame() {
     for k in 4..frames.len() {
         let (with, without) =
             (frames[k]["region_psnr_db"].as_f64().unwrap(), frames[k]["region_psnr_db_without"].as_f64().unwrap());
-        eprintln!("frame {k}: jump region {with:.2} dB with the stage, {without:.2} without");
-        assert!(with > without + MEASURED_REGION_GAIN_DB - 2.0, "frame {k}: the stage's region {with} vs {without}");
+        let frame = frames[k]["psnr_db"].as_f64().unwrap();
+        eprintln!(
+            "frame {k}: jump region {with:.2} dB with the stage (its whole frame {frame:.2}), {without:.2} without"
+        );
+        assert!(
+            with > frame - MEASURED_REGION_GAP_DB - 2.0,
+            "frame {k}: the stage's region {with} under its frame {frame}"
+        );
+        if k >= 6 {
+            assert!(
+                with > without + MEASURED_REGION_GAIN_DB - 2.0,
+                "frame {k}: the stage's region {with} vs the technique's {without}"
+            );
+        }
     }
     let rec = region["recovery_frames"].as_u64().expect("the region never settles");
     assert!(rec <= MEASURED_REGION_RECOVERY + 2, "the region took {rec} frames to settle");
 }
 
-/// Measured 2026-12-04 on llvmpipe by the test above, with the spatially stratified jitter: the
-/// smallest gain of the stage over the technique's own frame in the jump's region (478 pixels,
-/// 9.2 % of the frame), over frames 4–13: +1.82 dB, on the jump frame (45.52 against 43.70 dB);
-/// from frame 5 on it gains 2.9 to 8.9 dB. (With the hashed jitter, same day: −0.07 dB on the
-/// jump frame, 44.78 against 44.85.) A ghost that the stage kept would cost far more
-/// (night-street's lamps, where the technique alone is exact: −29 dB on the jump frame;
-/// docs/RESULTS.md).
-const MEASURED_REGION_GAIN_DB: f64 = 1.82;
+/// Measured 2026-12-07 on llvmpipe by the test above, with the default bilinear shadow filter
+/// (the region is 347 pixels, 6.7 % of the frame): the most the stage's region fell under its
+/// whole frame over frames 4–13, 1.02 dB (frame 7: 49.78 against 50.80; the jump frame 48.03
+/// against 48.91). A ghost kept (`clip=false`, `depth_tolerance=1000`, `history_weight=0.95`,
+/// same run) puts the region 8.6, 7.2 and 4.4 dB under its frame on frames 4–6.
+const MEASURED_REGION_GAP_DB: f64 = 1.02;
+/// Measured 2026-12-07 by the test above (bilinear filter): the smallest gain of the stage over
+/// the technique's own frame in the jump's region from two frames after the jump on (frames
+/// 6–13), +2.19 dB (frame 7: 49.78 against 47.58); the kept ghost above loses 9.2 dB on frame
+/// 6. On the jump frame and the next the technique alone is better there (53.54 and 52.33 dB
+/// against the stage's 48.03 and 51.82): under the bilinear filter its own frame over the box's
+/// shadow is unusually good (its whole frame reads 39.4 dB). With the nearest filter
+/// (2026-12-04) the stage gained from the jump frame on, +1.82 dB there (45.52 against 43.70).
+const MEASURED_REGION_GAIN_DB: f64 = 2.19;
 /// Measured by the test above: frames from the jump until the region is within 1 dB of its
 /// steady state (2026-12-04: 0, with either jitter).
 const MEASURED_REGION_RECOVERY: u64 = 0;

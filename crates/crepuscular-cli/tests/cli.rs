@@ -384,14 +384,14 @@ fn scene_options_combine_and_bad_ones_are_named() {
     use crepuscular::ShadowFilter;
     use crepuscular_cli::render::load_scene;
     let plain = load_scene("night-street").unwrap();
-    assert_eq!(plain.render.shadow.filter, ShadowFilter::Nearest);
+    assert_eq!(plain.render.shadow.filter, ShadowFilter::Bilinear, "the default");
     assert!(plain.lights.len() > 2);
-    for name in ["night-street:lights=2:shadow_filter=bilinear", "night-street:shadow_filter=bilinear:lights=2"] {
+    for name in ["night-street:lights=2:shadow_filter=nearest", "night-street:shadow_filter=nearest:lights=2"] {
         let s = load_scene(name).unwrap();
         assert_eq!(s.lights.len(), 2, "{name}");
-        assert_eq!(s.render.shadow.filter, ShadowFilter::Bilinear, "{name}");
+        assert_eq!(s.render.shadow.filter, ShadowFilter::Nearest, "{name}");
         let desc = crepuscular_cli::render::frame_desc(&s).unwrap();
-        assert!(desc.lights.iter().all(|l| l.shadow_filter == ShadowFilter::Bilinear), "{name}: reaches the frame");
+        assert!(desc.lights.iter().all(|l| l.shadow_filter == ShadowFilter::Nearest), "{name}: reaches the frame");
     }
     let e = load_scene("night-street:shadow_filter=pcf").unwrap_err().to_string();
     assert!(e.contains("night-street:shadow_filter=pcf") && e.contains("\"pcf\"") && e.contains("bilinear"), "{e}");

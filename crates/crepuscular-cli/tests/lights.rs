@@ -275,7 +275,8 @@ fn bad_light_lists_are_errors_naming_the_light() {
     assert!(e.contains("shadow_maps") && e.contains("lights[1]"), "{e}");
 }
 
-// Measured on 2026-12-02, before the quality table: each technique at its defaults on the
+// Measured on 2026-12-02, before the quality table and under the nearest shadow filter (the
+// default until 2026-12-07): each technique at its defaults on the
 // several-light built-in scenes, 160×90, 1024² shadow maps, reference at 512 steps, PSNR of the
 // in-scattering and FLIP of the final image, CPU / llvmpipe: night-street
 // brute-force 65.03 / 65.03 dB, FLIP 0.0076; interleaved 41.51 / 41.51, 0.0233; subsampled

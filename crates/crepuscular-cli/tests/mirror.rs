@@ -194,10 +194,9 @@ fn bilinear_shadow_filter_matches_between_gpu_and_cpu() {
         let mut scene = small(name);
         scene.render.width = 96;
         scene.render.height = 54;
-        let nearest = frame_desc(&scene).unwrap();
-        let mut bilinear = nearest.clone();
-        for l in &mut bilinear.lights {
-            l.shadow_filter = ShadowFilter::Bilinear;
+        let (mut nearest, mut bilinear) = (frame_desc(&scene).unwrap(), frame_desc(&scene).unwrap());
+        for (n, b) in nearest.lights.iter_mut().zip(&mut bilinear.lights) {
+            (n.shadow_filter, b.shadow_filter) = (ShadowFilter::Nearest, ShadowFilter::Bilinear);
         }
         let h = host_cpu::render(&scene.geometry, &scene.shading(), &nearest);
         let frame = |desc| CpuFrame { desc, depth: &h.depth, shadow_maps: &h.shadow_maps, surface: None };

@@ -74,7 +74,7 @@
 //! height = 540                           # pixels, 1 to 16384; default 540
 //! shadow_map_size = 2048                 # texels per side, 1 to 16384; default 2048
 //! shadow_bias = 0.02                     # metres along the light's depth axis, ≥ 0; default 0.02
-//! shadow_filter = "bilinear"             # volume lookups: "nearest" | "bilinear" (2×2 PCF); default "nearest"
+//! shadow_filter = "bilinear"             # volume lookups: "nearest" | "bilinear" (2×2 PCF); default "bilinear"
 //! shadow_normal_offset_texels = 1.5      # surface-lookup offset, shadow-map texels, ≥ 0; default 1.5
 //! ambient = [0.03, 0.03, 0.03]           # radiance added to surfaces (× albedo), ≥ 0; default 0.03
 //! exposure = 1.0                         # multiplier before the tone curve, > 0; default 1

@@ -155,7 +155,7 @@ pub struct FrameLight {
     /// visibility) or a 2×2 bilinear percentage-closer filter (four reads per sample instead
     /// of one; docs/MODEL.md §1 "Visibility"). Read by the reference and every step-by-step
     /// march ([`ShadowFilter`] lists them) and by `minmax`'s walk; `prefiltered`'s filtered
-    /// maps keep their own visibility outside the epipole disc. Default [`ShadowFilter::Nearest`].
+    /// maps keep their own visibility outside the epipole disc. Default [`ShadowFilter::Bilinear`].
     pub shadow_filter: ShadowFilter,
     /// First layer of this light's shadow map in the frame's shadow-map array
     /// ([`GpuFrame::shadow_maps`]); the map takes `shadow.layers` layers from there. Default 0.
@@ -170,14 +170,14 @@ pub struct FrameLight {
 }
 
 impl FrameLight {
-    /// `light` with its shadow projection, bias 0.02, the nearest-texel filter, layers 0,
+    /// `light` with its shadow projection, bias 0.02, the bilinear filter, layers 0,
     /// scattering 1.
     pub fn new(light: Light, shadow: ShadowProjection) -> Self {
         Self {
             light,
             shadow,
             shadow_bias: 0.02,
-            shadow_filter: ShadowFilter::Nearest,
+            shadow_filter: ShadowFilter::Bilinear,
             shadow_layer: 0,
             texture_layer: 0,
             scattering: 1.0,

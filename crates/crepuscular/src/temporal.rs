@@ -79,7 +79,7 @@ pub enum HistoryFilter {
 /// moments [`TemporalSettings::adaptive_weight`] reads —, one R32F weight).
 ///
 /// Feed it a jittered march whose lights read their shadow maps with
-/// [`crate::ShadowFilter::Bilinear`]: at the march's cost, brute-force with the stage then
+/// [`crate::ShadowFilter::Bilinear`] (the default): at the march's cost, brute-force with the stage then
 /// reaches 40 dB after 8 frames of a slow move on every built-in scene (forest 41.1 dB against
 /// 38.7 with nearest lookups; docs/RESULTS.md "The stage with the bilinear shadow filter").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

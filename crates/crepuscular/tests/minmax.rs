@@ -91,8 +91,9 @@ fn an_unshadowed_point_light_converges_with_its_segments() {
 }
 
 /// On a shadowed frame (a sun over a half-plane), every pixel equals a dense march of its own
-/// ray through the standard shadow map — each of 20 000 steps makes the reference's test
-/// (`ShadowMap::visibility` at its midpoint) —, i.e. minmax is exact at the standard map's
+/// ray through the standard shadow map — each of 20 000 steps weighs its light by the
+/// reference's lookup (`ShadowMap::visibility` at its midpoint, with the light's filter:
+/// bilinear by default) —, i.e. minmax is exact at the standard map's
 /// resolution: its rectified map (coarser here than the standard map, 256 columns against 512)
 /// only bounds the texels (conservative level 0), and the rays a texel leaves undecided are
 /// resolved against the standard map in closed form. The tree changes nothing (levels 0 and 8
@@ -127,8 +128,9 @@ fn a_shadowed_frame_equals_a_dense_march_through_the_standard_map() {
             let mut dark = 0;
             for i in 0..n {
                 let t = (i as f32 + 0.5) * delta;
-                if sm.visibility(Vec3::ZERO, d.camera.position + dir * t, fl.shadow_bias, fl.shadow_filter) > 0.0 {
-                    sum += f * (-st * (i as f32 * delta)).exp() * segment_transmittance(st, delta);
+                let v = sm.visibility(Vec3::ZERO, d.camera.position + dir * t, fl.shadow_bias, fl.shadow_filter);
+                if v > 0.0 {
+                    sum += v * f * (-st * (i as f32 * delta)).exp() * segment_transmittance(st, delta);
                 } else {
                     dark += 1;
                 }

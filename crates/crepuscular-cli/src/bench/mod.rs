@@ -95,6 +95,23 @@ pub struct BenchPlan {
     pub warmup: u32,
     /// Steps of the quality reference (0: no quality measurement).
     pub reference_steps: u32,
+    /// The shadow filter every scene's lights are read with, in place of the scene's own
+    /// (`render.shadow_filter`, default bilinear). The papers' presets pin `nearest`: the
+    /// binary visibility their techniques are written for and their published figures use
+    /// (docs/RESULTS.md). None: each scene's own.
+    pub shadow_filter: Option<crepuscular::ShadowFilter>,
+}
+
+impl BenchPlan {
+    /// Loads one of the plan's scenes ([`load_scene`]) with the plan's
+    /// [`shadow_filter`](Self::shadow_filter), if it pins one.
+    pub fn load_scene(&self, name: &str) -> Result<crepuscular_scene::Scene> {
+        let mut scene = load_scene(name)?;
+        if let Some(f) = self.shadow_filter {
+            scene.render.shadow.filter = f;
+        }
+        Ok(scene)
+    }
 }
 
 /// The steps swept by default for each ray-marching technique.
@@ -129,6 +146,7 @@ pub fn default_plan(scenes: Vec<String>, techniques: &[String]) -> Result<BenchP
         repeat: 5,
         warmup: 2,
         reference_steps: 256,
+        shadow_filter: None,
     })
 }
 
@@ -373,7 +391,7 @@ pub fn run(
     let mut timing = String::from("wall-clock");
     for scene_name in &plan.scenes {
         for &(w, h) in &plan.sizes {
-            let mut scene = load_scene(scene_name)?;
+            let mut scene = plan.load_scene(scene_name)?;
             scene.render.width = w;
             scene.render.height = h;
             let desc = frame_desc(&scene)?;
@@ -576,7 +594,7 @@ pub fn measure_flicker(
     check_flicker_frames(frames, report.plan.reference_steps)?;
     let Some((rows_size, size)) = flicker_sizes(&report.plan) else { return Ok(()) };
     for scene_arg in &report.plan.scenes {
-        let mut scene = load_scene(scene_arg)?;
+        let mut scene = report.plan.load_scene(scene_arg)?;
         (scene.render.width, scene.render.height) = size;
         let mut rows = Vec::new();
         for (i, x) in report.records.iter().enumerate() {
@@ -671,7 +689,7 @@ pub fn measure_temporal(
         jumped: [Vec<f64>; 2],
     }
     for scene_arg in &report.plan.scenes {
-        let mut scene = load_scene(scene_arg)?;
+        let mut scene = report.plan.load_scene(scene_arg)?;
         (scene.render.width, scene.render.height) = size;
         let mut rows = Vec::new();
         for (i, x) in report.records.iter().enumerate() {

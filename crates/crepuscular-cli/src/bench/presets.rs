@@ -50,6 +50,20 @@ pub const PRESETS: &[(&str, &str)] = &[
     ),
 ];
 
+/// The presets that reproduce a paper's table or figure: they pin the nearest-texel shadow
+/// filter ([`BenchPlan::shadow_filter`]).
+pub const PAPER_PRESETS: &[&str] = &[
+    "toth-interleaving",
+    "engelhardt-fig9",
+    "engelhardt-fig10",
+    "engelhardt-timings",
+    "wyman-steps",
+    "klehm-table1",
+    "klehm-table2",
+    "klehm-fig5",
+    "klehm-scenes",
+];
+
 /// The preset that turns the temporal column on ([`super::measure_temporal`]).
 pub const TEMPORAL_PRESET: &str = "temporal";
 
@@ -97,7 +111,7 @@ fn gpu_techniques_at_defaults() -> Vec<Variant> {
 
 /// A named preset.
 pub fn preset(name: &str) -> Result<BenchPlan> {
-    let plan = match name {
+    let mut plan = match name {
         "toth-interleaving" => BenchPlan {
             name: name.into(),
             description: "Tóth & Umenhoffer 2009, §5: the frame without scattering (host passes only), with \
@@ -116,6 +130,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
             repeat: 3,
             warmup: 1,
             reference_steps: 256,
+            shadow_filter: None,
         },
         "wyman-steps" => {
             let mut variants = Vec::new();
@@ -144,6 +159,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
                 repeat: 3,
                 warmup: 1,
                 reference_steps: 512,
+                shadow_filter: None,
             }
         }
         "engelhardt-fig9" => BenchPlan {
@@ -170,6 +186,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
             repeat: 3,
             warmup: 1,
             reference_steps: 256,
+            shadow_filter: None,
         },
         "engelhardt-fig10" => {
             let mut variants: Vec<Variant> = [256u32, 512, 1024]
@@ -193,6 +210,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
                 repeat: 3,
                 warmup: 1,
                 reference_steps: 256,
+                shadow_filter: None,
             }
         }
         "engelhardt-timings" => BenchPlan {
@@ -214,6 +232,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
             repeat: 3,
             warmup: 1,
             reference_steps: 0,
+            shadow_filter: None,
         },
         "klehm-table1" => {
             let variants = KLEHM_TABLE1
@@ -250,6 +269,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
                 repeat: 3,
                 warmup: 1,
                 reference_steps: 0,
+                shadow_filter: None,
             }
         }
         "klehm-table2" => {
@@ -287,6 +307,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
                 repeat: 3,
                 warmup: 1,
                 reference_steps: 256,
+                shadow_filter: None,
             }
         }
         "klehm-fig5" => {
@@ -365,6 +386,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
                 repeat: 3,
                 warmup: 1,
                 reference_steps: 256,
+                shadow_filter: None,
             }
         }
         "klehm-scenes" => BenchPlan {
@@ -386,6 +408,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
             repeat: 3,
             warmup: 1,
             reference_steps: 256,
+            shadow_filter: None,
         },
         "lights" => BenchPlan {
             name: name.into(),
@@ -403,6 +426,7 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
             repeat: 3,
             warmup: 1,
             reference_steps: 256,
+            shadow_filter: None,
         },
         TEMPORAL_PRESET => BenchPlan {
             name: name.into(),
@@ -420,11 +444,42 @@ pub fn preset(name: &str) -> Result<BenchPlan> {
             repeat: 3,
             warmup: 1,
             reference_steps: 256,
+            shadow_filter: None,
         },
         other => {
             let names: Vec<_> = PRESETS.iter().map(|p| p.0).collect();
             bail!("unknown preset `{other}` (known: {})", names.join(", "))
         }
     };
+    // The papers' presets read every shadow map with the nearest texel, the binary visibility
+    // of their techniques and of every figure published from them (the default became
+    // bilinear on 2026-12-07).
+    if PAPER_PRESETS.contains(&name) {
+        plan.shadow_filter = Some(crepuscular::ShadowFilter::Nearest);
+    }
     Ok(plan)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The papers' presets read every map with the nearest texel, whatever the scene's default
+    /// (bilinear); every other preset keeps each scene's own filter, and the scenes the plan
+    /// loads carry the pinned filter.
+    #[test]
+    fn the_papers_presets_pin_the_nearest_filter() {
+        for p in PAPER_PRESETS {
+            assert!(PRESETS.iter().any(|(n, _)| n == p), "{p} is a preset");
+        }
+        for (name, _) in PRESETS {
+            let plan = preset(name).unwrap();
+            let want = PAPER_PRESETS.contains(name).then_some(crepuscular::ShadowFilter::Nearest);
+            assert_eq!(plan.shadow_filter, want, "{name}");
+            let scene = plan.load_scene(&plan.scenes[0]).unwrap();
+            let own = crate::render::load_scene(&plan.scenes[0]).unwrap().render.shadow.filter;
+            assert_eq!(own, crepuscular::ShadowFilter::Bilinear, "{name}: the scene's own default");
+            assert_eq!(scene.render.shadow.filter, want.unwrap_or(own), "{name}");
+        }
+    }
 }

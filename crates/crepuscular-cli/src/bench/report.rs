@@ -31,6 +31,9 @@ pub fn markdown(r: &BenchReport) -> String {
         "- {} timed frames after {} warm-up frames; times are median (min–max) in ms\n",
         r.plan.repeat, r.plan.warmup
     );
+    if let Some(f) = r.plan.shadow_filter {
+        s += &format!("- shadow filter: `{}` on every light (pinned by the plan)\n", f.name());
+    }
     if r.plan.reference_steps > 0 {
         s += &format!(
             "- quality vs `reference` ({} steps): PSNR of the linear in-scattering (dB), FLIP mean of the tone-mapped final image\n",

@@ -70,7 +70,7 @@ pub struct CrepuscularPlugin;
 pub struct Crepuscular {
     /// The technique and its settings, as the library names them (every technique and every
     /// preset: `TechniqueSettings::named("epipolar")`, `Preset::Fast.settings("prefiltered")`).
-    /// Default: epipolar at its balanced settings (K = 32 slices of 64 steps).
+    /// Default: epipolar at its balanced settings (K = 32 initial samples per line, 64 steps).
     pub technique: TechniqueSettings,
     /// Scattering coefficient σs per RGB channel, m⁻¹ (world units⁻¹). Must be finite and ≥ 0.
     /// Default 0.02 m⁻¹ (grey). Cost: none (the medium is homogeneous; docs/MODEL.md §1).

@@ -250,7 +250,7 @@ pub struct EpipolarSettings {
     /// resolution, no step count, its cost the tree's build (once per frame) plus nodes per
     /// sample instead of `steps` lookups. The re-marched pixels (epipole, fallback) keep their
     /// `steps`; a spot or point light's quadrature takes `steps` segments (at most 1024). The
-    /// tree's own settings are `minmax`'s defaults (all levels, 512 nodes per ray); its map is
+    /// tree's own settings are `minmax`'s defaults (all levels, 1024 nodes per ray); its map is
     /// always resampled from the shadow map (no host raster). Samples near a visible light's
     /// epipole, where the rectified map has little precision, walk it too: only the
     /// `epipole_radius` pixels are re-marched.

@@ -417,22 +417,7 @@ impl Rectification {
         let rows: Vec<f32> = (0..opt.height)
             .flat_map(|j| {
                 let w = r.slice_dir(r.row_phi(j as f32 + 0.5));
-                let inside = |t: f32| {
-                    let d = a * t.cos() + w * t.sin();
-                    planes.iter().all(|n| n.dot(d) >= -1e-6)
-                };
-                let n = 256;
-                let (mut lo, mut hi) = (f32::MAX, f32::MIN);
-                for k in 0..=n {
-                    let t = t0 + (t1 - t0) * k as f32 / n as f32;
-                    if inside(t) {
-                        lo = lo.min(t);
-                        hi = hi.max(t);
-                    }
-                }
-                if lo > hi {
-                    (lo, hi) = (t0, t1);
-                }
+                let (lo, hi) = slice_theta_range(a, w, &planes, t0, t1).unwrap_or((t0, t1));
                 let single = epipolar_reference(lo, hi, if r.local { ReferenceRay::Bisectrix } else { opt.reference });
                 // Several bands: the centres of equal cells of ln θ over [max(lo, hi/32), hi]
                 // (ascending): rays near the epipole, where the world step per column changes
@@ -718,6 +703,53 @@ fn frustum_side_normals(corners: &[Vec3; 4]) -> [Vec3; 4] {
     })
 }
 
+/// The θ interval of one slice inside the view frustum: the smallest [lo, hi] ⊂ [t0, t1] that
+/// holds every θ whose direction d(θ) = a·cos θ + w·sin θ lies inside the frustum's four side
+/// planes (n·d ≥ −10⁻⁶ for each inward normal n); None where no θ in [t0, t1] does.
+///
+/// In closed form, once per row and frame: n·d(θ) = A·cos θ + B·sin θ = R·cos(θ − α) with
+/// A = n·a, B = n·w, R = √(A² + B²), α = atan2(B, A), so each plane keeps the arc
+/// |θ − α| ≤ acos(−10⁻⁶/R) (mod 2π), and the slice keeps the intersection of four such arcs
+/// with [t0, t1] (a plane with R = 0 keeps every θ). Where that intersection is two pieces
+/// (possible only when [t0, t1], padded, is longer than π), the interval spans both.
+fn slice_theta_range(a: Vec3, w: Vec3, planes: &[Vec3; 4], t0: f32, t1: f32) -> Option<(f32, f32)> {
+    use std::f32::consts::TAU;
+    // The set kept so far: disjoint intervals of [t0, t1]. Each plane's arc is shorter than
+    // 2π − (its gap), so it meets an interval in at most two pieces, and four planes leave at
+    // most a handful (bounded here by 8: a fixed array, no allocation per row).
+    let mut kept = [(t0, t1); 8];
+    let mut count = 1;
+    for n in planes {
+        let (ca, cb) = (n.dot(a), n.dot(w));
+        let r = ca.hypot(cb);
+        if r <= 1e-6 {
+            continue;
+        }
+        let alpha = cb.atan2(ca);
+        let half = (-1e-6 / r).clamp(-1.0, 1.0).acos();
+        let mut next = [(0.0, 0.0); 8];
+        let mut next_count = 0;
+        for &(lo, hi) in &kept[..count] {
+            // The arc's copies that can meet [lo, hi] ⊂ [t0, t1] ⊂ [−π − 1, 2π + 1].
+            for k in -1..=2 {
+                let centre = alpha + k as f32 * TAU;
+                let (a0, a1) = ((centre - half).max(lo), (centre + half).min(hi));
+                if a0 <= a1 && next_count < next.len() {
+                    next[next_count] = (a0, a1);
+                    next_count += 1;
+                }
+            }
+        }
+        if next_count == 0 {
+            return None;
+        }
+        (kept, count) = (next, next_count);
+    }
+    let lo = kept[..count].iter().map(|k| k.0).fold(f32::MAX, f32::min);
+    let hi = kept[..count].iter().map(|k| k.1).fold(f32::MIN, f32::max);
+    Some((lo, hi))
+}
+
 /// The reference angle θ_ref in the θ interval [lo, hi] of a slice, measured from the axis
 /// towards the light; the direction ⊥ to the light in the slice is θ = 90°, so k = sin θ.
 fn epipolar_reference(lo: f32, hi: f32, reference: ReferenceRay) -> f32 {
@@ -900,6 +932,56 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The closed-form θ interval of a slice (`slice_theta_range`) is the interval a dense scan
+    /// of the slice's directions finds inside the frustum, to within the scan's step, for suns
+    /// and lamps on and off screen, in front of and behind the camera (the epipole and its
+    /// opposite on screen), and every row.
+    #[test]
+    fn a_slices_theta_range_is_the_dense_scans() {
+        let cam = Camera { position: Vec3::new(0.0, 2.0, 8.0), look_at: Vec3::new(0.0, 1.0, 0.0), ..Camera::default() };
+        let mut checked = 0;
+        for light in [
+            sun(Vec3::new(1.0, -0.6, 0.2)),
+            sun(Vec3::new(0.1, -0.3, 1.0)),
+            sun(Vec3::new(0.0, -0.2, -1.0)),
+            sun(Vec3::new(0.0, -1.0, 0.0)),
+            Light::Point { position: Vec3::new(1.0, 3.0, 0.0), color: Vec3::ONE, intensity: 1.0 },
+            Light::Point { position: Vec3::new(0.0, 2.0, 20.0), color: Vec3::ONE, intensity: 1.0 },
+        ] {
+            let d = desc(light, cam.clone());
+            let r = Rectification::new(&d, &opts(RectificationChoice::Epipolar, 1, 0.0));
+            let [e1, e2, a] = r.axes;
+            let planes = frustum_side_normals(&corner_dirs(&d));
+            let (t0, t1) = (r.ranges.z, r.ranges.w);
+            let n = 20000;
+            let step = (t1 - t0) / n as f32;
+            for j in 0..r.height {
+                let phi = r.row_phi(j as f32 + 0.5);
+                let w = e1 * phi.cos() + e2 * phi.sin();
+                let inside = |t: f32| planes.iter().all(|p| p.dot(a * t.cos() + w * t.sin()) >= -1e-6);
+                let ts: Vec<f32> =
+                    (0..=n).map(|k| t0 + (t1 - t0) * k as f32 / n as f32).filter(|&t| inside(t)).collect();
+                let got = slice_theta_range(a, w, &planes, t0, t1);
+                match (ts.first(), ts.last(), got) {
+                    (Some(&lo), Some(&hi), Some((glo, ghi))) => {
+                        assert!(
+                            glo <= lo + 1e-4 && glo >= lo - step - 1e-4,
+                            "row {j}: lo {glo} against the scan's {lo}"
+                        );
+                        assert!(
+                            ghi >= hi - 1e-4 && ghi <= hi + step + 1e-4,
+                            "row {j}: hi {ghi} against the scan's {hi}"
+                        );
+                        checked += 1;
+                    }
+                    (None, None, None) => {}
+                    (lo, hi, got) => panic!("row {j}: the scan found {lo:?}..{hi:?}, the closed form {got:?}"),
+                }
+            }
+        }
+        assert!(checked > 500, "only {checked} rows had a range");
     }
 
     #[test]

@@ -419,7 +419,9 @@ fn shafts_are_where_the_pillars_cast_them() {
     };
     let (m_with, m_without) = (mean(&with), mean(&without));
     eprintln!("mean sRGB value: {m_with:.1} with the effect, {m_without:.1} without");
-    assert!(m_with > m_without + 10.0, "the fog brightens the picture ({m_with} vs {m_without})");
+    // Measured 2026-12-07 (llvmpipe): 148.7 with the effect, 63.5 without (+85.2); held 20
+    // below (a composite that lost the in-scattering, or added half of it, fails).
+    assert!(m_with > m_without + 65.0, "the fog brightens the picture ({m_with} vs {m_without})");
 }
 
 #[test]

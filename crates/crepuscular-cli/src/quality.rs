@@ -68,7 +68,22 @@ impl Table {
     pub fn load() -> Result<Table> {
         let path = table_path();
         let text = std::fs::read_to_string(&path).with_context(|| format!("{}", path.display()))?;
-        toml::from_str(&text).with_context(|| format!("{}", path.display()))
+        let table: Table = toml::from_str(&text).with_context(|| format!("{}", path.display()))?;
+        // A row whose figures are not finite and positive would pass (NaN) or fail everything.
+        for r in &table.rows {
+            if !(r.psnr_db.is_finite() && r.flip.is_finite() && r.flip >= 0.0) {
+                bail!(
+                    "{}: the row of {} on {} ({}) has psnr_db = {}, flip = {} (must be finite, flip >= 0)",
+                    path.display(),
+                    r.technique,
+                    r.scene,
+                    r.backend,
+                    r.psnr_db,
+                    r.flip
+                );
+            }
+        }
+        Ok(table)
     }
 
     /// The row of (technique, scene, backend).
@@ -81,15 +96,17 @@ impl Table {
 /// measured FLIP × (1 + [`FLIP_MARGIN`])); the error names the row, the value and the bound.
 /// With [`MEASURE_ENV`] set it records the measurement there instead and checks nothing.
 pub fn check(technique: &str, scene: &str, backend: &str, psnr_db: f64, flip: f64) -> Result<()> {
+    // Before recording too: a NaN row would pass every later measurement (no comparison with
+    // NaN is true).
+    if !psnr_db.is_finite() || !flip.is_finite() {
+        bail!("{backend} {technique} on {scene}: PSNR {psnr_db}, FLIP {flip} (not finite)");
+    }
     if let Some(dir) = std::env::var_os(MEASURE_ENV) {
         let row = Row { technique: technique.into(), scene: scene.into(), backend: backend.into(), psnr_db, flip };
         let dir = PathBuf::from(dir);
         std::fs::create_dir_all(&dir).with_context(|| format!("{}", dir.display()))?;
         let file = dir.join(format!("{technique}--{scene}--{backend}.toml"));
         return crate::output::write_atomic(&file, toml::to_string(&row)?.as_bytes());
-    }
-    if !psnr_db.is_finite() || !flip.is_finite() {
-        bail!("{backend} {technique} on {scene}: PSNR {psnr_db}, FLIP {flip} (not finite)");
     }
     let table = Table::load()?;
     let Some(row) = table.row(technique, scene, backend) else {

@@ -124,8 +124,8 @@ fn brute_force_gpu_matches_its_cpu_mirror() {
 /// Both step layouts of local lights (docs/MODEL.md §9, `local_steps = "equiangular"`, the
 /// default, and `"uniform"`) for every technique on the point-light and spot-light scenes: the
 /// GPU's layout (common.wgsl `Steps`) is the CPU's (march.rs `Steps`), for the marches,
-/// prefiltered's quadrature and minmax's segments alike, each layout held to 0.5 % or twice
-/// the other's agreement; and the two layouts differ (the setting reaches both backends).
+/// prefiltered's quadrature and minmax's segments alike, each layout on its own held to 0.5 % of
+/// values (prefiltered 2 %); and the two layouts differ (the setting reaches both backends).
 #[test]
 fn equiangular_steps_match_between_gpu_and_cpu_for_every_technique() {
     let Some(gpu) = test_gpu("equiangular_steps_match_between_gpu_and_cpu_for_every_technique") else { return };
@@ -163,14 +163,19 @@ fn equiangular_steps_match_between_gpu_and_cpu_for_every_technique() {
                 uniform_gpu_vs_cpu * 100.0,
                 vs_uniform * 100.0
             );
+            // Each layout's GPU picture is its CPU mirror's, on its own (a bug shared by both
+            // layouts must not pass by loosening the other's bound). Measured 2026-12-07
+            // (llvmpipe): 0.000 % for every technique but prefiltered under both layouts;
+            // prefiltered 1.13 % (equiangular) and 1.10 % (uniform) on stained-glass, 0 on cage.
+            let bound = if t == "prefiltered" { 0.02 } else { 0.005 };
             assert!(
-                gpu_vs_cpu < 0.005f64.max(2.0 * uniform_gpu_vs_cpu),
+                gpu_vs_cpu < bound,
                 "{name} {t}: GPU and CPU equiangular steps differ on {:.3}% (uniform: {:.3}%)",
                 gpu_vs_cpu * 100.0,
                 uniform_gpu_vs_cpu * 100.0
             );
             assert!(
-                uniform_gpu_vs_cpu < 0.005f64.max(2.0 * gpu_vs_cpu),
+                uniform_gpu_vs_cpu < bound,
                 "{name} {t}: GPU and CPU uniform steps differ on {:.3}% (equiangular: {:.3}%)",
                 uniform_gpu_vs_cpu * 100.0,
                 gpu_vs_cpu * 100.0
@@ -182,7 +187,7 @@ fn equiangular_steps_match_between_gpu_and_cpu_for_every_technique() {
 
 /// The 2×2 bilinear shadow filter (`ShadowFilter::Bilinear`, docs/MODEL.md §1 "Visibility") on
 /// every built-in scene — directional, spot and point (cube) maps: each marching technique's
-/// GPU picture is its CPU mirror's (held to the nearest filter's own agreement), the filter
+/// GPU picture is its CPU mirror's under each filter, each held on its own, the filter
 /// changes the pictures of the marches and of `minmax`'s walk (the setting reaches both
 /// backends); `prefiltered`, which keeps its own visibility, is held only to the mirror.
 #[test]
@@ -224,7 +229,14 @@ fn bilinear_shadow_filter_matches_between_gpu_and_cpu() {
                 changed * 100.0,
                 gpu_changed * 100.0
             );
-            assert!(b < 0.005f64.max(2.0 * n), "{name} {t}: bilinear GPU and CPU differ on {:.3}%", b * 100.0);
+            // Each filter's GPU picture is its CPU mirror's, on its own (a broken nearest path
+            // must not loosen the bilinear bound, nor the reverse). Measured 2026-12-07
+            // (llvmpipe): 0.000 % for the marches and minmax under both filters; prefiltered,
+            // whose filtered visibility rounds differently on the two backends, 0–7.4 % under
+            // both (forest 7.40 %, atrium 3.04 %, colonnade 1.73 %).
+            let bound = if t == "prefiltered" { 0.09 } else { 0.005 };
+            assert!(b < bound, "{name} {t}: bilinear GPU and CPU differ on {:.3}%", b * 100.0);
+            assert!(n < bound, "{name} {t}: nearest GPU and CPU differ on {:.3}%", n * 100.0);
             if t == "prefiltered" {
                 // Its own visibility (filtered maps) ignores the filter; only the epipole disc,
                 // a plain march, reads it: the picture may or may not change. (minmax's walk

@@ -1083,8 +1083,10 @@ fn transmittance_weights_beat_average_visibility_in_a_dense_medium() {
         eprintln!("colonnade, σt ×4, {what}: PSNR {p:.2} dB, FLIP {flip:.4}");
         psnr.push(p);
     }
-    assert!(psnr[0] > psnr[1] + 5.0, "weights {:.2} dB vs average visibility {:.2} dB", psnr[0], psnr[1]);
-    assert!(psnr[2] > psnr[0], "bands {:.2} dB vs one band {:.2} dB", psnr[2], psnr[0]);
+    // Measured 2026-12-07 (CPU): weights 33.59 dB, average visibility 22.27 (+11.32), four
+    // bands 38.77 (+5.18 over one); each gain held 2 dB below its measurement.
+    assert!(psnr[0] > psnr[1] + 9.3, "weights {:.2} dB vs average visibility {:.2} dB", psnr[0], psnr[1]);
+    assert!(psnr[2] > psnr[0] + 3.2, "bands {:.2} dB vs one band {:.2} dB", psnr[2], psnr[0]);
 }
 
 // ---- (5) Settings ----------------------------------------------------------------------------

@@ -58,6 +58,36 @@ fn bound(technique: &str) -> f64 {
         .1
 }
 
+/// Bounds on the in-scattering's energy against the reference's, Σ L_t / Σ L_ref over every
+/// pixel and channel, per technique, over every bounded case whose reference is visible: a
+/// dimmed, black or over-bright picture lands outside them even where its NMAE stays inside
+/// the technique's (loose) bound — a picture k × the reference has NMAE 1 − k, which
+/// interleaved's 0.98 lets through for any k above 2 %. Every technique spreads or filters
+/// light but keeps its total close; measured ranges and the margins are in
+/// docs/ROBUSTNESS.md ("The energy check").
+const ENERGY_RATIO: &[(&str, f64, f64)] = &[
+    ("brute-force", 0.5, 2.0),
+    ("interleaved", 0.5, 2.0),
+    ("subsampled", 0.5, 2.0),
+    ("epipolar", 0.5, 2.0),
+    ("prefiltered", 0.5, 2.0),
+    ("minmax", 0.5, 2.0),
+    ("epipolar (min-max march)", 0.5, 2.0),
+];
+
+fn energy_bounds(technique: &str) -> (f64, f64) {
+    let b = ENERGY_RATIO
+        .iter()
+        .find(|b| b.0 == technique)
+        .unwrap_or_else(|| panic!("no energy bounds for technique `{technique}`: measure them and add some"));
+    (b.1, b.2)
+}
+
+/// Σ L over every pixel and rgb channel.
+fn energy(img: &Image) -> f64 {
+    img.pixels.iter().flat_map(|p| p[..3].iter().map(|&v| v as f64)).sum()
+}
+
 /// Reference settings of the sweep (more than enough at 64×36 to sit well under the bound).
 const REFERENCE: ReferenceSettings = ReferenceSettings { steps: 256, seed: 1 };
 
@@ -346,22 +376,29 @@ fn constant(img: &Image) -> bool {
     img.pixels.iter().all(|p| (0..3).all(|c| (p[c] - first[c]).abs() <= 1e-6 * peak))
 }
 
-/// The case's NMAE, and what is wrong with the output, if anything: NaN or Inf, an error over
-/// the technique's bound, a constant (or black) picture.
+/// The case's NMAE, its energy ratio ([`ENERGY_RATIO`]; None where the case is unbounded or
+/// the reference is not visible), and what is wrong with the output, if anything: NaN or Inf,
+/// an error over the technique's bound, an energy outside its bounds, a constant (or black)
+/// picture.
 fn check(
     c: &Case,
     backend: &str,
     technique: &str,
     out: &RenderOutput,
     reference: &RenderOutput,
-) -> (f64, Option<String>) {
+) -> (f64, Option<f64>, Option<String>) {
     let name = &c.name;
     let e = nmae(&out.inscatter, &reference.inscatter);
     let max = bound(technique);
+    let ratio =
+        (c.bounded && visible(&reference.inscatter)).then(|| energy(&out.inscatter) / energy(&reference.inscatter));
+    let (lo, hi) = energy_bounds(technique);
     let failure = if !finite(&out.inscatter) || !finite(&out.final_radiance) {
         Some(format!("{backend} {technique} on `{name}`: NaN or Inf in the output"))
     } else if c.bounded && e > max {
         Some(format!("{backend} {technique} on `{name}`: NMAE {e:.3} > {max}"))
+    } else if let Some(r) = ratio.filter(|r| !(lo..=hi).contains(r)) {
+        Some(format!("{backend} {technique} on `{name}`: energy {r:.3} of the reference's, outside [{lo}, {hi}]"))
     } else if c.bounded && visible(&reference.inscatter) && !constant(&reference.inscatter) && constant(&out.inscatter)
     {
         // Apart from the bound (which a black picture fails: its NMAE is 1 wherever the
@@ -370,7 +407,7 @@ fn check(
     } else {
         None
     };
-    (e, failure)
+    (e, ratio, failure)
 }
 
 /// True where the in-scattering's mean is above [`nmae`]'s floor (visible at exposure 1).
@@ -391,6 +428,9 @@ fn sweep(
     let techniques = techniques();
     let mut failures = Vec::new();
     let mut worst: Vec<(f64, String)> = vec![(0.0, String::new()); techniques.len()];
+    // Per technique: the lowest and highest energy ratio, with their cases.
+    let mut energies: Vec<[(f64, String); 2]> =
+        vec![[(f64::INFINITY, String::new()), (f64::NEG_INFINITY, String::new())]; techniques.len()];
     let started = std::time::Instant::now();
     for (k, c) in cases.iter().enumerate() {
         let opts = |technique| RenderOptions { technique, progress: &|_, _| {} };
@@ -401,9 +441,18 @@ fn sweep(
         for (i, t) in techniques.iter().enumerate() {
             let out = render(&c.scene, gpu, &opts(t.clone()))
                 .unwrap_or_else(|e| panic!("{backend} {} on `{}`: {e:#}", t.name(), c.name));
-            let (e, failure) = check(c, backend, label(t), &out, &reference);
+            let (e, ratio, failure) = check(c, backend, label(t), &out, &reference);
             failures.extend(failure);
             line += &format!(" {}={e:.3}", label(t));
+            if let Some(r) = ratio {
+                line += &format!(" ({r:.2}×)");
+                if r < energies[i][0].0 {
+                    energies[i][0] = (r, c.name.clone());
+                }
+                if r > energies[i][1].0 {
+                    energies[i][1] = (r, c.name.clone());
+                }
+            }
             if c.bounded && e > worst[i].0 {
                 worst[i] = (e, c.name.clone());
             }
@@ -415,8 +464,13 @@ fn sweep(
         }
     }
     eprintln!("{backend}: {} views, {:.0} s", cases.len(), started.elapsed().as_secs_f64());
-    for (t, (e, name)) in techniques.iter().zip(&worst) {
-        eprintln!("{backend} worst for {}: NMAE {e:.3} on `{name}` (bound {})", label(t), bound(label(t)));
+    for ((t, (e, name)), [(lo, lo_case), (hi, hi_case)]) in techniques.iter().zip(&worst).zip(&energies) {
+        eprintln!(
+            "{backend} worst for {}: NMAE {e:.3} on `{name}` (bound {}); energy {lo:.3}× on `{lo_case}` to {hi:.3}× on `{hi_case}` (bounds {:?})",
+            label(t),
+            bound(label(t)),
+            energy_bounds(label(t))
+        );
     }
     eprintln!(
         "{backend}: {} failures{}",

@@ -591,11 +591,12 @@ fn gpu_temporal_builds_its_bind_groups_once_for_the_same_views() {
 
 #[test]
 fn jittered_brute_force_accumulated_over_8_frames_is_closer_to_the_reference() {
-    // Measured 2026-12-04 (CPU backend, colonnade 96×54, still camera, reference 512 steps):
-    // brute-force 16 steps, one frame at step midpoints 23.91 dB (FLIP 0.0919); jittered (the
-    // spatially stratified pattern, docs/MODEL.md §7) and accumulated over 8 frames 37.85 dB
-    // (FLIP 0.0225). The assertions keep a 3 dB margin below the measured gain, and FLIP must at
-    // least halve (measured: ÷4.1). (2026-12-02, hashed jitter: 24.01 → 34.36 dB, FLIP ÷3.0.)
+    // Measured 2026-12-07 at the bilinear default (CPU backend, colonnade 96×54, still camera,
+    // reference 512 steps): brute-force 16 steps, one frame at step midpoints 25.16 dB (FLIP
+    // 0.0666); jittered (the spatially stratified pattern, docs/MODEL.md §7) and accumulated
+    // over 8 frames 39.68 dB (FLIP 0.0158). The assertions keep a 2 dB margin below the measured
+    // gain, and FLIP must fall to 0.3× (measured: 0.237×). (2026-12-04, nearest lookups: 23.91
+    // → 37.85 dB, FLIP ÷4.1; 2026-12-02, hashed jitter: 24.01 → 34.36 dB, FLIP ÷3.0.)
     let sc = scene();
     let (desc, depth, host) = posed(&sc, Vec3::ZERO);
     let frame = CpuFrame { desc: &desc, depth: &depth, shadow_maps: &host.shadow_maps, surface: None };
@@ -620,12 +621,12 @@ fn jittered_brute_force_accumulated_over_8_frames_is_closer_to_the_reference() {
         "brute-force 16 steps: one frame {:.2} dB (FLIP {:.4}); jittered + temporal, 8 frames {:.2} dB (FLIP {:.4})",
         single.psnr_db, single.flip_mean, acc.psnr_db, acc.flip_mean
     );
-    assert!(acc.psnr_db > single.psnr_db + MEASURED_GAIN_DB - 3.0, "accumulation gained too little");
-    assert!(acc.flip_mean < 0.5 * single.flip_mean, "accumulation did not halve FLIP");
+    assert!(acc.psnr_db > single.psnr_db + MEASURED_GAIN_DB - 2.0, "accumulation gained too little");
+    assert!(acc.flip_mean < 0.3 * single.flip_mean, "accumulation lowered FLIP too little");
 }
 
 /// The PSNR gain the test above measured (see its comment).
-const MEASURED_GAIN_DB: f64 = 13.94;
+const MEASURED_GAIN_DB: f64 = 14.52;
 
 /// `light_disc_radius` (docs/MODEL.md §7, step 0): through a camera move over cage, whose
 /// point light is in view, every pixel within the radius (a fraction of the image height) of

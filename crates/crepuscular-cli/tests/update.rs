@@ -138,6 +138,11 @@ fn stats_off_renders_the_same_image_without_timing_or_readbacks() {
             // and are the ones measured at once.
             runner.set_stats_mode(StatsMode::Deferred).unwrap();
             let (deferred, ds) = render_stats(&gpu, &scene, &host, &mut runner);
+            // The three images compared below are no picture if the measured one is black.
+            assert!(
+                measured.chunks(4).any(|p| p[..3].iter().any(|&b| f32::from_bits(b) > 0.0)),
+                "{scene_name} {technique}: the measured frame scatters nothing"
+            );
             assert!(deferred == measured, "{scene_name} {technique}: StatsMode::Deferred changed the image");
             assert_eq!(ds.raymarched_samples, ms.raymarched_samples, "{scene_name} {technique}: deferred counts");
             assert_eq!(ds.extra, ms.extra, "{scene_name} {technique}: deferred counts");

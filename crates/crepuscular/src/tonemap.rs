@@ -161,10 +161,22 @@ mod tests {
         assert_eq!(ToneMap::default().apply([0.0; 3]), [0, 0, 0]);
     }
 
+    /// The curve's closed form, x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14), then the sRGB
+    /// OETF 1.055·v^(1/2.4) − 0.055 (12.92·v below 0.0031308), ×255, rounded — evaluated by
+    /// hand in f64: 0.18 → 0.266899 → 141.13, 1 → 0.803797 → 231.60, 0.01 → 0.0037703 →
+    /// 12.27, 3 → 0.953743 → 249.74. Another curve (Reinhard's x/(1+x): 0.18 → 109) fails.
     #[test]
-    fn mid_grey_maps_to_a_mid_value() {
-        let v = grey(&ToneMap::default(), 0.18);
-        assert!((100..=180).contains(&v), "0.18 → {v}");
+    fn the_curve_and_the_encoding_are_the_closed_forms() {
+        for (x, curve) in [(0.18f32, 0.266_899_f32), (1.0, 0.803_797), (0.01, 0.003_770_3), (3.0, 0.953_743)] {
+            let got = aces_narkowicz(x);
+            assert!((got - curve).abs() < 2e-6, "ACES fit at {x}: {got}, closed form {curve}");
+        }
+        let tm = ToneMap::default();
+        for (x, byte) in [(0.18f32, 141u8), (1.0, 232), (0.01, 12), (3.0, 250)] {
+            assert_eq!(grey(&tm, x), byte, "{x} → 8-bit sRGB");
+        }
+        // Exposure multiplies before the curve: 0.09 at exposure 2 is 0.18.
+        assert_eq!(grey(&ToneMap::new(2.0), 0.09), 141);
     }
 
     #[test]

@@ -66,15 +66,17 @@ fn bound(technique: &str) -> f64 {
 /// sweep at the bilinear default (CPU and llvmpipe agree to 0.001), lowest and highest ratio:
 /// brute-force 0.985–1.017, interleaved 0.950–1.210, subsampled 0.244 (the g = 0.99 halo: its
 /// grid misses the one-pixel peak) – 1.096, epipolar 0.990–1.036, prefiltered 0.290 (the
-/// extreme medium) – 1.230, minmax 0.960–1.004, epipolar's min-max march 0.968–1.029. Each
-/// bound is the measured extreme × 0.8 (low) or × 1.2 (high). docs/ROBUSTNESS.md, "The energy
+/// extreme medium) – 1.230, minmax 0.960–1.004, epipolar's min-max march 0.968–1.029. The
+/// 1000-view long sweep (CPU) went further on two: subsampled up to 1.783 (narrow spots, the
+/// views of its worst NMAE too) and prefiltered up to 1.604 (suns). Each bound
+/// is the extreme of both runs × 0.8 (low) or × 1.2 (high). docs/ROBUSTNESS.md, "The energy
 /// check".
 const ENERGY_RATIO: &[(&str, f64, f64)] = &[
     ("brute-force", 0.79, 1.22),
     ("interleaved", 0.76, 1.45),
-    ("subsampled", 0.195, 1.32),
+    ("subsampled", 0.195, 2.14),
     ("epipolar", 0.79, 1.24),
-    ("prefiltered", 0.23, 1.48),
+    ("prefiltered", 0.23, 1.93),
     ("minmax", 0.77, 1.2),
     ("epipolar (min-max march)", 0.77, 1.23),
 ];
@@ -623,7 +625,7 @@ fn a_size_beyond_the_adapter_is_refused_with_the_limit_before_allocating() {
 
 /// The sweep's checks can fail: on a real case, the reference's own picture passes every
 /// technique's checks, and the same picture dimmed to the bound of the loosest NMAE (k = 0.1,
-/// NMAE 0.9, inside interleaved's and subsampled's bounds), brightened 1.6×, blackened or made
+/// NMAE 0.9, inside interleaved's and subsampled's bounds), brightened 2.5×, blackened or made
 /// constant fails each technique's.
 #[test]
 fn the_sweeps_checks_reject_a_dimmed_a_bright_a_black_and_a_constant_picture() {
@@ -641,7 +643,7 @@ fn the_sweeps_checks_reject_a_dimmed_a_bright_a_black_and_a_constant_picture() {
     let scaled = |k: f32| move |p: [f32; 4]| [p[0] * k, p[1] * k, p[2] * k, p[3]];
     let wrong = [
         ("dimmed to 0.1", with(&scaled(0.1))),
-        ("brightened 1.6×", with(&scaled(1.6))),
+        ("brightened 2.5×", with(&scaled(2.5))),
         ("black", with(&scaled(0.0))),
         ("constant", with(&|p: [f32; 4]| [0.3, 0.3, 0.3, p[3]])),
     ];

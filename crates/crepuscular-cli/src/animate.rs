@@ -422,43 +422,23 @@ impl<'g> PathRenderer<'g> {
 }
 
 /// A technique rendered frame after frame: the settings of frame i are the scene's and the
-/// overrides', with `frame_index` advanced by i where the technique has that setting (temporal
-/// jitter). The GPU pipelines are built once.
+/// overrides', with `frame_index` advanced by i where the technique marches
+/// ([`TechniqueSettings::ray_march`]: temporal jitter). The GPU pipelines are built once.
 pub struct AnimatedTechnique {
     name: String,
-    overrides: Vec<String>,
-    /// The scene's settings tables (no geometry), to parse each frame's settings.
-    stub: Scene,
     frame_index: Option<u32>,
     gpu: Option<(serde_json::Value, Scattering, wgpu::Texture)>,
     /// Settings of frame 0.
     pub first: TechniqueSettings,
 }
 
-/// The `frame_index` setting of a parsed technique, if it has one.
-fn frame_index_of(choice: &TechniqueSettings) -> Option<u32> {
-    let v = serde_json::to_value(choice).ok()?;
-    v.get("frame_index")?.as_u64().map(|x| x as u32)
-}
-
 impl AnimatedTechnique {
     /// Parses the technique's settings (scene table + `key=value` overrides); errors name them.
     pub fn new(name: &str, scene: &Scene, overrides: &[String]) -> Result<Self> {
         let first = parse_technique(name, scene, overrides)?;
-        let stub = Scene {
-            name: scene.name.clone(),
-            description: String::new(),
-            camera: scene.camera.clone(),
-            medium: scene.medium.clone(),
-            lights: scene.lights.clone(),
-            geometry: Geometry::default(),
-            render: scene.render.clone(),
-        };
         Ok(AnimatedTechnique {
             name: name.into(),
-            overrides: overrides.to_vec(),
-            frame_index: frame_index_of(&first),
-            stub,
+            frame_index: first.ray_march().map(|m| m.frame_index),
             gpu: None,
             first,
         })
@@ -481,14 +461,11 @@ impl AnimatedTechnique {
 
     /// Settings of frame `i`.
     pub fn settings(&self, i: u32) -> Result<TechniqueSettings> {
-        match self.frame_index {
-            None => Ok(self.first.clone()),
-            Some(base) => {
-                let mut o = self.overrides.clone();
-                o.push(format!("frame_index={}", base.wrapping_add(i)));
-                parse_technique(&self.name, &self.stub, &o)
-            }
+        let mut s = self.first.clone();
+        if let (Some(base), Some(m)) = (self.frame_index, s.ray_march_mut()) {
+            m.frame_index = base.wrapping_add(i);
         }
+        Ok(s)
     }
 
     /// Renders frame `i` (the in-scattering) on `frame`: on the GPU when there is one and the
@@ -917,7 +894,7 @@ pub fn recovery_frames(psnr: &[f64], jump: usize) -> Option<u32> {
 /// overrides do not set it (what the temporal stage is fed); and whether it was added.
 pub(crate) fn with_jitter(name: &str, scene: &Scene, overrides: &[String]) -> Result<(Vec<String>, bool)> {
     let first = parse_technique(name, scene, overrides)?;
-    let has_jitter = serde_json::to_value(&first)?.get("jitter").is_some();
+    let has_jitter = first.ray_march().is_some();
     let set_by_user = overrides.iter().any(|o| o.split_once('=').is_some_and(|(k, _)| k.trim() == "jitter"));
     let add = has_jitter && !set_by_user;
     let mut o = overrides.to_vec();

@@ -670,19 +670,6 @@ fn settings_fields(t: &TechniqueSettings) -> serde_json::Map<String, serde_json:
     }
 }
 
-/// `technique` with its `jitter` on and `frame_index` = `frame`, where it has both (the
-/// temporal stage's per-frame sample positions); None where it has neither.
-fn jittered(technique: &TechniqueSettings, frame: u32) -> Option<TechniqueSettings> {
-    let mut v = serde_json::to_value(technique).ok()?;
-    let m = v.as_object_mut()?;
-    if !m.contains_key("jitter") || !m.contains_key("frame_index") {
-        return None;
-    }
-    m.insert("jitter".into(), true.into());
-    m.insert("frame_index".into(), frame.into());
-    serde_json::from_value(v).ok()
-}
-
 /// TOML text for the fields that are not scalars (unset options, arrays).
 fn text_fields(fields: &serde_json::Map<String, serde_json::Value>) -> std::collections::BTreeMap<String, String> {
     fields

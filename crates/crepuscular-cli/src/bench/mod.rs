@@ -258,7 +258,7 @@ pub struct LightJumpColumn {
 impl BenchRecord {
     /// Whether the row's technique has a `jitter` setting (the temporal column turns it on).
     pub fn settings_have_jitter(&self) -> bool {
-        serde_json::to_value(&self.settings).is_ok_and(|v| v.get("jitter").is_some())
+        self.settings.ray_march().is_some()
     }
 }
 

@@ -159,8 +159,8 @@ impl Viewer {
         let runner = self.runner.as_mut().expect("runner was just built");
         if self.temporal.is_some() {
             // Each frame's samples elsewhere: jitter on, frame_index advanced (no rebuild).
-            if let Some(jittered) = jittered(&self.technique, self.frames_rendered) {
-                runner.update(&jittered)?;
+            if self.technique.ray_march().is_some() {
+                runner.update(&self.technique.jittered(self.frames_rendered))?;
             }
         }
         let out_view = targets.inscatter.create_view(&Default::default());

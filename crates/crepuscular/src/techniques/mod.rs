@@ -341,4 +341,74 @@ impl TechniqueSettings {
     pub fn writes_scattering_distance(&self) -> bool {
         matches!(self, Self::BruteForce(_))
     }
+
+    /// How the technique marches its view rays ([`crate::march::MarchSettings`]: `steps`,
+    /// `jitter`, `frame_index`), where it marches them: `brute-force`, `interleaved`,
+    /// `subsampled` and `epipolar`. None for `prefiltered`, `minmax` and `reference`, which
+    /// have no march whose samples a frame could move.
+    pub fn ray_march(&self) -> Option<&crate::march::MarchSettings> {
+        match self {
+            Self::BruteForce(s) => Some(&s.ray_march),
+            Self::Interleaved(s) => Some(&s.ray_march),
+            Self::Subsampled(s) => Some(&s.ray_march),
+            Self::Epipolar(s) => Some(&s.ray_march),
+            Self::Prefiltered(_) | Self::Minmax(_) | Self::Reference(_) => None,
+        }
+    }
+
+    /// [`Self::ray_march`], to change.
+    pub fn ray_march_mut(&mut self) -> Option<&mut crate::march::MarchSettings> {
+        match self {
+            Self::BruteForce(s) => Some(&mut s.ray_march),
+            Self::Interleaved(s) => Some(&mut s.ray_march),
+            Self::Subsampled(s) => Some(&mut s.ray_march),
+            Self::Epipolar(s) => Some(&mut s.ray_march),
+            Self::Prefiltered(_) | Self::Minmax(_) | Self::Reference(_) => None,
+        }
+    }
+
+    /// These settings for frame `frame` of a jittered sequence, as the temporal stage wants
+    /// them (docs/MODEL.md §7): `jitter` on and `frame_index` = `frame` where the technique
+    /// marches ([`Self::ray_march`]); unchanged where it does not. Feeding the result to
+    /// [`crate::Scattering::update`] every frame changes no pipeline and no allocation.
+    pub fn jittered(&self, frame: u32) -> Self {
+        let mut s = self.clone();
+        if let Some(m) = s.ray_march_mut() {
+            m.jitter = true;
+            m.frame_index = frame;
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{TECHNIQUES, TechniqueSettings};
+
+    /// `ray_march` is there exactly for the techniques whose settings have the march's keys
+    /// (`steps`, `jitter`, `frame_index` in their scene-file table), and `jittered` sets the
+    /// two that move the samples and nothing else.
+    #[test]
+    fn jittered_moves_the_march_of_exactly_the_marching_techniques() {
+        let mut marching = Vec::new();
+        for info in TECHNIQUES {
+            let base = TechniqueSettings::named(info.name).expect("a listed technique");
+            let table = toml::Value::try_from(&base).expect("settings serialise");
+            let has_keys = ["steps", "jitter", "frame_index"].iter().all(|k| table.get(k).is_some());
+            assert_eq!(base.ray_march().is_some(), has_keys, "{}", info.name);
+            let j = base.jittered(7);
+            match j.ray_march() {
+                Some(m) => {
+                    marching.push(info.name);
+                    assert!(m.jitter && m.frame_index == 7, "{}", info.name);
+                    let mut back = j.clone();
+                    let m = back.ray_march_mut().expect("marches");
+                    (m.jitter, m.frame_index) = (false, 0);
+                    assert_eq!(back, base, "{}: jittered changed another setting", info.name);
+                }
+                None => assert_eq!(j, base, "{}: a technique without a march is unchanged", info.name),
+            }
+        }
+        assert_eq!(marching, ["brute-force", "interleaved", "subsampled", "epipolar"]);
+    }
 }

@@ -1,11 +1,13 @@
 //! The plugin in a Bevy app: the demo colonnade with light shafts, in a window (T switches to
-//! the next technique, Escape quits), or headless into a PNG with `--screenshot`.
+//! the next technique, A turns temporal accumulation on and off, Escape quits), or headless
+//! into a PNG with `--screenshot`.
 //!
 //! ```text
 //! cargo run --release -p crepuscular-bevy --example shafts                       # a window
 //! cargo run --release -p crepuscular-bevy --example shafts -- --screenshot shafts.png --frames 4
 //! cargo run --release -p crepuscular-bevy --example shafts -- --technique prefiltered --preset fast --lamps --screenshot p.png
 //! cargo run --release -p crepuscular-bevy --example shafts -- --bevy-fog 64 --screenshot bevy.png
+//! cargo run --release -p crepuscular-bevy --example shafts -- --technique brute-force --preset fast --temporal --frames 12 --screenshot t.png
 //! ```
 
 use std::path::PathBuf;
@@ -35,6 +37,10 @@ struct Args {
     /// Add a spot and a point lamp to the sun (both scatter).
     #[arg(long)]
     lamps: bool,
+    /// Temporal accumulation after the technique (`CrepuscularTemporal` at its defaults, with
+    /// Bevy's motion vectors): the samples move every frame and the frames are blended.
+    #[arg(long)]
+    temporal: bool,
     /// Image (or window) size, WIDTHxHEIGHT.
     #[arg(long, default_value = "960x540")]
     size: String,
@@ -76,7 +82,11 @@ fn run(args: Args) -> Result<(), String> {
         }
         Effect::Crepuscular(demo::crepuscular(technique))
     };
-    let opts = DemoOptions { width, height, effect, lamps: args.lamps, ..Default::default() };
+    if args.temporal && !matches!(effect, Effect::Crepuscular(_)) {
+        return Err("--temporal: the stage runs after the plugin's technique, not with --bevy-fog or --no-fog".into());
+    }
+    let temporal = args.temporal.then(crepuscular_bevy::CrepuscularTemporal::default);
+    let opts = DemoOptions { width, height, effect, lamps: args.lamps, temporal, ..Default::default() };
     let Some(screenshot) = args.screenshot else {
         let mut app = demo::windowed_app(&opts);
         if let Some(path) = args.window_screenshot {

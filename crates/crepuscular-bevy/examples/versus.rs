@@ -16,6 +16,7 @@
 //! frame without fog.
 //! Quality: PSNR and FLIP of the final (tone-mapped, 8-bit) picture against the effect's own
 //! converged picture: Bevy at 1024 steps; the plugin's brute-force march at 1024 steps.
+//! `--temporal` adds the marching techniques with the temporal stage after them (a still camera).
 //! Writes `versus.md` (the table), `versus.json`, `side-by-side.png` and each picture.
 
 use std::path::{Path, PathBuf};
@@ -52,6 +53,12 @@ struct Args {
     /// (one texel).
     #[arg(long, default_value = "bilinear", value_parser = crepuscular::ShadowFilter::parse)]
     shadow_filter: crepuscular::ShadowFilter,
+    /// Also measure each marching technique (brute-force, interleaved, subsampled, epipolar)
+    /// with the temporal stage after it (`CrepuscularTemporal` at its defaults, Bevy's motion
+    /// vectors on): jittered samples blended over the settle frames, the timed frames and the
+    /// captured one, the camera still (the stage's best case: a moving camera keeps less).
+    #[arg(long)]
+    temporal: bool,
     /// Output folder.
     #[arg(long, default_value = "bevy-versus")]
     output: PathBuf,
@@ -104,14 +111,16 @@ fn run(args: Args) -> Result<(), String> {
     // A fresh progress log for this run.
     let _ = std::fs::remove_file(args.output.join("progress.log"));
 
-    let mut configs: Vec<(String, &'static str, Effect)> = vec![("no fog".into(), "baseline", Effect::None)];
+    type Config = (String, &'static str, Effect, Option<crepuscular_bevy::CrepuscularTemporal>);
+    let mut configs: Vec<Config> = vec![("no fog".into(), "baseline", Effect::None, None)];
     for &s in &args.steps {
-        configs.push((format!("Bevy VolumetricFog {s} steps"), "bevy", Effect::BevyFog { steps: s }));
+        configs.push((format!("Bevy VolumetricFog {s} steps"), "bevy", Effect::BevyFog { steps: s }, None));
     }
     configs.push((
         "Bevy VolumetricFog 1024 steps (converged)".into(),
         "bevy-converged",
         Effect::BevyFog { steps: 1024 },
+        None,
     ));
     // The plugin's rows name a non-default shadow filter, so tables of both can be merged.
     let filter = match args.shadow_filter {
@@ -124,7 +133,9 @@ fn run(args: Args) -> Result<(), String> {
         format!("crepuscular brute-force 1024 steps (converged{filter})"),
         "ours-converged",
         Effect::Crepuscular(demo::crepuscular(TechniqueSettings::BruteForce(converged))),
+        None,
     ));
+    let stage_frames = 3 + args.frames + 1;
     for info in crepuscular::techniques::TECHNIQUES {
         if !args.techniques.is_empty() && !args.techniques.iter().any(|t| t == info.name) {
             continue;
@@ -134,10 +145,23 @@ fn run(args: Args) -> Result<(), String> {
             if !t.has_gpu() {
                 continue;
             }
+            if args.temporal && t.ray_march().is_some() {
+                configs.push((
+                    format!(
+                        "crepuscular {} ({}{filter}) + temporal stage, still camera, frame {stage_frames}",
+                        info.name,
+                        p.name()
+                    ),
+                    "ours",
+                    Effect::Crepuscular(demo::crepuscular(t.clone())),
+                    Some(crepuscular_bevy::CrepuscularTemporal::default()),
+                ));
+            }
             configs.push((
                 format!("crepuscular {} ({}{filter})", info.name, p.name()),
                 "ours",
                 Effect::Crepuscular(demo::crepuscular(t)),
+                None,
             ));
         }
     }
@@ -147,7 +171,7 @@ fn run(args: Args) -> Result<(), String> {
     let mut runs = Vec::new();
     let mut adapter = String::new();
     let mut software = true;
-    for (label, family, effect) in configs {
+    for (label, family, effect, temporal) in configs {
         bar.set_message(label.clone());
         // Bevy's logger is process-wide: the first app installs it.
         let opts = DemoOptions {
@@ -157,6 +181,7 @@ fn run(args: Args) -> Result<(), String> {
             lamps: false,
             shadow_filter: args.shadow_filter,
             log: runs.is_empty(),
+            temporal,
             ..Default::default()
         };
         let mut app = demo::headless_app(&opts);

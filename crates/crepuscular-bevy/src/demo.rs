@@ -14,7 +14,7 @@ use bevy::render::render_resource::TextureFormat;
 use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use bevy::window::{ExitCondition, WindowPlugin};
 
-use crate::{Crepuscular, CrepuscularLight, CrepuscularPlugin};
+use crate::{Crepuscular, CrepuscularLight, CrepuscularPlugin, CrepuscularTemporal};
 
 /// Which volumetric effect the demo camera renders.
 #[derive(Clone, Debug)]
@@ -51,6 +51,9 @@ pub struct DemoOptions {
     /// Installs Bevy's `LogPlugin` (a process-wide logger: tests that build several apps in one
     /// process turn it off). Default true.
     pub log: bool,
+    /// With the plugin: the temporal stage on the camera ([`CrepuscularTemporal`]), with
+    /// Bevy's `MotionVectorPrepass` beside it for its motion vectors. Default None (off).
+    pub temporal: Option<CrepuscularTemporal>,
 }
 
 impl Default for DemoOptions {
@@ -63,6 +66,7 @@ impl Default for DemoOptions {
             shadow_map_size: 1024,
             shadow_filter: crepuscular::ShadowFilter::Bilinear,
             log: true,
+            temporal: None,
         }
     }
 }
@@ -92,12 +96,13 @@ pub fn headless_app(opts: &DemoOptions) -> App {
 }
 
 /// The demo in a window of the options' size (run it with `app.run()`): T switches the camera
-/// to the next GPU technique (at the same preset), Escape quits.
+/// to the next GPU technique (at the same preset), A turns the temporal stage on and off,
+/// Escape quits.
 pub fn windowed_app(opts: &DemoOptions) -> App {
     let mut app = App::new();
     app.add_plugins(DefaultPlugins.set(WindowPlugin {
         primary_window: Some(Window {
-            title: "crepuscular-bevy: T switches technique".into(),
+            title: "crepuscular-bevy: T switches technique, A temporal accumulation".into(),
             resolution: bevy::window::WindowResolution::new(opts.width, opts.height),
             ..default()
         }),
@@ -132,13 +137,30 @@ fn add_scene(app: &mut App, opts: &DemoOptions, window: Option<()>) {
     );
 }
 
-/// T: the next GPU technique (same preset); Escape: quit.
-fn keys(keys: Res<ButtonInput<KeyCode>>, mut cameras: Query<&mut Crepuscular>, mut exit: MessageWriter<AppExit>) {
+/// T: the next GPU technique (same preset); A: the temporal stage on or off; Escape: quit.
+fn keys(
+    mut commands: Commands,
+    keys: Res<ButtonInput<KeyCode>>,
+    mut cameras: Query<(Entity, &mut Crepuscular, Has<CrepuscularTemporal>)>,
+    mut exit: MessageWriter<AppExit>,
+) {
     if keys.just_pressed(KeyCode::Escape) {
         exit.write(AppExit::Success);
     }
+    if keys.just_pressed(KeyCode::KeyA) {
+        for (entity, _, on) in &cameras {
+            if on {
+                commands.entity(entity).remove::<CrepuscularTemporal>();
+            } else {
+                commands
+                    .entity(entity)
+                    .insert((CrepuscularTemporal::default(), bevy::core_pipeline::prepass::MotionVectorPrepass));
+            }
+            info!("crepuscular: temporal stage {}", if on { "off" } else { "on" });
+        }
+    }
     if keys.just_pressed(KeyCode::KeyT) {
-        for mut c in &mut cameras {
+        for (_, mut c, _) in &mut cameras {
             c.technique = next_technique(&c.technique);
             info!("crepuscular: technique {}", c.technique.name());
         }
@@ -293,6 +315,9 @@ pub fn spawn_colonnade(
     match &opts.effect {
         Effect::Crepuscular(c) => {
             camera.insert(c.clone());
+            if let Some(t) = &opts.temporal {
+                camera.insert((t.clone(), bevy::core_pipeline::prepass::MotionVectorPrepass));
+            }
         }
         Effect::BevyFog { steps } => {
             camera.insert(VolumetricFog { step_count: *steps, ambient_intensity: 0.0, jitter: 0.0, ..default() });

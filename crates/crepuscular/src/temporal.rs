@@ -821,6 +821,13 @@ impl Temporal {
         self.prev = None;
     }
 
+    /// Whether the next frame will be blended with a history: false before the first frame
+    /// and after [`Self::reset`] (the stage may still drop it on that frame, for a new size,
+    /// other lights or medium, or a light jump).
+    pub fn has_history(&self) -> bool {
+        self.prev.is_some()
+    }
+
     /// The history weight w per pixel of the last frame recorded (an `R32Float` texture of the
     /// frame's size; 0 where the history was rejected): the viewer's debug view.
     pub fn weights(&self) -> Option<&wgpu::Texture> {

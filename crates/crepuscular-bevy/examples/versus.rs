@@ -17,7 +17,9 @@
 //! Quality: PSNR and FLIP of the final (tone-mapped, 8-bit) picture against the effect's own
 //! converged picture: Bevy at 1024 steps; the plugin's brute-force march at 1024 steps.
 //! `--temporal` adds the marching techniques with the temporal stage after them (a still camera).
-//! Writes `versus.md` (the table), `versus.json`, `side-by-side.png` and each picture.
+//! Writes `versus.md` (the table), `versus.json`, `side-by-side.png`, with `--temporal`
+//! `temporal.png` (the plugin's converged picture, a technique alone, the same with the stage),
+//! and each picture.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -55,8 +57,9 @@ struct Args {
     shadow_filter: crepuscular::ShadowFilter,
     /// Also measure each marching technique (brute-force, interleaved, subsampled, epipolar)
     /// with the temporal stage after it (`CrepuscularTemporal` at its defaults, Bevy's motion
-    /// vectors on): jittered samples blended over the settle frames, the timed frames and the
-    /// captured one, the camera still (the stage's best case: a moving camera keeps less).
+    /// vectors on): jittered samples blended over the timed frames and the captured one (the
+    /// history is cut after the settle frames), the camera still (the stage's best case: a
+    /// moving camera keeps less). `--frames 7` makes the captured frame the eighth.
     #[arg(long)]
     temporal: bool,
     /// Output folder.
@@ -135,7 +138,8 @@ fn run(args: Args) -> Result<(), String> {
         Effect::Crepuscular(demo::crepuscular(TechniqueSettings::BruteForce(converged))),
         None,
     ));
-    let stage_frames = 3 + args.frames + 1;
+    // The stage's history is cut after the settle frames: the captured frame is its n-th.
+    let stage_frames = args.frames + 1;
     for info in crepuscular::techniques::TECHNIQUES {
         if !args.techniques.is_empty() && !args.techniques.iter().any(|t| t == info.name) {
             continue;
@@ -148,7 +152,7 @@ fn run(args: Args) -> Result<(), String> {
             if args.temporal && t.ray_march().is_some() {
                 configs.push((
                     format!(
-                        "crepuscular {} ({}{filter}) + temporal stage, still camera, frame {stage_frames}",
+                        "crepuscular {} ({}{filter}) + temporal stage, still camera, frame {stage_frames} after a cut",
                         info.name,
                         p.name()
                     ),
@@ -189,6 +193,11 @@ fn run(args: Args) -> Result<(), String> {
         app.finish();
         app.cleanup();
         demo::settle(&mut app, 3).map_err(|e| format!("{label}: {e}"))?;
+        // The stage's history starts with the timed frames (the settle's count varies).
+        let mut stages = app.world_mut().query::<&mut crepuscular_bevy::CrepuscularTemporal>();
+        for mut t in stages.iter_mut(app.world_mut()) {
+            t.cut();
+        }
         let device = app.world().resource::<bevy::render::renderer::RenderDevice>().wgpu_device().clone();
         let queue: wgpu::Queue = {
             let q: &wgpu::Queue = &app.world().resource::<bevy::render::renderer::RenderQueue>().0;
@@ -274,7 +283,16 @@ fn run(args: Args) -> Result<(), String> {
         .find(|r| r.label == "crepuscular epipolar (balanced)")
         .or_else(|| runs.iter().find(|r| r.family == "ours"));
     if let (Some(l), Some(r)) = (left, right) {
-        side_by_side(&l.image, &r.image, &args.output.join("side-by-side.png"))?;
+        side_by_side(&[&l.image, &r.image], &args.output.join("side-by-side.png"))?;
+    }
+    // With --temporal: the plugin's converged picture, the first marching row alone and the
+    // same row with the stage, left to right.
+    let staged = runs.iter().find(|r| r.label.contains("temporal stage"));
+    if let Some(staged) = staged {
+        let plain_label = staged.label.split(" + temporal stage").next().unwrap_or_default();
+        if let Some(plain) = runs.iter().find(|r| r.label == plain_label) {
+            side_by_side(&[ours_ref, &plain.image, &staged.image], &args.output.join("temporal.png"))?;
+        }
     }
     print!("{md}");
     eprintln!("wrote {}", args.output.join("versus.md").display());
@@ -367,16 +385,22 @@ fn quality(reference: &Image, test: &Image) -> Result<(f64, f64), String> {
     Ok((psnr, nv_flip::FlipPool::from_image(&map).mean() as f64))
 }
 
-fn side_by_side(left: &Image, right: &Image, path: &Path) -> Result<(), String> {
-    let (w, h, l) = rgb8(left)?;
-    let (_, _, r) = rgb8(right)?;
+/// The pictures side by side, left to right, 4 black pixels apart.
+fn side_by_side(pictures: &[&Image], path: &Path) -> Result<(), String> {
+    let pictures = pictures.iter().map(|p| rgb8(p)).collect::<Result<Vec<_>, _>>()?;
+    let (w, h) = (pictures[0].0, pictures[0].1);
+    if pictures.iter().any(|p| (p.0, p.1) != (w, h)) {
+        return Err(format!("{}: pictures of different sizes", path.display()));
+    }
     let gap = 4u32;
-    let mut out = image::RgbImage::new(2 * w + gap, h);
-    for y in 0..h {
-        for x in 0..w {
-            let i = ((y * w + x) * 3) as usize;
-            out.put_pixel(x, y, image::Rgb([l[i], l[i + 1], l[i + 2]]));
-            out.put_pixel(w + gap + x, y, image::Rgb([r[i], r[i + 1], r[i + 2]]));
+    let n = pictures.len() as u32;
+    let mut out = image::RgbImage::new(n * w + (n - 1) * gap, h);
+    for (k, (_, _, p)) in pictures.iter().enumerate() {
+        for y in 0..h {
+            for x in 0..w {
+                let i = ((y * w + x) * 3) as usize;
+                out.put_pixel(k as u32 * (w + gap) + x, y, image::Rgb([p[i], p[i + 1], p[i + 2]]));
+            }
         }
     }
     let mut png = std::io::Cursor::new(Vec::new());

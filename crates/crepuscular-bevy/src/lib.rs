@@ -396,8 +396,8 @@ pub struct CapturedFrame {
     pub shadow_maps: wgpu::Texture,
     /// The in-scattering the plugin computed (in `Crepuscular::output_format`).
     pub inscatter: wgpu::Texture,
-    /// With [`CrepuscularTemporal`]: the stage's output (what was composited), and Bevy's
-    /// motion vectors where the stage read them.
+    /// With [`CrepuscularTemporal`]: the stage's output (what was composited) and what it
+    /// read.
     pub temporal: Option<CapturedTemporal>,
 }
 

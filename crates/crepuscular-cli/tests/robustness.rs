@@ -441,7 +441,10 @@ fn sweep(
     let started = std::time::Instant::now();
     for (k, c) in cases.iter().enumerate() {
         let opts = |technique| RenderOptions { technique, progress: &|_, _| {} };
-        let reference = render(&c.scene, None, &opts(TechniqueSettings::Reference(reference.clone())))
+        // The reference over the backend's own frame (on the GPU backend: the CPU reference over
+        // the shadow maps and depth the GPU host drew), so the error measures the technique,
+        // not the two hosts' rasterizations.
+        let reference = render(&c.scene, gpu, &opts(TechniqueSettings::Reference(reference.clone())))
             .unwrap_or_else(|e| panic!("reference on `{}`: {e:#}", c.name));
         assert!(finite(&reference.inscatter), "reference on `{}`: NaN or Inf", c.name);
         let mut line = format!("{backend} {:<40}", c.name);

@@ -6,20 +6,25 @@
 //!    Halton(2, 3) offset): lit, shadowed surface colour (`Rgba16Float`) and the depth buffer,
 //! 3. crepuscular's technique (`Scattering::encode`), handed the engine's device, depth buffer,
 //!    shadow map and matrices: the in-scattered light into an `Rgba32Float` texture,
-//! 4. crepuscular's composite (`Composite::encode`): L = T(s)·L_surface + L_scatt, tone-mapped
+//! 4. with `--temporal`, crepuscular's temporal stage (`Temporal::encode`): the technique's
+//!    samples move every frame (`TechniqueSettings::jittered`, through `Scattering::update`)
+//!    and the stage blends the frame with the previous ones, reprojected through the previous
+//!    and current (jittered) matrices and the depth buffer,
+//! 5. crepuscular's composite (`Composite::encode`): L = T(s)·L_surface + L_scatt, tone-mapped
 //!    into the engine's `Rgba8Unorm` target,
 //!
 //! for several frames and for every GPU technique, then checks each final picture (shafts in
 //! the fog, shadows on the ground, not black) and saves it; it exits non-zero when a check fails.
 //!
-//! Run: `cargo run --release -p crepuscular --example own_renderer [-- OUT_DIR [TECHNIQUE]]`
-//! (default: the current directory, every GPU technique), writing `own_renderer-<technique>.ppm`.
+//! Run: `cargo run --release -p crepuscular --example own_renderer [-- OUT_DIR [TECHNIQUE] [--temporal]]`
+//! (default: the current directory, every GPU technique, no temporal stage), writing
+//! `own_renderer-<technique>.ppm` (`-temporal.ppm` with the stage).
 
 use crepuscular::frame::{FrameDesc, FrameLight, GpuFrame};
 use crepuscular::tonemap::ToneMap;
 use crepuscular::{
     Composite, CompositeInputs, CompositeTarget, DepthConvention, FrameCamera, GpuContext, Light, Medium, Scattering,
-    ShadowProjection, TechniqueSettings,
+    ShadowProjection, TechniqueSettings, Temporal, TemporalSettings,
 };
 use glam::{Mat4, Vec3};
 use wgpu::util::DeviceExt;
@@ -78,8 +83,10 @@ fn halton(mut i: u32, base: u32) -> f32 {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let out_dir = std::path::PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| ".".into()));
-    let only = std::env::args().nth(2);
+    let temporal = std::env::args().any(|a| a == "--temporal");
+    let args: Vec<String> = std::env::args().skip(1).filter(|a| a != "--temporal").collect();
+    let out_dir = std::path::PathBuf::from(args.first().cloned().unwrap_or_else(|| ".".into()));
+    let only = args.get(1).cloned();
 
     // 1. The engine's own instance, adapter and device; crepuscular is handed the device.
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
@@ -243,8 +250,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     });
     let (color_view, surface_view) =
         (surface.create_view(&Default::default()), surface.create_view(&Default::default()));
-    let (inscatter_view, final_view) =
-        (inscatter.create_view(&Default::default()), final_image.create_view(&Default::default()));
+    // With the temporal stage: its output, which the composite then reads.
+    let resolved = texture(
+        "resolved in-scattering",
+        WIDTH,
+        HEIGHT,
+        wgpu::TextureFormat::Rgba32Float,
+        wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC,
+    );
+    let (inscatter_view, resolved_view, final_view) = (
+        inscatter.create_view(&Default::default()),
+        resolved.create_view(&Default::default()),
+        final_image.create_view(&Default::default()),
+    );
     let light = Light::Directional { direction: sun_dir, color: sun_color, intensity: sun_intensity };
     let shadow = ShadowProjection {
         view_proj: [light_vp; 6],
@@ -259,7 +277,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     // One frame of the engine: its passes, crepuscular's technique and composite, one submit.
     let mut composite = Composite::new(&device)?;
-    let mut frame = |scattering: &mut Scattering, index: u32| -> Result<FrameCamera, crepuscular::Error> {
+    let mut frame = |scattering: &mut Scattering,
+                     stage: Option<&mut Temporal>,
+                     index: u32|
+     -> Result<FrameCamera, crepuscular::Error> {
         let jitter = (halton(index + 1, 2) - 0.5, halton(index + 1, 3) - 0.5);
         let jittered =
             Mat4::from_translation(Vec3::new(2.0 * jitter.0 / WIDTH as f32, 2.0 * jitter.1 / HEIGHT as f32, 0.0))
@@ -339,10 +360,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             spot_textures: None,
             rectified_shadow_maps: &[],
         };
+        if stage.is_some() {
+            // The samples move every frame: jitter on, frame_index = the frame (no rebuild).
+            scattering.update(&scattering.settings().jittered(index))?;
+        }
         scattering.encode(&mut encoder, &gpu_frame, &inscatter_view)?;
-        // 4. … and its composite, with the display transform, into the engine's target.
-        let inputs =
-            CompositeInputs { desc: &desc, depth: &depth_view, inscatter: &inscatter_view, surface: &surface_view };
+        // 4. The temporal stage, if on: this frame blended with the history (no motion
+        // vectors: the scene is static, so reprojecting through the camera is exact).
+        let composited = match stage {
+            Some(stage) => {
+                stage.encode(&mut encoder, &desc, &depth_view, &inscatter_view, &resolved_view, None)?;
+                &resolved_view
+            }
+            None => &inscatter_view,
+        };
+        // 5. … and the composite, with the display transform, into the engine's target.
+        let inputs = CompositeInputs { desc: &desc, depth: &depth_view, inscatter: composited, surface: &surface_view };
         composite.encode(&mut encoder, &inputs, CompositeTarget::Into(&final_view), Some(ToneMap::new(1.0)))?;
         queue.submit([encoder.finish()]); // the frame's one submit
         scattering.end_frame();
@@ -350,7 +383,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(camera)
     };
 
-    // 5. Every GPU technique, several frames each; read back, check, report and save.
+    // 6. Every GPU technique, several frames each; read back, check, report and save.
     let readback = GpuContext::from_device(&device, &queue); // the library's readback helpers
     let mut failures = Vec::new();
     for info in crepuscular::techniques::TECHNIQUES.iter().filter(|t| t.gpu) {
@@ -358,9 +391,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             continue;
         }
         let mut scattering = Scattering::new(&device, &queue, TechniqueSettings::named(info.name)?)?;
+        let mut stage = if temporal { Some(Temporal::new(&device, TemporalSettings::default())?) } else { None };
         let mut camera = None;
         for i in 0..FRAMES {
-            camera = Some(frame(&mut scattering, i)?);
+            camera = Some(frame(&mut scattering, stage.as_mut(), i)?);
         }
         readback.wait()?;
         let camera = camera.expect("frames were rendered");
@@ -376,7 +410,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (in_shadow, in_sun) = (pixel_of(ground_shadow), pixel_of(ground_shadow + Vec3::X));
         let mut fail = |what: String| failures.push(format!("{}: {what}", info.name));
 
-        let img = readback.read_image(&inscatter)?;
+        let img = readback.read_image(if temporal { &resolved } else { &inscatter })?;
+        if img.pixels.iter().any(|p| p.iter().any(|v| !v.is_finite())) {
+            fail("NaN or infinity in the in-scattering".into());
+        }
         let lum: Vec<f32> = img.pixels.iter().map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]).collect();
         let mean = lum.iter().sum::<f32>() / lum.len() as f32;
         // The view ray to the shadowed ground runs through the bar's shadow volume, the ray
@@ -402,11 +439,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             format!("{} ({})", passes.join(", "), s.timing)
         });
         println!(
-            "{:<12} {FRAMES} frames, one submit each: in-scattering mean {mean:.4}, shaft {a:.4} vs {b:.4}; \
+            "{:<12} {FRAMES} frames{}, one submit each: in-scattering mean {mean:.4}, shaft {a:.4} vs {b:.4}; \
              final mean {final_mean:.1}, ground {ga:.0} in shadow vs {gb:.0} in sun; {timing}",
-            info.name
+            info.name,
+            if temporal { " with the temporal stage" } else { "" }
         );
-        let path = out_dir.join(format!("own_renderer-{}.ppm", info.name));
+        let suffix = if temporal { "-temporal" } else { "" };
+        let path = out_dir.join(format!("own_renderer-{}{suffix}.ppm", info.name));
         let mut ppm = format!("P6\n{WIDTH} {HEIGHT}\n255\n").into_bytes();
         ppm.extend_from_slice(&rgb);
         std::fs::write(&path, ppm)?;

@@ -772,4 +772,25 @@ fn the_temporal_stage_in_bevy_equals_the_library_frame_by_frame() {
     let off = take_capture(&mut app);
     assert!(off.temporal.is_none(), "without the component there is no stage");
     assert_eq!(off.technique, TechniqueSettings::named("epipolar").unwrap(), "the technique's own settings");
+
+    // A setting out of range is a logged error (the library's, naming
+    // `temporal.history_weight`): the effect skips the frame, Bevy renders on, and the stage
+    // runs once the setting is fixed.
+    let capture = app.world().resource::<CrepuscularCapture>().clone();
+    let mut bad = CrepuscularTemporal::default();
+    bad.settings.history_weight = 1.5;
+    let cameras: Vec<Entity> =
+        app.world_mut().query_filtered::<Entity, With<Crepuscular>>().iter(app.world()).collect();
+    for &e in &cameras {
+        app.world_mut().entity_mut(e).insert(bad.clone());
+    }
+    let _ = capture.take();
+    app.update();
+    assert!(capture.take().is_none(), "no frame with history_weight 1.5");
+    for &e in &cameras {
+        app.world_mut().entity_mut(e).insert(CrepuscularTemporal::default());
+    }
+    let fixed = take_capture(&mut app);
+    assert!(fixed.temporal.is_some_and(|t| t.reset), "the stage starts once the setting is valid");
+    assert!(app.should_exit().is_none(), "the app never quit");
 }

@@ -664,7 +664,13 @@ fn scatter(
         let inscatter = match &state.inscatter {
             Some(t) if (t.width(), t.height()) == (width, height) => t.clone(),
             _ => {
-                let t = inscatter_texture(device_w, "crepuscular inscatter", width, height, settings.output_format);
+                let t = crepuscular::gpu::storage_texture(
+                    device_w,
+                    "crepuscular inscatter",
+                    settings.output_format,
+                    width,
+                    height,
+                );
                 state.inscatter = Some(t.clone());
                 t
             }
@@ -709,8 +715,13 @@ fn scatter(
                         r.clone()
                     }
                     _ => {
-                        let r =
-                            inscatter_texture(device_w, "crepuscular resolved", width, height, settings.output_format);
+                        let r = crepuscular::gpu::storage_texture(
+                            device_w,
+                            "crepuscular resolved",
+                            settings.output_format,
+                            width,
+                            height,
+                        );
                         t.resolved = Some(r.clone());
                         r
                     }
@@ -780,28 +791,6 @@ fn new_scattering(
         .and_then(|s| s.with_stats(StatsMode::Off))
         .and_then(|s| s.with_output_format(format))
         .map_err(|e| e.to_string())
-}
-
-/// An in-scattering texture of the frame's size: written by a compute pass, read by the next.
-fn inscatter_texture(
-    device: &wgpu::Device,
-    label: &str,
-    width: u32,
-    height: u32,
-    format: wgpu::TextureFormat,
-) -> wgpu::Texture {
-    device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format,
-        usage: wgpu::TextureUsages::STORAGE_BINDING
-            | wgpu::TextureUsages::TEXTURE_BINDING
-            | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    })
 }
 
 fn new_state(device: &wgpu::Device, queue: &wgpu::Queue, settings: &Crepuscular) -> Result<ViewState, String> {

@@ -452,6 +452,10 @@ fn sweep(
             let out = render(&c.scene, gpu, &opts(t.clone()))
                 .unwrap_or_else(|e| panic!("{backend} {} on `{}`: {e:#}", t.name(), c.name));
             let (e, ratio, failure) = check(c, backend, label(t), &out, &reference);
+            if let (false, Some(f)) = (verbose, &failure) {
+                // As it happens: a long run stopped early still shows what failed.
+                eprintln!("FAILED {f}");
+            }
             failures.extend(failure);
             line += &format!(" {}={e:.3}", label(t));
             if let Some(r) = ratio {
@@ -506,8 +510,8 @@ fn every_technique_survives_every_hard_view_gpu() {
 /// The long sweep, outside the default test run (docs/ROBUSTNESS.md): the seeded random views
 /// continued to `CREPUSCULAR_SWEEP_VIEWS` (default 1000), every technique, on the backends in
 /// `CREPUSCULAR_SWEEP_BACKENDS` (`cpu`, `gpu` or `cpu,gpu`, the default), the same checks and
-/// bounds as the default sweep; prints progress every 50 views, the worst case per technique
-/// and every failure, and fails at the end if there was one. `cargo test --release -p crepuscular-cli --test robustness -- --ignored --nocapture`
+/// bounds as the default sweep; prints each failure as it happens, progress every 50 views,
+/// the worst case per technique and every failure again, and fails at the end if there was one. `cargo test --release -p crepuscular-cli --test robustness -- --ignored --nocapture`
 #[test]
 #[ignore = "the long sweep: about 1000 views per backend; run it with -- --ignored"]
 fn every_technique_over_many_seeded_views() {

@@ -39,7 +39,12 @@ fn full_float(technique: TechniqueSettings) -> Crepuscular {
 
 /// A settled app with the capture on, and its newest captured frame.
 fn app_with_capture(effect: Effect, lamps: bool) -> (App, CapturedFrame) {
-    let mut app = demo::headless_app(&options(effect, lamps));
+    app_with_options(&options(effect, lamps))
+}
+
+/// [`app_with_capture`] for any demo options.
+fn app_with_options(opts: &DemoOptions) -> (App, CapturedFrame) {
+    let mut app = demo::headless_app(opts);
     app.insert_resource(CrepuscularCapture::default());
     app.finish();
     app.cleanup();
@@ -619,15 +624,7 @@ fn temporal_sequence(motion_vectors: bool) -> (App, Vec<CapturedFrame>) {
     let mut temporal = CrepuscularTemporal::default();
     temporal.motion_vectors = motion_vectors;
     opts.temporal = Some(temporal);
-    let (mut app, _) = {
-        let mut app = demo::headless_app(&opts);
-        app.insert_resource(CrepuscularCapture::default());
-        app.finish();
-        app.cleanup();
-        demo::settle(&mut app, 3).expect("the demo settles");
-        let c = take_capture(&mut app);
-        (app, c)
-    };
+    let (mut app, _) = app_with_options(&opts);
     let mut q = app.world_mut().query::<&mut CrepuscularTemporal>();
     for mut t in q.iter_mut(app.world_mut()) {
         t.cut();

@@ -83,18 +83,7 @@ fn library_render(
         .and_then(|s| s.with_stats(mode))
         .and_then(|s| s.with_output_format(wgpu::TextureFormat::Rgba32Float))
         .expect("the technique builds");
-    let out = gpu.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("library inscatter"),
-        size: wgpu::Extent3d { width: c.desc.width, height: c.desc.height, depth_or_array_layers: 1 },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba32Float,
-        usage: wgpu::TextureUsages::STORAGE_BINDING
-            | wgpu::TextureUsages::COPY_SRC
-            | wgpu::TextureUsages::TEXTURE_BINDING,
-        view_formats: &[],
-    });
+    let out = gpu.create_output_texture(c.desc.width, c.desc.height);
     let depth = c
         .depth
         .create_view(&wgpu::TextureViewDescriptor { aspect: wgpu::TextureAspect::DepthOnly, ..Default::default() });
@@ -675,16 +664,7 @@ fn the_temporal_stage_in_bevy_equals_the_library_frame_by_frame() {
     let gpu = gpu_of(&app);
     let settings = frames[0].temporal.as_ref().expect("the stage ran").settings;
     let mut library = crepuscular::Temporal::new(&gpu.device, settings).expect("the stage builds");
-    let out = gpu.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("library resolved"),
-        size: wgpu::Extent3d { width: W, height: H, depth_or_array_layers: 1 },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba32Float,
-        usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    });
+    let out = gpu.create_output_texture(W, H);
     let mut previous_input: Option<crepuscular::Image> = None;
     for (f, c) in frames.iter().enumerate() {
         let t = c.temporal.as_ref().expect("the stage ran");

@@ -25,7 +25,7 @@ W=/tmp/work; mkdir -p "$W"
 } 2>&1 | tee "$OUT/summary.txt"
 pack() {  # one archive per step; of versus's pictures only the side-by-side and a few (16 MiB a file)
   (cd "$W/$1" && find . -name '*.png' ! -name 'side-by-side.png' ! -name '*64-steps.png' \
-     ! -name '*1024-steps*.png' ! -name '*epipolar-balanced*.png' -delete 2>/dev/null)
+     ! -name '*1024-steps*.png' ! -name '*epipolar-balanced*.png' ! -name 'temporal.png' -delete 2>/dev/null)
   tar -czf "$OUT/$1.tar.gz" -C "$W" "$1" 2>/dev/null
 }
 step() {  # name, seconds, command...
@@ -37,7 +37,7 @@ step() {  # name, seconds, command...
 }
 bench() { local name=$1 secs=$2; shift 2
   step "$name" "$secs" "$B" bench --backend gpu --reference-steps 0 --flicker-frames 0 --output "$W/$name" "$@"; }
-step versus-1080p 200 .devbin/versus --size 1920x1080 --frames 15 --output "$W/versus-1080p"; pack versus-1080p
+step versus-1080p 260 .devbin/versus --size 1920x1080 --frames 15 --temporal --output "$W/versus-1080p"; pack versus-1080p
 bench default-1080p 60 --sizes 1920x1080 --repeat 10 --warmup 3
 for p in engelhardt-timings klehm-scenes toth-interleaving klehm-table1 engelhardt-fig10 lights; do bench "$p" 45 --preset "$p"; done
 mkdir -p "$W/presets"

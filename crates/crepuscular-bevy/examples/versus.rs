@@ -17,6 +17,10 @@
 //! Quality: PSNR and FLIP of the final (tone-mapped, 8-bit) picture against the effect's own
 //! converged picture: Bevy at 1024 steps; the plugin's brute-force march at 1024 steps.
 //! `--temporal` adds the marching techniques with the temporal stage after them (a still camera).
+//! `--config TECHNIQUE:PRESET:KEY=VALUE;…` adds a plugin row with settings of your own (e.g.
+//! epipolar with fewer lines at a high resolution), and `--references-from DIR` reads both
+//! converged pictures from an earlier run's output at the same size instead of rendering them
+//! again (at 1920×1080 on a software adapter they take most of a run).
 //! Writes `versus.md` (the table), `versus.json`, `side-by-side.png`, with `--temporal`
 //! `temporal.png` (the plugin's converged picture, a technique alone, the same with the stage),
 //! and each picture.
@@ -62,6 +66,18 @@ struct Args {
     /// moving camera keeps less). `--frames 7` makes the captured frame the eighth.
     #[arg(long)]
     temporal: bool,
+    /// An extra plugin row: `TECHNIQUE:PRESET:KEY=VALUE;KEY=VALUE…`, the preset's settings with
+    /// each `KEY=VALUE` (a TOML value, keys as in a scene's `[render.TECHNIQUE]` table) set over
+    /// them, e.g. `epipolar:fast:slices=512;samples=512`. Repeatable; measured like the preset
+    /// rows (and with the stage after it under `--temporal`, for a marching technique).
+    #[arg(long = "config", value_name = "TECHNIQUE:PRESET:KEY=VALUE;…")]
+    configs: Vec<String>,
+    /// Read both converged pictures (Bevy at 1024 steps, the plugin's brute-force at 1024
+    /// steps) from this folder, an earlier run's `--output` at the same `--size` and
+    /// `--shadow-filter`, instead of rendering them. The files are the PNGs that run wrote
+    /// (8-bit, what quality is measured on); a missing file or another size is an error.
+    #[arg(long, value_name = "DIR")]
+    references_from: Option<PathBuf>,
     /// Output folder.
     #[arg(long, default_value = "bevy-versus")]
     output: PathBuf,
@@ -74,7 +90,15 @@ struct Run {
     frame_ms: f64,
     /// Median of the effect's GPU bracket, ms (hardware adapters with timestamps).
     gpu_ms: Option<f64>,
-    image: Image,
+    image: Rgb8,
+}
+
+/// A final 8-bit picture, what quality is measured on.
+struct Rgb8 {
+    width: u32,
+    height: u32,
+    /// Row-major RGB bytes.
+    data: Vec<u8>,
 }
 
 struct Row {
@@ -140,6 +164,25 @@ fn run(args: Args) -> Result<(), String> {
     ));
     // The stage's history is cut after the settle frames: the captured frame is its n-th.
     let stage_frames = args.frames + 1;
+    let push_plugin = |configs: &mut Vec<Config>, t: TechniqueSettings, what: String| {
+        if args.temporal && t.ray_march().is_some() {
+            configs.push((
+                format!(
+                    "crepuscular {} ({what}{filter}) + temporal stage, still camera, frame {stage_frames} after a cut",
+                    t.name()
+                ),
+                "ours",
+                Effect::Crepuscular(demo::crepuscular(t.clone())),
+                Some(crepuscular_bevy::CrepuscularTemporal::default()),
+            ));
+        }
+        configs.push((
+            format!("crepuscular {} ({what}{filter})", t.name()),
+            "ours",
+            Effect::Crepuscular(demo::crepuscular(t)),
+            None,
+        ));
+    };
     for info in crepuscular::techniques::TECHNIQUES {
         if !args.techniques.is_empty() && !args.techniques.iter().any(|t| t == info.name) {
             continue;
@@ -149,24 +192,22 @@ fn run(args: Args) -> Result<(), String> {
             if !t.has_gpu() {
                 continue;
             }
-            if args.temporal && t.ray_march().is_some() {
-                configs.push((
-                    format!(
-                        "crepuscular {} ({}{filter}) + temporal stage, still camera, frame {stage_frames} after a cut",
-                        info.name,
-                        p.name()
-                    ),
-                    "ours",
-                    Effect::Crepuscular(demo::crepuscular(t.clone())),
-                    Some(crepuscular_bevy::CrepuscularTemporal::default()),
-                ));
-            }
-            configs.push((
-                format!("crepuscular {} ({}{filter})", info.name, p.name()),
-                "ours",
-                Effect::Crepuscular(demo::crepuscular(t)),
-                None,
-            ));
+            push_plugin(&mut configs, t, p.name().to_string());
+        }
+    }
+    for spec in &args.configs {
+        let (t, what) = parse_config(spec)?;
+        push_plugin(&mut configs, t, what);
+    }
+    // Converged pictures from an earlier run: their configurations are not rendered.
+    let mut loaded = Vec::new();
+    if let Some(dir) = &args.references_from {
+        for family in ["bevy-converged", "ours-converged"] {
+            let Some(k) = configs.iter().position(|c| c.1 == family) else { continue };
+            let (label, ..) = configs.remove(k);
+            let file = dir.join(format!("{}.png", slug(&label)));
+            let image = load_png(&file, width, height)?;
+            loaded.push(Run { label, family, frame_ms: f64::NAN, gpu_ms: None, image });
         }
     }
 
@@ -228,9 +269,10 @@ fn run(args: Args) -> Result<(), String> {
         let bracket = (!gpu.is_empty() && gpu.len() == times.len()).then(|| median(&mut gpu));
         // A software adapter's timestamps are logged (progress.log) but not used.
         let gpu_ms = bracket.filter(|_| !software);
-        let image = demo::capture(&mut app).map_err(|e| format!("{label}: {e}"))?;
+        let captured = demo::capture(&mut app).map_err(|e| format!("{label}: {e}"))?;
         let file = args.output.join(format!("{}.png", slug(&label)));
-        demo::save_png(&image, &file)?;
+        demo::save_png(&captured, &file)?;
+        let image = rgb8(&captured)?;
         let run = Run { label, family, frame_ms: median(&mut times), gpu_ms, image };
         let stamps = match bracket {
             Some(ms) if software => format!("{ms:.3} ms (software adapter: not used)"),
@@ -246,6 +288,8 @@ fn run(args: Args) -> Result<(), String> {
         bar.inc(1);
     }
     bar.finish_and_clear();
+    // The loaded references' rows have no timing (NaN, written as "–").
+    runs.extend(loaded);
 
     let baseline = runs.iter().find(|r| r.family == "baseline").ok_or("no baseline")?;
     // Timestamps only where every configuration has them (a hardware adapter).
@@ -363,39 +407,74 @@ fn slug(s: &str) -> String {
     out.trim_matches('-').to_string()
 }
 
-fn rgb8(img: &Image) -> Result<(u32, u32, Vec<u8>), String> {
+fn rgb8(img: &Image) -> Result<Rgb8, String> {
     let d = img.clone().try_into_dynamic().map_err(|e| e.to_string())?.to_rgb8();
-    Ok((d.width(), d.height(), d.into_raw()))
+    Ok(Rgb8 { width: d.width(), height: d.height(), data: d.into_raw() })
+}
+
+/// A picture written by an earlier run, which must be `width`×`height`.
+fn load_png(file: &Path, width: u32, height: u32) -> Result<Rgb8, String> {
+    let d = image::open(file).map_err(|e| format!("--references-from: {}: {e}", file.display()))?.to_rgb8();
+    if (d.width(), d.height()) != (width, height) {
+        return Err(format!(
+            "--references-from: {}: {}x{}, but --size is {width}x{height}",
+            file.display(),
+            d.width(),
+            d.height()
+        ));
+    }
+    Ok(Rgb8 { width, height, data: d.into_raw() })
+}
+
+/// `TECHNIQUE:PRESET:KEY=VALUE;…` → the preset's settings with the overrides, validated, and
+/// the row's description (the preset and the overrides).
+fn parse_config(spec: &str) -> Result<(TechniqueSettings, String), String> {
+    let mut parts = spec.splitn(3, ':');
+    let (Some(name), Some(preset)) = (parts.next(), parts.next()) else {
+        return Err(format!("--config {spec}: expected TECHNIQUE:PRESET:KEY=VALUE;…"));
+    };
+    let preset = Preset::parse(preset).map_err(|e| format!("--config {spec}: {e}"))?;
+    let overrides: Vec<String> =
+        parts.next().unwrap_or("").split(';').map(str::trim).filter(|o| !o.is_empty()).map(String::from).collect();
+    let t = crepuscular_cli::view::parse_preset_technique(name, preset, &overrides, &format!("--config {spec}"))
+        .map_err(|e| {
+            let e = e.to_string();
+            if e.starts_with("--config") { e } else { format!("--config {spec}: {e}") }
+        })?;
+    if !t.has_gpu() {
+        return Err(format!("--config {spec}: `{name}` runs on the CPU only"));
+    }
+    let what = std::iter::once(preset.name().to_string()).chain(overrides).collect::<Vec<_>>().join(", ");
+    Ok((t, what))
 }
 
 /// PSNR (8-bit sRGB, peak 255) and FLIP mean of `test` against `reference`.
-fn quality(reference: &Image, test: &Image) -> Result<(f64, f64), String> {
-    let (w, h, r) = rgb8(reference)?;
-    let (w2, h2, t) = rgb8(test)?;
+fn quality(reference: &Rgb8, test: &Rgb8) -> Result<(f64, f64), String> {
+    let (w, h, r) = (reference.width, reference.height, &reference.data);
+    let (w2, h2, t) = (test.width, test.height, &test.data);
     if (w, h) != (w2, h2) {
         return Err(format!("pictures of {w}x{h} and {w2}x{h2}"));
     }
-    let mse = r.iter().zip(&t).map(|(&a, &b)| (a as f64 - b as f64).powi(2)).sum::<f64>() / r.len() as f64;
+    let mse = r.iter().zip(t).map(|(&a, &b)| (a as f64 - b as f64).powi(2)).sum::<f64>() / r.len() as f64;
     let psnr = if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64 * 255.0 / mse).log10() };
     let map = nv_flip::flip(
-        nv_flip::FlipImageRgb8::with_data(w, h, &r),
-        nv_flip::FlipImageRgb8::with_data(w, h, &t),
+        nv_flip::FlipImageRgb8::with_data(w, h, r),
+        nv_flip::FlipImageRgb8::with_data(w, h, t),
         nv_flip::DEFAULT_PIXELS_PER_DEGREE,
     );
     Ok((psnr, nv_flip::FlipPool::from_image(&map).mean() as f64))
 }
 
 /// The pictures side by side, left to right, 4 black pixels apart.
-fn side_by_side(pictures: &[&Image], path: &Path) -> Result<(), String> {
-    let pictures = pictures.iter().map(|p| rgb8(p)).collect::<Result<Vec<_>, _>>()?;
-    let (w, h) = (pictures[0].0, pictures[0].1);
-    if pictures.iter().any(|p| (p.0, p.1) != (w, h)) {
+fn side_by_side(pictures: &[&Rgb8], path: &Path) -> Result<(), String> {
+    let (w, h) = (pictures[0].width, pictures[0].height);
+    if pictures.iter().any(|p| (p.width, p.height) != (w, h)) {
         return Err(format!("{}: pictures of different sizes", path.display()));
     }
     let gap = 4u32;
     let n = pictures.len() as u32;
     let mut out = image::RgbImage::new(n * w + (n - 1) * gap, h);
-    for (k, (_, _, p)) in pictures.iter().enumerate() {
+    for (k, p) in pictures.iter().map(|p| &p.data).enumerate() {
         for y in 0..h {
             for x in 0..w {
                 let i = ((y * w + x) * 3) as usize;
@@ -425,8 +504,18 @@ fn markdown(rows: &[Row], adapter: &str, w: u32, h: u32, frames: u32, base: f64,
         Timing::Gpu => 3,
         Timing::WallClock => 1,
     };
+    // A picture read with --references-from has no timing.
+    let ms =
+        |v: f64, d: usize| if v.is_finite() { format!("{v:.d$}") } else { "– (read from an earlier run)".into() };
     for r in rows {
-        s += &format!("| {} | {:.d$} | {:.1} | {:.1} | {:.4} |\n", r.label, r.cost_ms, r.frame_ms, r.psnr_db, r.flip);
+        s += &format!(
+            "| {} | {} | {} | {:.1} | {:.4} |\n",
+            r.label,
+            ms(r.cost_ms, d),
+            ms(r.frame_ms, 1),
+            r.psnr_db,
+            r.flip
+        );
     }
     s += "\n**At equal quality** (for each plugin configuration, the cheapest Bevy step count whose PSNR is at least as high):\n\n\
           | plugin | its cost (ms) | PSNR | cheapest Bevy at ≥ that PSNR | Bevy's cost (ms) | plugin / Bevy |\n| --- | ---: | ---: | --- | ---: | ---: |\n";

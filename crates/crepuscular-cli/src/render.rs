@@ -92,8 +92,19 @@ pub fn load_scene(name_or_path: &str) -> Result<Scene> {
 /// A technique's settings from the scene's `[render.<name>]` table and `key=value` overrides
 /// (values in TOML syntax). Errors name the source, key and value.
 pub fn parse_technique(name: &str, scene: &Scene, overrides: &[String]) -> Result<TechniqueSettings> {
-    let table = with_overrides("--set", scene.render.techniques.get(name).cloned().unwrap_or_default(), overrides)?;
-    let src = format!("{} [render.{name}]", scene.name);
+    let table = scene.render.techniques.get(name).cloned().unwrap_or_default();
+    parse_technique_table(name, table, &format!("{} [render.{name}]", scene.name), overrides)
+}
+
+/// [`parse_technique`] over a settings table of the caller's (`src` names it in errors).
+pub fn parse_technique_table(
+    name: &str,
+    table: toml::Table,
+    src: &str,
+    overrides: &[String],
+) -> Result<TechniqueSettings> {
+    let table = with_overrides("--set", table, overrides)?;
+    let src = src.to_string();
     let parse = || -> Result<TechniqueSettings> {
         let settings = TechniqueSettings::deserialize_named(name, toml::Value::Table(table))
             .with_context(|| src.clone())?

@@ -150,6 +150,19 @@ pub fn parse_technique(
     render::parse_technique(name, scene, &all)
 }
 
+/// A technique from a preset and `key=value` overrides over it, without a scene's table (`src`
+/// names the settings in errors).
+pub fn parse_preset_technique(
+    name: &str,
+    preset: Preset,
+    overrides: &[String],
+    src: &str,
+) -> Result<TechniqueSettings> {
+    let mut all = preset_overrides(preset, name);
+    all.extend_from_slice(overrides);
+    render::parse_technique_table(name, toml::Table::new(), src, &all)
+}
+
 /// Runs the viewer until the window is closed (or `screenshot_after` frames were rendered).
 pub fn run(opts: ViewOptions) -> Result<()> {
     let mut scene = render::load_scene(&opts.scene)?;

@@ -368,42 +368,50 @@ pub fn coordinates(frame: &CpuFrame, p: &EpipolarParams, lines: &[EpipolarLine])
 
 // ---- pass 2: refine ----
 
-/// Mirrors `refine_texel` in refine.wgsl: (left, right) of texel t over the view distances
-/// `s` of its line (left = right = t for a ray-march sample). `near[t]`: texel t lies within
-/// `epipole_radius` of the epipole ([`near_epipole`]). The disc's edge breaks the search as a
-/// depth discontinuity does: the texels on either side of it become ray-march samples, so no
-/// texel outside the disc interpolates from one inside it (the disc's pixels are re-marched
-/// instead). Every line's first texel sits on the epipole, where the in-scattering is least
-/// like the rest of the line: a point or spot light seen directly peaks like 1/r there (the
-/// ray through it passes the light at distance 0); under a sun the ray runs along the light,
-/// so an occluder's edge through the epipole lets that one ray read the edge's partial light
-/// over its whole length. Interpolating from it smeared either over the line's whole first
-/// initial segment: for the sun, a starburst from the epipole over the dark occluder
-/// (docs/RESULTS.md, the Bevy comparison: epipolar's fast preset 28.5 → 37.8 dB with the
-/// disc's break under the sun).
-pub fn refine_texel(p: &EpipolarParams, s: &[f32], near: &[bool], t: u32, n_init: u32) -> (u32, u32) {
-    let (a, b) = segment(p, t, n_init);
-    let mut left = t;
-    let mut cur = s[t as usize];
-    while left > a {
-        let sl = s[left as usize - 1];
-        if discontinuity(p, sl, cur) || near[left as usize - 1] != near[left as usize] {
-            break;
+/// Mirrors the `refine` entry point's walk for one line: every texel's left | right << 16 over
+/// the view distances `s` of the line (left = right = t for a ray-march sample). `near[t]`:
+/// texel t lies within `epipole_radius` of the epipole ([`near_epipole`]).
+///
+/// The paper's search (§5.2) walks from texel t to the left and to the right until a depth
+/// discontinuity or the end of t's initial segment ([`segment`]); so left and right are the
+/// ends of the run of texels around t with no break inside, clipped to the segment. Each
+/// segment is walked once to find those runs (S texel reads per line, not S × the texels per
+/// segment); a unit test holds it to the per-texel search on every texel.
+///
+/// The disc's edge breaks the search as a depth discontinuity does: the texels on either side
+/// of it become ray-march samples, so no texel outside the disc interpolates from one inside it
+/// (the disc's pixels are re-marched instead). Every line's first texel sits on the epipole,
+/// where the in-scattering is least like the rest of the line: a point or spot light seen
+/// directly peaks like 1/r there (the ray through it passes the light at distance 0); under a
+/// sun the ray runs along the light, so an occluder's edge through the epipole lets that one
+/// ray read the edge's partial light over its whole length. Interpolating from it smeared
+/// either over the line's whole first initial segment: for the sun, a starburst from the
+/// epipole over the dark occluder (docs/RESULTS.md, the Bevy comparison: epipolar's fast preset
+/// 28.5 → 37.8 dB with the disc's break under the sun).
+pub fn refine_line(p: &EpipolarParams, s: &[f32], near: &[bool], n_init: u32) -> Vec<u32> {
+    let breaks = |u: usize| discontinuity(p, s[u - 1], s[u]) || near[u - 1] != near[u];
+    let mut interp = vec![0u32; s.len()];
+    for i in 0..n_init - 1 {
+        let (a, b) = (initial_index(p, i, n_init), initial_index(p, i + 1, n_init));
+        // The texels of the run [l, r] that segment i owns ([`segment`]).
+        let mut write_run = |l: u32, r: u32| {
+            for u in l..=r {
+                if segment(p, u, n_init) == (a, b) {
+                    let (lu, ru) = if u == l || u == r { (u, u) } else { (l, r) };
+                    interp[u as usize] = lu | (ru << 16);
+                }
+            }
+        };
+        let mut start = a;
+        for t in a + 1..=b {
+            if breaks(t as usize) {
+                write_run(start, t - 1);
+                start = t;
+            }
         }
-        cur = sl;
-        left -= 1;
+        write_run(start, b);
     }
-    let mut right = t;
-    cur = s[t as usize];
-    while right < b {
-        let sr = s[right as usize + 1];
-        if discontinuity(p, cur, sr) || near[right as usize] != near[right as usize + 1] {
-            break;
-        }
-        cur = sr;
-        right += 1;
-    }
-    if left == t || right == t { (t, t) } else { (left, right) }
+    interp
 }
 
 /// What the refine pass produces.
@@ -431,17 +439,15 @@ pub fn refine(desc: &FrameDesc, p: &EpipolarParams, lines: &[EpipolarLine], coor
             }
             let s: Vec<f32> = row.iter().map(|c| c[2]).collect();
             let near: Vec<bool> = row.iter().map(|c| near_epipole(p, Vec2::new(c[0], c[1]))).collect();
-            let mut interp = Vec::with_capacity(n);
-            let mut pixels = Vec::new();
-            for t in 0..n as u32 {
-                let (l, r) = refine_texel(p, &s, &near, t, line.initial);
-                interp.push(l | (r << 16));
-                if l == t && r == t {
+            let interp = refine_line(p, &s, &near, line.initial);
+            let pixels = (0..n as u32)
+                .filter(|&t| interp[t as usize] == t | (t << 16))
+                .map(|t| {
                     let c = row[t as usize];
                     let (x, y) = texel_pixel(desc, Vec2::new(c[0], c[1]));
-                    pixels.push(y * desc.width + x);
-                }
-            }
+                    y * desc.width + x
+                })
+                .collect();
             (interp, pixels)
         })
         .collect();
@@ -605,7 +611,7 @@ pub fn line_taps(p: &EpipolarParams, line: &EpipolarLine, radiance_row: &[[f32; 
         for (i, wl) in [(i0, 1.0 - fr), (i1, fr)] {
             // A texel inside the re-marched disc holds no estimate: the refinement let it
             // interpolate from the line's first texel, on the epipole, where the in-scattering
-            // peaks or is singular ([`refine_texel`]); a pixel outside the disc whose taps
+            // peaks or is singular ([`refine_line`]); a pixel outside the disc whose taps
             // reach in (towards the light, or the bilinear pair across the disc's edge) skips
             // it.
             if near_epipole(p, texel_point(p, line, i)) {
@@ -912,4 +918,86 @@ pub fn render_with_debug(
     };
     let interp = refined.interp;
     Ok((img, stats, EpipolarDebug { params: p, lines, coords, interp, radiance }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The paper's search for one texel (§5.2 pseudo-code, restricted to t's initial segment):
+    /// walk left and right from t until a break or the segment's end.
+    fn paper_search(p: &EpipolarParams, s: &[f32], near: &[bool], t: u32, n_init: u32) -> u32 {
+        let (a, b) = segment(p, t, n_init);
+        let breaks =
+            |u: u32| discontinuity(p, s[u as usize - 1], s[u as usize]) || near[u as usize - 1] != near[u as usize];
+        let mut left = t;
+        while left > a && !breaks(left) {
+            left -= 1;
+        }
+        let mut right = t;
+        while right < b && !breaks(right + 1) {
+            right += 1;
+        }
+        if left == t || right == t { t | (t << 16) } else { left | (right << 16) }
+    }
+
+    /// `refine_line`'s one walk per segment gives every texel the paper's per-texel search's
+    /// (left, right), on rows of steps, ramps, disc edges and noise, for S and K from 2 to the
+    /// largest ratios the settings allow.
+    #[test]
+    fn the_walk_per_segment_equals_the_papers_search_on_every_texel() {
+        let mut p: EpipolarParams = bytemuck::Zeroable::zeroed();
+        p.depth_threshold = 0.5;
+        p.threshold_growth = 0.05;
+        // A small deterministic generator (xorshift), so the rows are the same on every run.
+        let mut state = 0x9e37_79b9_u32;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state
+        };
+        let (mut rows, mut samples_seen, mut interpolated_seen) = (0, 0u64, 0u64);
+        for &n in &[2u32, 3, 5, 17, 64, 245, 1469] {
+            p.samples = n;
+            for &k in &[2u32, 3, 4, 16, 32, 64, 1469] {
+                let k = k.min(n);
+                for pattern in 0..4 {
+                    let mut depth = 10.0f32;
+                    let (mut s, mut near) = (Vec::new(), Vec::new());
+                    for t in 0..n {
+                        let r = next();
+                        // 0: smooth ramps with rare steps; 1: frequent steps; 2: constant with
+                        // the disc's edge at a few texels; 3: steps just above and below the
+                        // threshold.
+                        depth = match pattern {
+                            0 if r % 50 == 0 => depth + 5.0,
+                            0 => depth + 0.01,
+                            1 if r % 3 == 0 => 5.0 + (r % 1000) as f32 * 0.05,
+                            3 if r % 4 == 0 => depth + if r % 8 == 0 { 1.01 } else { 0.99 } * (0.5 + 0.05 * depth),
+                            _ => depth,
+                        };
+                        s.push(depth);
+                        near.push(pattern == 2 && (t < n / 7 || (t / 13) % 5 == 0));
+                    }
+                    let interp = refine_line(&p, &s, &near, k);
+                    for t in 0..n {
+                        let want = paper_search(&p, &s, &near, t, k);
+                        assert_eq!(interp[t as usize], want, "S {n}, K {k}, pattern {pattern}, texel {t}");
+                        if want == t | (t << 16) {
+                            samples_seen += 1;
+                        } else {
+                            interpolated_seen += 1;
+                        }
+                    }
+                    rows += 1;
+                }
+            }
+        }
+        // Both kinds of texel were compared, in quantity.
+        assert!(
+            rows > 150 && samples_seen > 1000 && interpolated_seen > 10_000,
+            "{rows} {samples_seen} {interpolated_seen}"
+        );
+    }
 }

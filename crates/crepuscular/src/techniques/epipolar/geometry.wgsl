@@ -191,12 +191,12 @@ fn initial_index(i: u32, n_init: u32) -> u32 {
     return (2u * i * s1 + k1) / (2u * k1);
 }
 
-// The initial segment [a, b] (texel indices of consecutive initial samples) holding texel t.
-fn segment(t: u32, n_init: u32) -> vec2<u32> {
+// The index i of the initial segment [initial_index(i), initial_index(i + 1)] that holds texel
+// t (a texel on the boundary of two segments belongs to one of them).
+fn segment_index(t: u32, n_init: u32) -> u32 {
     let s1 = params.samples - 1u;
     let k1 = n_init - 1u;
-    let i = min(t * k1 / s1, k1 - 1u);
-    return vec2<u32>(initial_index(i, n_init), initial_index(i + 1u, n_init));
+    return min(t * k1 / s1, k1 - 1u);
 }
 
 // A depth discontinuity between adjacent texels of view distances sa, sb (§4.2, with the

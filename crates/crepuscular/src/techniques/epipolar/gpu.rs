@@ -488,7 +488,11 @@ impl Epipolar {
             enc.clear_buffer(&sized.claims, 0, None);
             stage(
                 compute_pass(enc, "epipolar refine", ts),
-                &[(&p.refine, &b.refine, p.refine.groups_2d(samples, slices)), (&p.args, &b.args, [1, 1, 1])],
+                // One thread per initial segment (at most K − 1 on a line) and line.
+                &[
+                    (&p.refine, &b.refine, p.refine.groups_2d(params.initial_samples - 1, slices)),
+                    (&p.args, &b.args, [1, 1, 1]),
+                ],
             );
         })?;
         let minmax_march = s.march == EpipolarMarch::Minmax;

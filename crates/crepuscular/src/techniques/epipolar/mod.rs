@@ -15,8 +15,10 @@
 //!    rays that meet its cone), its initial-sample count; entry `coordinates`, one thread per
 //!    texel: the *coordinate texture* (slices rows × `samples` columns, `Rgba32Float`: the
 //!    point p, the view distance s of pixel ⌊p⌋, valid).
-//! 2. `refine` (refine.wgsl, §4.2, §5.2): entry `refine`, one thread per texel: the paper's
-//!    left/right discontinuity search inside the texel's initial segment, written to the
+//! 2. `refine` (refine.wgsl, §4.2, §5.2): entry `refine`, one thread per initial segment: the
+//!    paper's left/right discontinuity search inside each texel's initial segment, found for
+//!    all of the segment's texels in one walk over it (the ends of each run of texels with no
+//!    break inside; S reads per line instead of the per-texel search's S × S/K), written to the
 //!    *interpolation texture* (`R32Uint`, left | right << 16); every ray-march sample (left =
 //!    right = itself) claims its pixel ⌊p⌋ with an atomic, and the first claim of a pixel
 //!    appends it to a list with an atomic counter — compaction instead of the paper's stencil
@@ -219,7 +221,7 @@ pub struct EpipolarParams {
     pub prefilter_level: u32,
     /// Re-march radius around the epipole, pixels; the refinement breaks the lines at the
     /// disc's edge, the upsampling's taps skip the texels inside it and the lines on which
-    /// the pixel's own point lies inside it (cpu.rs `refine_texel`, `line_taps`,
+    /// the pixel's own point lies inside it (cpu.rs `refine_line`, `line_taps`,
     /// `upsample_pixel`).
     pub epipole_radius: f32,
     /// Padding.

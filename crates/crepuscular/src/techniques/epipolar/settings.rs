@@ -141,9 +141,9 @@ pub struct EpipolarSettings {
     pub samples: Option<u32>,
     /// Initial ray-march samples per line, K (§4.1: "typically 8 to 32"), evenly spaced over
     /// the S texels; they split the line into K − 1 initial segments inside which the
-    /// discontinuity search runs (cost ∝ S/K per texel). More resolves the smooth variation of
-    /// the in-scattering along a line (the phase function's peak around the light, the
-    /// attenuation) better, at K ray marches per line. With length-proportional initial
+    /// discontinuity search runs (one walk over each segment: S texel reads per line whatever
+    /// K). More resolves the smooth variation of the in-scattering along a line (the phase
+    /// function's peak around the light, the attenuation) better, at K ray marches per line. With length-proportional initial
     /// samples, K is the count of a line as long as the screen's diagonal. In 2..=8192 and at
     /// most `samples` (a larger K is clamped to S). Default 32. Measured (length-proportional):
     /// K = 4 39.39 dB / 0.0984 / 0.073, 8 41.52 / 0.0627 / 0.078, 16 44.40 / 0.0419 / 0.087, 32

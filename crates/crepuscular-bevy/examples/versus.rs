@@ -288,12 +288,12 @@ fn run(args: Args) -> Result<(), String> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    // The loaded references' rows have no timing (NaN, written as "–").
+    // Timestamps only where every rendered configuration has them (a hardware adapter).
+    let timing = if runs.iter().all(|r| r.gpu_ms.is_some()) { Timing::Gpu } else { Timing::WallClock };
+    // The loaded references' rows have no timing (NaN, written as "–"); they do not decide it.
     runs.extend(loaded);
 
     let baseline = runs.iter().find(|r| r.family == "baseline").ok_or("no baseline")?;
-    // Timestamps only where every configuration has them (a hardware adapter).
-    let timing = if runs.iter().all(|r| r.gpu_ms.is_some()) { Timing::Gpu } else { Timing::WallClock };
     let base = timing.ms(baseline);
     let bevy_ref = &runs.iter().find(|r| r.family == "bevy-converged").ok_or("no Bevy reference")?.image;
     let ours_ref = &runs.iter().find(|r| r.family == "ours-converged").ok_or("no plugin reference")?.image;
@@ -436,11 +436,8 @@ fn parse_config(spec: &str) -> Result<(TechniqueSettings, String), String> {
     let preset = Preset::parse(preset).map_err(|e| format!("--config {spec}: {e}"))?;
     let overrides: Vec<String> =
         parts.next().unwrap_or("").split(';').map(str::trim).filter(|o| !o.is_empty()).map(String::from).collect();
-    let t = crepuscular_cli::view::parse_preset_technique(name, preset, &overrides, &format!("--config {spec}"))
-        .map_err(|e| {
-            let e = e.to_string();
-            if e.starts_with("--config") { e } else { format!("--config {spec}: {e}") }
-        })?;
+    let t = crepuscular_cli::view::parse_preset_technique(name, preset, &overrides)
+        .map_err(|e| format!("--config {spec}: {e}"))?;
     if !t.has_gpu() {
         return Err(format!("--config {spec}: `{name}` runs on the CPU only"));
     }

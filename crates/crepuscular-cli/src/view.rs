@@ -150,17 +150,11 @@ pub fn parse_technique(
     render::parse_technique(name, scene, &all)
 }
 
-/// A technique from a preset and `key=value` overrides over it, without a scene's table (`src`
-/// names the settings in errors).
-pub fn parse_preset_technique(
-    name: &str,
-    preset: Preset,
-    overrides: &[String],
-    src: &str,
-) -> Result<TechniqueSettings> {
+/// A technique from a preset and `key=value` overrides over it, without a scene's table.
+pub fn parse_preset_technique(name: &str, preset: Preset, overrides: &[String]) -> Result<TechniqueSettings> {
     let mut all = preset_overrides(preset, name);
     all.extend_from_slice(overrides);
-    render::parse_technique_table(name, toml::Table::new(), src, &all)
+    render::parse_technique_table(name, toml::Table::new(), &format!("the {} preset of {name}", preset.name()), &all)
 }
 
 /// Runs the viewer until the window is closed (or `screenshot_after` frames were rendered).

@@ -198,11 +198,18 @@ pub fn initial_index(p: &EpipolarParams, i: u32, n_init: u32) -> u32 {
     (2 * i * s1 + k1) / (2 * k1)
 }
 
-/// Mirrors `segment`: the initial segment (a, b) holding texel t.
-pub fn segment(p: &EpipolarParams, t: u32, n_init: u32) -> (u32, u32) {
+/// Mirrors `segment_index`: the index i of the initial segment that holds texel t (a texel on
+/// the boundary of two segments belongs to one of them).
+pub fn segment_index(p: &EpipolarParams, t: u32, n_init: u32) -> u32 {
     let s1 = p.samples - 1;
     let k1 = n_init - 1;
-    let i = (t * k1 / s1).min(k1 - 1);
+    (t * k1 / s1).min(k1 - 1)
+}
+
+/// The initial segment (a, b) holding texel t: initial samples i and i + 1 of
+/// [`segment_index`].
+pub fn segment(p: &EpipolarParams, t: u32, n_init: u32) -> (u32, u32) {
+    let i = segment_index(p, t, n_init);
     (initial_index(p, i, n_init), initial_index(p, i + 1, n_init))
 }
 
@@ -393,10 +400,10 @@ pub fn refine_line(p: &EpipolarParams, s: &[f32], near: &[bool], n_init: u32) ->
     let mut interp = vec![0u32; s.len()];
     for i in 0..n_init - 1 {
         let (a, b) = (initial_index(p, i, n_init), initial_index(p, i + 1, n_init));
-        // The texels of the run [l, r] that segment i owns ([`segment`]).
+        // The texels of the run [l, r] that segment i owns ([`segment_index`]).
         let mut write_run = |l: u32, r: u32| {
             for u in l..=r {
-                if segment(p, u, n_init) == (a, b) {
+                if segment_index(p, u, n_init) == i {
                     let (lu, ru) = if u == l || u == r { (u, u) } else { (l, r) };
                     interp[u as usize] = lu | (ru << 16);
                 }

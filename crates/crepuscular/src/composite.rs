@@ -74,7 +74,7 @@ impl Composite {
     /// shader's own declarations, [`crate::techniques::pass::Bindings`]).
     pub fn new(device: &wgpu::Device) -> Result<Self, crate::Error> {
         let source = crate::shaders::compose(COMPOSITE_WGSL);
-        let (bindings, _) = Bindings::new(device, "composite", &source, "fs", naga::ShaderStage::Fragment)?;
+        let (bindings, _, _) = Bindings::new(device, "composite", &source, "fs", naga::ShaderStage::Fragment)?;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("composite.wgsl"),
             source: wgpu::ShaderSource::Wgsl(source.into()),

@@ -553,6 +553,11 @@ pub struct GpuFrame<'a> {
 }
 
 impl<'a> GpuFrame<'a> {
+    /// The pipelines' variant for this frame's lights ([`crate::techniques::pass::ShaderVariant::of`]).
+    pub fn shader_variant(&self) -> crate::techniques::pass::ShaderVariant {
+        crate::techniques::pass::ShaderVariant::of(self.desc)
+    }
+
     /// Light `k`'s own frame: `desc` (from [`FrameDesc::with_light`]) over the same textures.
     pub fn with_light<'b>(&'b self, desc: &'b FrameDesc, k: usize) -> GpuFrame<'b> {
         GpuFrame { desc, rectified_shadow_maps: self.rectified_shadow_maps.get(k..k + 1).unwrap_or(&[]), ..*self }

@@ -6,7 +6,7 @@
 
 use crate::error::Error;
 use crate::gpu::{GpuContext, Recorder, storage_texture};
-use crate::techniques::pass::{self, Pass};
+use crate::techniques::pass::{self, Pass, ShaderVariant};
 
 /// The add and clear passes and the scratch textures, kept between frames.
 pub(crate) struct LightSum {
@@ -84,14 +84,14 @@ impl LightSum {
     ) -> Result<(), Error> {
         let bind = self.bind(gpu, &[("a_tex", sum), ("b_tex", light), ("out_tex", out)])?;
         let size = out.texture().size();
-        self.add.dispatch(rec, "sum lights", &bind, self.add.groups_2d(size.width, size.height))
+        self.add.dispatch(rec, ShaderVariant::ALL, "sum lights", &bind, self.add.groups_2d(size.width, size.height))
     }
 
     /// Records zero in-scattering into `out` (no light reaches the view).
     pub(crate) fn clear(&mut self, gpu: &GpuContext, rec: &mut Recorder, out: &wgpu::TextureView) -> Result<(), Error> {
         let bind = self.bind(gpu, &[("out_tex", out)])?;
         let size = out.texture().size();
-        self.clear.dispatch(rec, "no lights", &bind, self.clear.groups_2d(size.width, size.height))
+        self.clear.dispatch(rec, ShaderVariant::ALL, "no lights", &bind, self.clear.groups_2d(size.width, size.height))
     }
 
     /// Bytes of GPU memory held.

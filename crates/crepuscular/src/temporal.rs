@@ -966,7 +966,7 @@ impl Temporal {
         }
         let mut cpass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("temporal"), timestamp_writes: None });
-        cpass.set_pipeline(resolve.pipeline());
+        cpass.set_pipeline(resolve.pipeline(crate::techniques::pass::ShaderVariant::ALL));
         cpass.set_bind_group(0, &self.binds.value()[read], &[]);
         let [x, y, z] = resolve.groups_2d(w, h);
         cpass.dispatch_workgroups(x, y, z);

@@ -2,7 +2,7 @@
 //! or doubled name is an error naming the pass and the variable, never a wgpu validation panic.
 
 use crepuscular::gpu::test_gpu;
-use crepuscular::techniques::pass::{Pass, Resource};
+use crepuscular::techniques::pass::{Pass, Resource, ShaderVariant};
 
 const SHADER: &str = "
 @group(0) @binding(0) var<uniform> scale: vec4<f32>;
@@ -55,10 +55,50 @@ fn a_pass_binds_by_name_and_names_what_is_wrong() {
     let bind = gpu.try_scoped("binding the test pass", || pass.bind(device, &shuffled)).unwrap();
     // The tools' wall-clock recorder submits and waits for the pass.
     let mut rec = crepuscular::gpu::Recorder::wall_clock(&gpu);
-    pass.dispatch(&mut rec, "scale", &bind, pass.groups_2d(8, 2)).unwrap();
+    pass.dispatch(&mut rec, ShaderVariant::ALL, "scale", &bind, pass.groups_2d(8, 2)).unwrap();
     drop(rec);
     let got = gpu.read_image(&out).unwrap();
     for (i, p) in got.pixels.iter().enumerate() {
         assert_eq!(*p, [2.0 * i as f32, 3.0, 2.0, 1.25], "pixel {i}");
     }
+}
+
+/// Writes the variant's two constants (common.wgsl's `LOCAL_LIGHTS`, `SPOT_TEXTURES`) as 0 or 1.
+const VARIANT_SHADER: &str = "
+@group(0) @binding(0) var out_tex: texture_storage_2d<rgba32float, write>;
+@compute @workgroup_size(1)
+fn main() {
+    textureStore(out_tex, vec2<u32>(0u), vec4<f32>(select(0.0, 1.0, LOCAL_LIGHTS), select(0.0, 1.0, SPOT_TEXTURES), 0.0, 1.0));
+}
+";
+
+#[test]
+fn each_shader_variant_runs_its_own_pipeline_built_on_first_use() {
+    let Some(gpu) = test_gpu("each_shader_variant_runs_its_own_pipeline_built_on_first_use") else { return };
+    let device = &gpu.device;
+    let pass = gpu.try_scoped("variant pass", || Pass::new(device, "test/variant", VARIANT_SHADER, "main")).unwrap();
+    assert!(pass.is_specialized());
+    assert_eq!(pass.pipelines_built(), 0, "pipelines are built on first use");
+    let out = gpu.create_output_texture(1, 1);
+    let out_view = out.create_view(&Default::default());
+    let bind = pass.bind(device, &[("out_tex", wgpu::BindingResource::TextureView(&out_view))]).unwrap();
+    let variants = [
+        (ShaderVariant::ALL, [1.0, 1.0]),
+        (ShaderVariant { local_lights: false, spot_textures: false }, [0.0, 0.0]),
+        (ShaderVariant { local_lights: true, spot_textures: false }, [1.0, 0.0]),
+        (ShaderVariant { local_lights: false, spot_textures: false }, [0.0, 0.0]),
+    ];
+    for (i, (variant, want)) in variants.into_iter().enumerate() {
+        let mut rec = crepuscular::gpu::Recorder::wall_clock(&gpu);
+        pass.dispatch(&mut rec, variant, "variant", &bind, [1, 1, 1]).unwrap();
+        drop(rec);
+        let got = gpu.read_image(&out).unwrap().pixels[0];
+        assert_eq!([got[0], got[1]], want, "{variant:?}");
+        assert_eq!(pass.pipelines_built(), [1, 2, 3, 3][i], "after {variant:?}");
+    }
+    // A pass that reads neither constant has one pipeline for every variant.
+    let plain = Pass::new(device, "test/scale", SHADER, "main").unwrap();
+    assert!(!plain.is_specialized());
+    let _ = plain.pipeline(ShaderVariant { local_lights: false, spot_textures: false });
+    assert_eq!(plain.pipelines_built(), 1);
 }

@@ -61,6 +61,14 @@ struct Lights {
 // evaluates a light.
 @group(0) @binding(15) var<uniform> lights: Lights;
 
+// The shader variant (pass.rs ShaderVariant, pipeline-overridable): whether the frame may hold
+// a spot or point light (LOCAL_LIGHTS) and a spot with a projected texture (SPOT_TEXTURES). A
+// pipeline built with one false has the code for those lights compiled out: the result is the
+// same for a frame without them, and a device that runs untaken branches (llvmpipe) or sizes
+// its registers for them no longer pays for them. Every light function tests them first.
+override LOCAL_LIGHTS: bool = true;
+override SPOT_TEXTURES: bool = true;
+
 // Light::kind and Frame::phase_kind (frame.rs LIGHT_* and PHASE_*).
 const LIGHT_DIRECTIONAL: u32 = 0u;
 const LIGHT_SPOT: u32 = 1u;
@@ -213,7 +221,7 @@ fn light_view_proj(l: Light, layer: u32) -> mat4x4<f32> {
 // shadow.rs ShadowMap::coord.
 fn shadow_coord(l: Light, p: vec3<f32>) -> ShadowCoord {
     var layer = 0u;
-    if l.shadow_layers == CUBE_LAYERS {
+    if LOCAL_LIGHTS && l.shadow_layers == CUBE_LAYERS {
         layer = cube_face(p - l.position.xyz);
     }
     return shadow_coord_clip(l, layer, light_view_proj(l, layer) * vec4<f32>(p, 1.0));
@@ -344,7 +352,7 @@ fn smooth_cone(cos_outer: f32, cos_inner: f32, c: f32) -> f32 {
 fn light_incident(f: Frame, l: Light, spot_tex: texture_2d_array<f32>, p: vec3<f32>) -> Incident {
     var r: Incident;
     let kind = l.kind;
-    if kind == LIGHT_DIRECTIONAL {
+    if !LOCAL_LIGHTS || kind == LIGHT_DIRECTIONAL {
         r.radiance = l.color.xyz;
         r.dir = l.direction.xyz;
         return r;
@@ -364,7 +372,7 @@ fn light_incident(f: Frame, l: Light, spot_tex: texture_2d_array<f32>, p: vec3<f
         return r;
     }
     var tex = vec3<f32>(1.0);
-    if l.texture_layer != NO_TEXTURE {
+    if SPOT_TEXTURES && l.texture_layer != NO_TEXTURE {
         let c = l.shadow_view_proj[0] * vec4<f32>(p, 1.0);
         if c.w > 0.0 {
             let ndc = c.xy / c.w;
@@ -483,7 +491,7 @@ const SPOT_APPENDIX_B_SMOOTHSTEP: u32 = 3u;
 // march.rs march_interval: the interval of the view ray a technique marches with its N steps.
 fn policy_interval(l: Light, o: vec3<f32>, d: vec3<f32>, s: f32, code: u32, denominator: f32) -> vec2<f32> {
     let policy = code & MARCH_SPOT_MASK;
-    if l.kind != LIGHT_SPOT || policy == SPOT_FIXED {
+    if !LOCAL_LIGHTS || l.kind != LIGHT_SPOT || policy == SPOT_FIXED {
         return vec2<f32>(0.0, s);
     }
     let c = cone_interval(l, o, d, s);
@@ -506,7 +514,7 @@ const REACH_OPTICAL_DEPTH: f32 = 13.815511;
 fn light_reach(f: Frame, l: Light) -> f32 {
     let st = extinction(f);
     let sigma = min(st.x, min(st.y, st.z));
-    if l.kind == LIGHT_DIRECTIONAL || sigma <= 0.0 {
+    if !LOCAL_LIGHTS || l.kind == LIGHT_DIRECTIONAL || sigma <= 0.0 {
         return 0.0;
     }
     return REACH_OPTICAL_DEPTH / sigma;
@@ -538,8 +546,8 @@ fn march_interval(f: Frame, l: Light, o: vec3<f32>, d: vec3<f32>, s: f32, policy
 // equiangular steps, is marched over its own interval with its own N steps; every other light
 // shares one march (docs/MODEL.md §6).
 fn own_interval(l: Light, policy: u32) -> bool {
-    return (l.kind == LIGHT_SPOT && (policy & MARCH_SPOT_MASK) != 0u)
-        || (l.kind != LIGHT_DIRECTIONAL && (policy & MARCH_EQUIANGULAR) != 0u);
+    return LOCAL_LIGHTS && ((l.kind == LIGHT_SPOT && (policy & MARCH_SPOT_MASK) != 0u)
+        || (l.kind != LIGHT_DIRECTIONAL && (policy & MARCH_EQUIANGULAR) != 0u));
 }
 
 // march.rs MIN_LIGHT_DISTANCE and UNRESOLVED_DISTANCE.
@@ -596,7 +604,7 @@ fn equiangular_steps(iv: vec2<f32>, n: u32, o: vec3<f32>, d: vec3<f32>, centre: 
 
 // march.rs MarchLights::own_steps: the steps of light l's own march over iv.
 fn own_steps(l: Light, iv: vec2<f32>, n: u32, o: vec3<f32>, d: vec3<f32>, policy: u32) -> Steps {
-    if l.kind != LIGHT_DIRECTIONAL && (policy & MARCH_EQUIANGULAR) != 0u {
+    if LOCAL_LIGHTS && l.kind != LIGHT_DIRECTIONAL && (policy & MARCH_EQUIANGULAR) != 0u {
         return equiangular_steps(iv, n, o, d, l.position.xyz);
     }
     return uniform_steps(iv, n);
@@ -851,7 +859,7 @@ fn march_lights(
     let sm = shared_march(f, o, dir, s, policy, denominator);
     var sum = march_steps(f, shadow_map, spot_tex, dir, uniform_steps(sm.iv, n), first, stride, j, sm.mask).xyz;
     var own = vec4<f32>(0.0);
-    for (var k = 0u; k < min(lights.count, MAX_LIGHTS); k++) {
+    for (var k = 0u; LOCAL_LIGHTS && k < min(lights.count, MAX_LIGHTS); k++) {
         let l = lights.items[k];
         if own_interval(l, policy) {
             let iv = march_interval(f, l, o, dir, s, policy, denominator);

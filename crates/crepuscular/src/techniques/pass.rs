@@ -198,23 +198,24 @@ pub struct Bindings {
 pub type Resource<'a> = (&'a str, wgpu::BindingResource<'a>);
 
 impl Bindings {
-    /// The layout of `entry` (a `stage` entry point) of the composed WGSL `source`, and the
-    /// entry point's workgroup size; `label` names it in errors and GPU captures.
+    /// The layout of `entry` (a `stage` entry point) of the composed WGSL `source`, the entry
+    /// point's workgroup size and whether it reads the [`ShaderVariant`]'s constants; `label`
+    /// names it in errors and GPU captures.
     pub fn new(
         device: &wgpu::Device,
         label: &str,
         source: &str,
         entry: &str,
         stage: naga::ShaderStage,
-    ) -> Result<(Self, [u32; 3]), crate::Error> {
+    ) -> Result<(Self, [u32; 3], bool), crate::Error> {
         let reflected = reflect(source, entry, stage)
             .map_err(|message| crate::Error::Gpu { context: format!("reading the bindings of {label}"), message })?;
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some(label),
             entries: &reflected.entries,
         });
-        let Reflected { slots, unused, workgroup, .. } = reflected;
-        Ok((Self { label: label.to_string(), layout, slots, unused }, workgroup))
+        let Reflected { slots, unused, workgroup, reads_overrides, .. } = reflected;
+        Ok((Self { label: label.to_string(), layout, slots, unused }, workgroup, reads_overrides))
     }
 
     /// The bind group layout.
@@ -256,37 +257,101 @@ impl Bindings {
     }
 }
 
-/// One compute pass: a pipeline with the layout its WGSL declares ([`Bindings`]).
+/// Which light code a pass's pipeline holds: the pipeline-overridable constants
+/// `LOCAL_LIGHTS` and `SPOT_TEXTURES` of common.wgsl. A frame runs the variant of the lights it
+/// holds ([`ShaderVariant::of`]): a pipeline without spot and point lights has their code (cone,
+/// attenuation, cube faces, their own march intervals) compiled out, and one without projected
+/// textures the texture's projection and four reads. The result for such a frame is the same;
+/// what changes is what the device pays for branches no pixel takes. On llvmpipe, which runs a
+/// branch's code whenever it cannot prove every lane skips it, the sun-only variant marches
+/// 1.8× faster (docs/RESULTS.md, "Shader variants by light kind"); a GPU skips a branch no lane
+/// takes, and gains at most the registers the branch held.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ShaderVariant {
+    /// The frame may hold spot or point lights (`LOCAL_LIGHTS`).
+    pub local_lights: bool,
+    /// The frame may hold a spot light with a projected texture (`SPOT_TEXTURES`).
+    pub spot_textures: bool,
+}
+
+impl ShaderVariant {
+    /// Every kind of light: the only variant of a pass whose entry point evaluates no light.
+    pub const ALL: Self = Self { local_lights: true, spot_textures: true };
+
+    /// The variant of a frame: spot and point lights where `desc` holds one, projected textures
+    /// where one of its spots has a texture.
+    pub fn of(desc: &crate::FrameDesc) -> Self {
+        Self {
+            local_lights: desc.lights.iter().any(|l| !matches!(l.light, crate::Light::Directional { .. })),
+            spot_textures: desc.lights.iter().any(|l| l.spot_texture().is_some()),
+        }
+    }
+
+    fn index(self) -> usize {
+        self.local_lights as usize | (self.spot_textures as usize) << 1
+    }
+
+    /// The override values, by the names common.wgsl gives them.
+    fn constants(self) -> [(&'static str, f64); 2] {
+        [("LOCAL_LIGHTS", self.local_lights as u8 as f64), ("SPOT_TEXTURES", self.spot_textures as u8 as f64)]
+    }
+}
+
+/// One compute pass: a pipeline with the layout its WGSL declares ([`Bindings`]), built per
+/// [`ShaderVariant`] on its first use when its entry point reads the variant's constants (one
+/// pipeline for every variant otherwise).
 pub struct Pass {
     bindings: Bindings,
-    pipeline: wgpu::ComputePipeline,
+    module: wgpu::ShaderModule,
+    layout: wgpu::PipelineLayout,
+    entry: String,
+    /// Whether the entry point reads `LOCAL_LIGHTS` or `SPOT_TEXTURES`.
+    specialized: bool,
+    /// The pipeline of each variant ([`ShaderVariant::index`]), built on first use.
+    pipelines: [std::sync::OnceLock<wgpu::ComputePipeline>; 4],
     workgroup: [u32; 3],
+    device: wgpu::Device,
 }
 
 impl Pass {
     /// Builds the pass `entry` of `pass_wgsl` (composed with common.wgsl), its layout read from
     /// the shader. `label` names it in errors and GPU captures (`technique/pass`).
+    /// The shader module is built and validated here; each variant's pipeline on its first
+    /// use ([`Pass::pipeline`]), so a frame compiles only the variants it runs.
     pub fn new(device: &wgpu::Device, label: &str, pass_wgsl: &str, entry: &str) -> Result<Self, crate::Error> {
         let source = crate::shaders::compose(pass_wgsl);
-        let (bindings, workgroup) = Bindings::new(device, label, &source, entry, naga::ShaderStage::Compute)?;
+        let (bindings, workgroup, specialized) =
+            Bindings::new(device, label, &source, entry, naga::ShaderStage::Compute)?;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),
             source: wgpu::ShaderSource::Wgsl(source.into()),
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(label),
             bind_group_layouts: &[Some(bindings.layout())],
             immediate_size: 0,
         });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(label),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        Ok(Self { bindings, pipeline, workgroup })
+        Ok(Self {
+            bindings,
+            module,
+            layout,
+            entry: entry.to_string(),
+            specialized,
+            pipelines: Default::default(),
+            workgroup,
+            device: device.clone(),
+        })
+    }
+
+    /// Whether the entry point reads the [`ShaderVariant`]'s constants (else every variant
+    /// runs the one pipeline).
+    pub fn is_specialized(&self) -> bool {
+        self.specialized
+    }
+
+    /// Pipelines built so far (0 to 4).
+    pub fn pipelines_built(&self) -> usize {
+        self.pipelines.iter().filter(|p| p.get().is_some()).count()
     }
 
     /// The pass's name (`technique/pass`).
@@ -319,16 +384,31 @@ impl Pass {
     pub fn dispatch(
         &self,
         rec: &mut crate::gpu::Recorder,
+        variant: ShaderVariant,
         name: &str,
         bind: &wgpu::BindGroup,
         groups: [u32; 3],
     ) -> Result<(), crate::Error> {
-        rec.dispatch(name, self.label(), &self.pipeline, bind, groups)
+        rec.dispatch(name, self.label(), self.pipeline(variant), bind, groups)
     }
 
-    /// The compute pipeline (for passes recorded by hand: indirect, or sharing a compute pass).
-    pub fn pipeline(&self) -> &wgpu::ComputePipeline {
-        &self.pipeline
+    /// The compute pipeline of `variant` (for passes recorded by hand: indirect, or sharing a
+    /// compute pass), built on first use; [`ShaderVariant::ALL`]'s for a pass that reads no
+    /// light.
+    pub fn pipeline(&self, variant: ShaderVariant) -> &wgpu::ComputePipeline {
+        let variant = if self.specialized { variant } else { ShaderVariant::ALL };
+        self.pipelines[variant.index()].get_or_init(|| {
+            let constants = if self.specialized { variant.constants().to_vec() } else { Vec::new() };
+            let label = format!("{} {variant:?}", self.label());
+            self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(&label),
+                layout: Some(&self.layout),
+                module: &self.module,
+                entry_point: Some(&self.entry),
+                compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
+                cache: None,
+            })
+        })
     }
 }
 
@@ -343,6 +423,42 @@ pub struct Reflected {
     pub unused: Vec<String>,
     /// The entry point's workgroup size.
     pub workgroup: [u32; 3],
+    /// Whether the entry point, or a function it calls, reads a pipeline-overridable constant.
+    pub reads_overrides: bool,
+}
+
+/// Whether `function`, or a function it calls, reads a pipeline-overridable constant.
+fn reads_overrides(module: &naga::Module, function: &naga::Function) -> bool {
+    fn block_calls(block: &naga::Block, out: &mut Vec<naga::Handle<naga::Function>>) {
+        use naga::Statement as S;
+        for statement in block.iter() {
+            match statement {
+                S::Call { function, .. } => out.push(*function),
+                S::Block(b) => block_calls(b, out),
+                S::If { accept, reject, .. } => {
+                    block_calls(accept, out);
+                    block_calls(reject, out);
+                }
+                S::Switch { cases, .. } => cases.iter().for_each(|c| block_calls(&c.body, out)),
+                S::Loop { body, continuing, .. } => {
+                    block_calls(body, out);
+                    block_calls(continuing, out);
+                }
+                _ => {}
+            }
+        }
+    }
+    let mut stack = vec![function];
+    let mut seen = std::collections::HashSet::new();
+    while let Some(f) = stack.pop() {
+        if f.expressions.iter().any(|(_, e)| matches!(e, naga::Expression::Override(_))) {
+            return true;
+        }
+        let mut calls = Vec::new();
+        block_calls(&f.body, &mut calls);
+        stack.extend(calls.into_iter().filter(|h| seen.insert(*h)).map(|h| &module.functions[h]));
+    }
+    false
 }
 
 /// Reads the bind group layout of the `stage` entry point `entry` of the composed WGSL
@@ -444,7 +560,8 @@ pub fn reflect(source: &str, entry: &str, stage: naga::ShaderStage) -> Result<Re
     found.sort_by_key(|(e, _)| e.binding);
     let workgroup = module.entry_points[index].workgroup_size;
     let slots = found.iter().map(|(e, n)| (n.clone(), e.binding)).collect();
-    Ok(Reflected { entries: found.into_iter().map(|(e, _)| e).collect(), slots, unused, workgroup })
+    let reads_overrides = reads_overrides(&module, &module.entry_points[index].function);
+    Ok(Reflected { entries: found.into_iter().map(|(e, _)| e).collect(), slots, unused, workgroup, reads_overrides })
 }
 
 /// The wgpu format of a WGSL storage texel format the passes use.
@@ -547,6 +664,30 @@ mod tests {
                 assert!(w[0].1 < w[1].1, "{name}/{entry}: {:?}", r.slots);
             }
             assert!(r.workgroup.iter().all(|&n| n >= 1), "{name}/{entry}: {:?}", r.workgroup);
+        }
+    }
+
+    #[test]
+    fn the_passes_that_evaluate_lights_and_only_they_are_specialized() {
+        let read: Vec<String> = compute_entries()
+            .into_iter()
+            .filter(|(_, src, entry)| reflect(src, entry, naga::ShaderStage::Compute).unwrap().reads_overrides)
+            .map(|(name, _, entry)| format!("{name}/{entry}"))
+            .collect();
+        for must in [
+            "brute_force/march/march",
+            "interleaved/march/march",
+            "subsampled/march/march",
+            "subsampled/upsample/upsample",
+            "epipolar/march/march",
+            "epipolar/upsample/upsample",
+            "minmax/traverse/traverse",
+            "prefiltered/evaluate/evaluate",
+        ] {
+            assert!(read.iter().any(|r| r == must), "{must} not in {read:?}");
+        }
+        for never in ["light_sum/", "light_clear/", "temporal/", "sum_rows", "sum_columns", "/refine", "/args"] {
+            assert!(!read.iter().any(|r| r.contains(never)), "{never} in {read:?}");
         }
     }
 

@@ -131,7 +131,13 @@ impl BruteForce {
             self.binds.store(key, bind);
         }
         let bind = self.binds.value();
-        self.march.dispatch(rec, "march", bind, self.march.groups_2d(desc.width, desc.height))?;
+        self.march.dispatch(
+            rec,
+            frame.shader_variant(),
+            "march",
+            bind,
+            self.march.groups_2d(desc.width, desc.height),
+        )?;
         Ok(TechniqueStats {
             technique: "brute-force".into(),
             backend: "gpu".into(),

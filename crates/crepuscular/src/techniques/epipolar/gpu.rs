@@ -4,6 +4,7 @@
 
 use super::*;
 use crate::gpu::compute_pass;
+use crate::techniques::pass::ShaderVariant;
 
 /// The textures and buffers whose size depends on (samples, slices) and the image size.
 struct Sized {
@@ -470,13 +471,15 @@ impl Epipolar {
         let (samples, slices) = (params.samples, params.slices);
         let (w, h) = (desc.width, desc.height);
         let p = &self.passes;
+        let variant = frame.shader_variant();
         if let (Some(bind), Some(pre)) = (&b.prefilter, &self.prefiltered) {
             let groups = p.prefilter.groups_2d(pre.texture.width(), pre.texture.height());
-            p.prefilter.dispatch(rec, "prefilter", bind, groups)?;
+            p.prefilter.dispatch(rec, variant, "prefilter", bind, groups)?;
         }
         rec.pass("lines", |enc, ts| {
             enc.clear_buffer(&self.counters, 0, None);
             stage(
+                variant,
                 compute_pass(enc, "epipolar lines", ts),
                 &[
                     (&p.lines, &b.lines, [slices.div_ceil(p.lines.workgroup_size()[0]), 1, 1]),
@@ -487,6 +490,7 @@ impl Epipolar {
         rec.pass("refine", |enc, ts| {
             enc.clear_buffer(&sized.claims, 0, None);
             stage(
+                variant,
                 compute_pass(enc, "epipolar refine", ts),
                 // One thread per initial segment (at most K − 1 on a line) and line.
                 &[
@@ -499,7 +503,7 @@ impl Epipolar {
         let indirect = |kernel: &Pass, bind: &wgpu::BindGroup, rec: &mut Recorder| {
             rec.pass("march", |enc, ts| {
                 let mut pass = compute_pass(enc, kernel.label(), ts);
-                pass.set_pipeline(kernel.pipeline());
+                pass.set_pipeline(kernel.pipeline(variant));
                 pass.set_bind_group(0, bind, &[]);
                 pass.dispatch_workgroups_indirect(&self.indirect, 0);
             })
@@ -541,8 +545,14 @@ impl Epipolar {
         } else {
             indirect(&p.march, &b.march, rec)?;
         }
-        p.interpolate.dispatch(rec, "interpolate", &b.interpolate, p.interpolate.groups_2d(samples, slices))?;
-        p.upsample.dispatch(rec, "upsample", &b.upsample, p.upsample.groups_2d(w, h))?;
+        p.interpolate.dispatch(
+            rec,
+            variant,
+            "interpolate",
+            &b.interpolate,
+            p.interpolate.groups_2d(samples, slices),
+        )?;
+        p.upsample.dispatch(rec, variant, "upsample", &b.upsample, p.upsample.groups_2d(w, h))?;
         self.last_params = Some(params);
         // The GPU-classified counts join the stats once the counters are read back (never with
         // StatsMode::Off: reading them at once would stall the frame).
@@ -572,9 +582,9 @@ impl Epipolar {
 
 /// Records `steps` (a pass, its bind group, its workgroups) into one compute pass: a timed stage
 /// whose entry points share it.
-fn stage(mut pass: wgpu::ComputePass<'_>, steps: &[(&Pass, &wgpu::BindGroup, [u32; 3])]) {
+fn stage(variant: ShaderVariant, mut pass: wgpu::ComputePass<'_>, steps: &[(&Pass, &wgpu::BindGroup, [u32; 3])]) {
     for (kernel, bind, [x, y, z]) in steps {
-        pass.set_pipeline(kernel.pipeline());
+        pass.set_pipeline(kernel.pipeline(variant));
         pass.set_bind_group(0, *bind, &[]);
         pass.dispatch_workgroups(*x, *y, *z);
     }

@@ -255,7 +255,7 @@ impl TreeBuilder {
             self.binds.store(key, bind);
         }
         // One workgroup per row of the map.
-        self.build.dispatch(rec, "build", self.binds.value(), [h, 1, 1])?;
+        self.build.dispatch(rec, frame.shader_variant(), "build", self.binds.value(), [h, 1, 1])?;
         Ok(TreeFrame { rect, host: host.is_some() })
     }
 
@@ -383,14 +383,20 @@ impl MinMax {
         rec.pass("traverse", |enc, ts| {
             enc.clear_buffer(&self.counters, 0, None);
             let mut pass = crate::gpu::compute_pass(enc, self.traverse.label(), ts);
-            pass.set_pipeline(self.traverse.pipeline());
+            pass.set_pipeline(self.traverse.pipeline(frame.shader_variant()));
             pass.set_bind_group(0, traverse_bind, &[]);
             let [x, y, z] = self.traverse.groups_2d(desc.width, desc.height);
             pass.dispatch_workgroups(x, y, z);
         })?;
         let epipole = epipole_pixel(desc, s.epipole_radius);
         if let Some([x0, y0, x1, y1]) = epipole_box(desc, s.epipole_radius, epipole) {
-            self.epipole.dispatch(rec, "epipole", epipole_bind, self.epipole.groups_2d(x1 - x0, y1 - y0))?;
+            self.epipole.dispatch(
+                rec,
+                frame.shader_variant(),
+                "epipole",
+                epipole_bind,
+                self.epipole.groups_2d(x1 - x0, y1 - y0),
+            )?;
         }
         // The walks are counted on the GPU; their figures join the stats once the counters are
         // read back (never with StatsMode::Off).

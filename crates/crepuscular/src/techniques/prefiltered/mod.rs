@@ -374,16 +374,40 @@ impl Prefiltered {
         }
         let [rectify_bind, prefilter_bind, evaluate_bind, epipole_bind] = self.binds.value();
         if host.is_none() {
-            self.rectify.dispatch(rec, "rectify", rectify_bind, self.rectify.groups_2d(w, h))?;
+            self.rectify.dispatch(
+                rec,
+                frame.shader_variant(),
+                "rectify",
+                rectify_bind,
+                self.rectify.groups_2d(w, h),
+            )?;
         }
         // One thread per (row, region, group of bases, set), in as many rows of 65535
         // workgroups as it takes.
         let threads = h * s.regions * (s.bases / s.bases_per_thread) * sets;
         let groups = threads.div_ceil(self.prefilter.workgroup_size()[0]);
-        self.prefilter.dispatch(rec, "prefilter", prefilter_bind, [groups.min(65535), groups.div_ceil(65535), 1])?;
-        self.evaluate.dispatch(rec, "evaluate", evaluate_bind, self.evaluate.groups_2d(desc.width, desc.height))?;
+        self.prefilter.dispatch(
+            rec,
+            frame.shader_variant(),
+            "prefilter",
+            prefilter_bind,
+            [groups.min(65535), groups.div_ceil(65535), 1],
+        )?;
+        self.evaluate.dispatch(
+            rec,
+            frame.shader_variant(),
+            "evaluate",
+            evaluate_bind,
+            self.evaluate.groups_2d(desc.width, desc.height),
+        )?;
         if let Some([x0, y0, x1, y1]) = epipole_box(desc, s.epipole_radius, epipole) {
-            self.epipole.dispatch(rec, "epipole", epipole_bind, self.epipole.groups_2d(x1 - x0, y1 - y0))?;
+            self.epipole.dispatch(
+                rec,
+                frame.shader_variant(),
+                "epipole",
+                epipole_bind,
+                self.epipole.groups_2d(x1 - x0, y1 - y0),
+            )?;
         }
         let extra = stats_extra(&s, &rect, host.is_some());
         self.last = Some(rect);

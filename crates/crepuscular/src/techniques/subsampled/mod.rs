@@ -316,12 +316,12 @@ impl Subsampled {
             self.binds.store(key, binds);
         }
         let [march_bind, upsample_bind] = self.binds.value();
-        self.march.dispatch(rec, "march", march_bind, self.march.groups_2d(gw, gh))?;
+        self.march.dispatch(rec, frame.shader_variant(), "march", march_bind, self.march.groups_2d(gw, gh))?;
         rec.pass("upsample", |enc, ts| {
             enc.clear_buffer(&self.counter, 0, None);
             {
                 let mut pass = compute_pass(enc, self.upsample.label(), ts);
-                pass.set_pipeline(self.upsample.pipeline());
+                pass.set_pipeline(self.upsample.pipeline(frame.shader_variant()));
                 pass.set_bind_group(0, upsample_bind, &[]);
                 let [x, y, z] = self.upsample.groups_2d(desc.width, desc.height);
                 pass.dispatch_workgroups(x, y, z);

@@ -152,7 +152,7 @@ fn upsample_pixel(px: vec2<u32>) -> Upsampled {
         vec2<u32>(sx.x, sy.y),
         vec2<u32>(sx.y, sy.y),
     );
-    let cones = params.cone_aware == 1u && any_spot();
+    let cones = LOCAL_LIGHTS && params.cone_aware == 1u && any_spot();
     var own_cones = 0u;
     if cones {
         own_cones = cone_set(dir, s);

@@ -379,8 +379,8 @@ impl Pass {
         self.bindings.bind(device, resources)
     }
 
-    /// Records the pass with `bind` over `groups` workgroups, timed as `name`
-    /// ([`crate::gpu::Recorder::dispatch`]).
+    /// Records the pass with `bind` over `groups` workgroups in `variant`'s pipeline
+    /// ([`Pass::pipeline`]), timed as `name` ([`crate::gpu::Recorder::dispatch`]).
     pub fn dispatch(
         &self,
         rec: &mut crate::gpu::Recorder,

@@ -580,8 +580,8 @@ impl Epipolar {
     }
 }
 
-/// Records `steps` (a pass, its bind group, its workgroups) into one compute pass: a timed stage
-/// whose entry points share it.
+/// Records `steps` (a pass, its bind group, its workgroups) into one compute pass, each in
+/// `variant`'s pipeline: a timed stage whose entry points share it.
 fn stage(variant: ShaderVariant, mut pass: wgpu::ComputePass<'_>, steps: &[(&Pass, &wgpu::BindGroup, [u32; 3])]) {
     for (kernel, bind, [x, y, z]) in steps {
         pass.set_pipeline(kernel.pipeline(variant));

@@ -490,9 +490,10 @@ impl Interleaved {
         }
         let [march_bind, rows_bind, columns_bind] = self.binds.value();
         let groups = self.march.groups_2d(desc.width, desc.height);
-        self.march.dispatch(rec, frame.shader_variant(), "march", march_bind, groups)?;
-        self.rows.dispatch(rec, frame.shader_variant(), "sum_rows", rows_bind, groups)?;
-        self.columns.dispatch(rec, frame.shader_variant(), "sum_columns", columns_bind, groups)?;
+        let variant = frame.shader_variant();
+        self.march.dispatch(rec, variant, "march", march_bind, groups)?;
+        self.rows.dispatch(rec, variant, "sum_rows", rows_bind, groups)?;
+        self.columns.dispatch(rec, variant, "sum_columns", columns_bind, groups)?;
         Ok(TechniqueStats {
             technique: "interleaved".into(),
             backend: "gpu".into(),

@@ -380,23 +380,18 @@ impl MinMax {
             self.binds.traverse.store(key, binds);
         }
         let [traverse_bind, epipole_bind] = self.binds.traverse.value();
+        let variant = frame.shader_variant();
         rec.pass("traverse", |enc, ts| {
             enc.clear_buffer(&self.counters, 0, None);
             let mut pass = crate::gpu::compute_pass(enc, self.traverse.label(), ts);
-            pass.set_pipeline(self.traverse.pipeline(frame.shader_variant()));
+            pass.set_pipeline(self.traverse.pipeline(variant));
             pass.set_bind_group(0, traverse_bind, &[]);
             let [x, y, z] = self.traverse.groups_2d(desc.width, desc.height);
             pass.dispatch_workgroups(x, y, z);
         })?;
         let epipole = epipole_pixel(desc, s.epipole_radius);
         if let Some([x0, y0, x1, y1]) = epipole_box(desc, s.epipole_radius, epipole) {
-            self.epipole.dispatch(
-                rec,
-                frame.shader_variant(),
-                "epipole",
-                epipole_bind,
-                self.epipole.groups_2d(x1 - x0, y1 - y0),
-            )?;
+            self.epipole.dispatch(rec, variant, "epipole", epipole_bind, self.epipole.groups_2d(x1 - x0, y1 - y0))?;
         }
         // The walks are counted on the GPU; their figures join the stats once the counters are
         // read back (never with StatsMode::Off).

@@ -373,14 +373,9 @@ impl Prefiltered {
             self.binds.store(key, binds);
         }
         let [rectify_bind, prefilter_bind, evaluate_bind, epipole_bind] = self.binds.value();
+        let variant = frame.shader_variant();
         if host.is_none() {
-            self.rectify.dispatch(
-                rec,
-                frame.shader_variant(),
-                "rectify",
-                rectify_bind,
-                self.rectify.groups_2d(w, h),
-            )?;
+            self.rectify.dispatch(rec, variant, "rectify", rectify_bind, self.rectify.groups_2d(w, h))?;
         }
         // One thread per (row, region, group of bases, set), in as many rows of 65535
         // workgroups as it takes.
@@ -388,26 +383,20 @@ impl Prefiltered {
         let groups = threads.div_ceil(self.prefilter.workgroup_size()[0]);
         self.prefilter.dispatch(
             rec,
-            frame.shader_variant(),
+            variant,
             "prefilter",
             prefilter_bind,
             [groups.min(65535), groups.div_ceil(65535), 1],
         )?;
         self.evaluate.dispatch(
             rec,
-            frame.shader_variant(),
+            variant,
             "evaluate",
             evaluate_bind,
             self.evaluate.groups_2d(desc.width, desc.height),
         )?;
         if let Some([x0, y0, x1, y1]) = epipole_box(desc, s.epipole_radius, epipole) {
-            self.epipole.dispatch(
-                rec,
-                frame.shader_variant(),
-                "epipole",
-                epipole_bind,
-                self.epipole.groups_2d(x1 - x0, y1 - y0),
-            )?;
+            self.epipole.dispatch(rec, variant, "epipole", epipole_bind, self.epipole.groups_2d(x1 - x0, y1 - y0))?;
         }
         let extra = stats_extra(&s, &rect, host.is_some());
         self.last = Some(rect);

@@ -316,12 +316,13 @@ impl Subsampled {
             self.binds.store(key, binds);
         }
         let [march_bind, upsample_bind] = self.binds.value();
-        self.march.dispatch(rec, frame.shader_variant(), "march", march_bind, self.march.groups_2d(gw, gh))?;
+        let variant = frame.shader_variant();
+        self.march.dispatch(rec, variant, "march", march_bind, self.march.groups_2d(gw, gh))?;
         rec.pass("upsample", |enc, ts| {
             enc.clear_buffer(&self.counter, 0, None);
             {
                 let mut pass = compute_pass(enc, self.upsample.label(), ts);
-                pass.set_pipeline(self.upsample.pipeline(frame.shader_variant()));
+                pass.set_pipeline(self.upsample.pipeline(variant));
                 pass.set_bind_group(0, upsample_bind, &[]);
                 let [x, y, z] = self.upsample.groups_2d(desc.width, desc.height);
                 pass.dispatch_workgroups(x, y, z);
